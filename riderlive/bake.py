@@ -1,0 +1,84 @@
+"""Offline baking: a horse take in, the rider's channels out (``riderlive bake``)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES
+from riderlive.configfile import ConfigError
+from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.rules.animator import AnimatorLayer, damp_series
+from riderlive.rules.engine import RiderModel
+from riderlive.rules.kuhnel2003 import RULE_INPUTS
+from riderlive.rules.params import load_preset
+
+DEFAULT_RATE = 120.0
+"""Frame rate assumed for a take without a ``t`` column (Hz)."""
+
+
+def horse_matrix(table: FrameTable) -> np.ndarray:
+    """The take's horse channels in canonical order; omitted channels are zero."""
+    out = np.zeros((len(table), len(HORSE)), dtype=np.float64)
+    for j, name in enumerate(table.names):
+        if name in HORSE_INDEX:
+            out[:, HORSE_INDEX[name]] = table.values[:, j]
+    return out
+
+
+def bake_table(
+    table: FrameTable,
+    model: RiderModel,
+    channels: Sequence[str] | None = None,
+    rate: float = DEFAULT_RATE,
+) -> FrameTable:
+    """Evaluate the rules on every frame of ``table``; keep ``channels`` (all if None)."""
+    rider = model.evaluate_batch(horse_matrix(table))
+    times = table.times(rate)
+    tau = model.params.smoothing.time_constant
+    if tau > 0.0:
+        rider = damp_series(np.ascontiguousarray(rider), times, tau)
+    names = tuple(channels) if channels else RIDER_NAMES
+    picked = rider if names == RIDER_NAMES else rider[:, [RIDER_INDEX[n] for n in names]]
+    return FrameTable(names, picked, times)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("input", help="horse take: .csv or .jsonl, or - for stdin")
+    parser.add_argument("-o", "--output", required=True, help="rider take to write (.csv, .jsonl, or -)")
+    parser.add_argument("--preset", default="kuhnel2003", help="preset name or TOML path (default kuhnel2003)")
+    parser.add_argument("--scale", type=float, default=1.0, help="input length units -> thesis rig units")
+    parser.add_argument("--channels", help="comma-separated rider channels to write (default all)")
+    parser.add_argument("--offsets", help="TOML with [offsets] and [gains] per rider channel")
+    parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
+    parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
+        for name in channels or ():
+            if name not in RIDER_INDEX:
+                raise FrameFileError("--channels", f"unknown rider channel {name!r}")
+        animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
+        model = RiderModel(params=load_preset(args.preset), scale=args.scale, animator=animator)
+        table = read_frames(args.input, required=RULE_INPUTS, fmt=args.format)
+        result = bake_table(table, model, channels, rate=args.rate)
+        _write_with_progress(args.output, result, args.format)
+    except (FrameFileError, ConfigError, ValueError) as exc:
+        print(f"riderlive bake: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _write_with_progress(path: str, table: FrameTable, fmt: str | None) -> None:
+    if not sys.stderr.isatty() or len(table) < 100_000:
+        write_frames(path, table, fmt)
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=len(table), unit="frames", unit_scale=True, desc="writing", file=sys.stderr) as bar:
+        write_frames(path, table, fmt, progress=bar.update)

@@ -1,0 +1,156 @@
+"""The channel vocabulary shared by every interface (files, websockets, servo maps).
+
+Names follow the thesis rigs: ``node.attr`` where ``attr`` is ``tx ty tz`` (translate,
+scene units of the thesis rig) or ``rx ry rz`` (rotate, degrees).
+
+Axis convention of both rigs (thesis section 7): rotate Z bends front/back, rotate X
+twists, rotate Y is side to side; translate X is forward/back, translate Y is up/down,
+translate Z is side to side. A positive ``lower_back.rz`` leans the rider forward.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class Kind(enum.Enum):
+    """What a channel's value measures, which decides its unit and its scaling."""
+
+    ROTATION = "deg"
+    TRANSLATION = "length"
+    ATTRIBUTE = "unitless"
+
+
+@dataclass(frozen=True, slots=True)
+class Channel:
+    """One named scalar signal."""
+
+    name: str
+    kind: Kind
+    meaning: str
+
+    @property
+    def node(self) -> str:
+        return self.name.split(".", 1)[0]
+
+    @property
+    def attr(self) -> str:
+        return self.name.split(".", 1)[1]
+
+    @property
+    def unit(self) -> str:
+        return self.kind.value
+
+
+def _kind_of(attr: str) -> Kind:
+    if attr in ("tx", "ty", "tz"):
+        return Kind.TRANSLATION
+    if attr in ("rx", "ry", "rz"):
+        return Kind.ROTATION
+    return Kind.ATTRIBUTE
+
+
+def _table(rows: tuple[tuple[str, str], ...]) -> tuple[Channel, ...]:
+    return tuple(Channel(name, _kind_of(name.split(".", 1)[1]), meaning) for name, meaning in rows)
+
+
+_HOOF_ROWS: tuple[tuple[str, str], ...] = tuple(
+    (f"{hoof}.{attr}", f"{label} hoof {what}")
+    for hoof, label in (
+        ("lfHoof", "left front"),
+        ("rfHoof", "right front"),
+        ("lbHoof", "left back"),
+        ("rbHoof", "right back"),
+    )
+    for attr, what in (("tx", "forward/back"), ("ty", "height above ground"), ("tz", "side"))
+)
+
+HORSE: tuple[Channel, ...] = _table(
+    (
+        *_HOOF_ROWS,
+        ("rearPivot.tx", "rear pivot (hips) forward/back"),
+        ("rearPivot.ty", "rear pivot height"),
+        ("rearPivot.tz", "rear pivot side"),
+        ("rearPivot.rx", "rear pivot side to side (the horse's roll)"),
+        ("rearPivot.ry", "rear pivot yaw (tail only)"),
+        ("rearPivot.rz", "rear pivot up/down (the horse's pitch)"),
+        ("backMid.rz", "mid-back pivot bend"),
+        ("root.tx", "world position forward"),
+        ("root.ty", "world position up"),
+        ("root.tz", "world position side"),
+        ("root.ry", "world heading"),
+    )
+)
+"""Every horse input channel, in the canonical column order of files and arrays."""
+
+RIDER: tuple[Channel, ...] = _table(
+    (
+        ("lower_back.rz", "Eq. 1: lower back forward (+) / back"),
+        ("lower_back.ry", "Eq. 2: lower back side to side"),
+        ("lower_back.rx", "Eq. 3: lower back twist"),
+        ("waist.rz", "Eq. 4: waist forward/back"),
+        ("hip.rz", "Eq. 5: hips forward/back"),
+        ("hip.ry", "Eq. 6: hips side to side"),
+        ("cog.ty", "Eq. 7: lift in the seat"),
+        ("cog.tx", "Eq. 8: shift in the seat"),
+        ("spine_c.ty", "Eq. 9: squash and stretch"),
+        ("spine_d.ty", "Eq. 9: squash and stretch"),
+        ("spine_f.ty", "Eq. 9: squash and stretch"),
+        ("neck.ty", "Eq. 9: squash and stretch"),
+        ("head_a.ty", "Eq. 9: squash and stretch"),
+        ("head.rz", "Eq. 10: head forward/back"),
+        ("head.ry", "Eq. 11: head side to side"),
+        ("lf_wrist.tz", "Eq. 12: left wrist forward/back"),
+        ("rt_wrist.tz", "Eq. 12: right wrist forward/back"),
+        ("lf_wrist.ty", "Eq. 13: left wrist up/down"),
+        ("rt_wrist.ty", "Eq. 13: right wrist up/down"),
+        ("lf_foot.tx", "Eq. 14: left foot forward/back"),
+        ("rt_foot.tx", "Eq. 14: right foot forward/back"),
+        ("lf_foot.rz", "Eq. 15: left foot up/down"),
+        ("rt_foot.rz", "Eq. 15: right foot up/down"),
+        ("lf_foot.ry", "Eq. 16: left foot side to side"),
+        ("rt_foot.ry", "Eq. 16: right foot side to side"),
+        ("lf_foot.rx", "Eq. 16 family: left foot twist"),
+        ("rt_foot.rx", "Eq. 16 family: right foot twist"),
+        ("lf_foot.tz", "Eq. 17: left foot toward/away from the belly"),
+        ("rt_foot.tz", "Eq. 17: right foot toward/away from the belly"),
+        ("lf_knee.tz", "Eq. 18: left knee toward/away from the belly"),
+        ("rt_knee.tz", "Eq. 18: right knee toward/away from the belly"),
+        ("lf_knee.ty", "left knee lift"),
+        ("rt_knee.ty", "right knee lift"),
+        ("hair.up", "hair up/down attribute"),
+        ("hair.side", "hair side to side attribute"),
+        ("cloth.up", "cloth up/down attribute"),
+        ("cloth.side", "cloth side to side attribute"),
+    )
+)
+"""Every rider output channel of the rules, in canonical order."""
+
+HORSE_NAMES: tuple[str, ...] = tuple(c.name for c in HORSE)
+RIDER_NAMES: tuple[str, ...] = tuple(c.name for c in RIDER)
+HORSE_INDEX: dict[str, int] = {n: i for i, n in enumerate(HORSE_NAMES)}
+RIDER_INDEX: dict[str, int] = {n: i for i, n in enumerate(RIDER_NAMES)}
+BY_NAME: dict[str, Channel] = {c.name: c for c in HORSE + RIDER}
+
+AXIS_CONVENTION: dict[str, str] = {
+    "rz": "bend front/back",
+    "rx": "twist",
+    "ry": "side to side",
+    "tx": "forward/back",
+    "ty": "up/down",
+    "tz": "side to side",
+}
+"""The thesis rigs' axis convention (section 7), as published in hellos and docs."""
+
+
+class UnknownChannelError(KeyError):
+    """A channel name that is not part of the vocabulary."""
+
+
+def lookup(name: str) -> Channel:
+    """Return the channel called ``name`` or raise :class:`UnknownChannelError`."""
+    try:
+        return BY_NAME[name]
+    except KeyError:
+        raise UnknownChannelError(name) from None

@@ -1,0 +1,42 @@
+"""The ``riderlive`` command: one subcommand per module, imported only when used."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from riderlive import __version__
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+}
+"""Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
+
+
+def build_parser(selected: str | None = None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="riderlive", description="A horse's motion in, a rider's reaction out.")
+    parser.add_argument("--version", action="version", version=f"riderlive {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module_name, summary) in COMMANDS.items():
+        sub_parser = sub.add_parser(name, help=summary, description=summary)
+        if name == selected:
+            importlib.import_module(module_name).add_arguments(sub_parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    selected = next((a for a in argv if a in COMMANDS), None)
+    args = build_parser(selected).parse_args(argv)
+    if args.command is None:
+        build_parser().print_help()
+        return 2
+    module = importlib.import_module(COMMANDS[args.command][0])
+    result: int = module.run(args)
+    return result
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

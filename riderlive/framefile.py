@@ -1,0 +1,240 @@
+"""Frame files: CSV and JSONL takes of horse or rider channels, read and written.
+
+CSV: a header of channel names, an optional ``t`` column (seconds), one frame per
+line. JSONL: one object per line with ``t`` and channel values. ``-`` reads stdin or
+writes stdout. Reading validates everything once at the edge: an unknown column, a
+missing required channel, a cell that is not a number, NaN or inf raise
+:class:`FrameFileError` naming the file, line and column. Writing goes to a file
+beside the target and is renamed at the end, so a failed run leaves nothing partial
+under the output's name.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+import numpy.typing as npt
+import orjson
+
+from riderlive.channels import BY_NAME
+
+FloatArray = npt.NDArray[np.float64]
+TIME = "t"
+
+
+class FrameFileError(ValueError):
+    """Bad frame data; the message names the file, line and column."""
+
+    def __init__(self, source: str, message: str, line: int | None = None, column: str | None = None) -> None:
+        self.source, self.line, self.column = source, line, column
+        where = source if line is None else f"{source}:{line}"
+        if column is not None:
+            where += f": column {column!r}"
+        super().__init__(f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class FrameTable:
+    """Frames as columns: ``values`` is (N, len(names)); ``t`` is (N,) or None."""
+
+    names: tuple[str, ...]
+    values: FloatArray
+    t: FloatArray | None = None
+
+    def __len__(self) -> int:
+        return int(self.values.shape[0])
+
+    def column(self, name: str) -> FloatArray:
+        if name == TIME and self.t is not None:
+            return self.t
+        return self.values[:, self.names.index(name)]
+
+    def times(self, rate: float) -> FloatArray:
+        """The ``t`` column, or ``i / rate`` when the file had none."""
+        return self.t if self.t is not None else np.arange(len(self), dtype=np.float64) / rate
+
+
+def file_format(path: str, override: str | None = None) -> str:
+    """``csv`` or ``jsonl`` from an explicit choice or the file's extension."""
+    if override:
+        return override
+    suffix = Path(path).suffix.lower()
+    if suffix in (".jsonl", ".ndjson"):
+        return "jsonl"
+    if suffix == ".csv" or path == "-":
+        return "csv"
+    raise FrameFileError(path, f"unknown file type {suffix!r} (use .csv or .jsonl)")
+
+
+def _check_names(source: str, names: Sequence[str], required: Iterable[str]) -> None:
+    seen: set[str] = set()
+    for name in names:
+        if name != TIME and name not in BY_NAME:
+            raise FrameFileError(source, "unknown channel", line=1, column=name)
+        if name in seen:
+            raise FrameFileError(source, "duplicate column", line=1, column=name)
+        seen.add(name)
+    missing = [r for r in required if r not in seen]
+    if missing:
+        raise FrameFileError(source, f"missing required channel(s): {', '.join(missing)}", line=1)
+
+
+def _first_bad_cell(source: str, text: str, names: Sequence[str]) -> FrameFileError:
+    """Walk the CSV slowly to name the first cell that is not a finite number."""
+    reader = csv.reader(io.StringIO(text))
+    next(reader, None)
+    for line_no, row in enumerate(reader, start=2):
+        if len(row) != len(names):
+            return FrameFileError(source, f"expected {len(names)} cells, found {len(row)}", line=line_no)
+        for name, cell in zip(names, row, strict=True):
+            try:
+                value = float(cell)
+            except ValueError:
+                return FrameFileError(source, f"not a number: {cell!r}", line=line_no, column=name)
+            if not np.isfinite(value):
+                return FrameFileError(source, f"not finite: {cell!r}", line=line_no, column=name)
+    return FrameFileError(source, "could not be parsed as CSV")
+
+
+def _read_text(path: str) -> str:
+    if path == "-":
+        return sys.stdin.read()
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FrameFileError(path, "file not found") from None
+    except UnicodeDecodeError as exc:
+        raise FrameFileError(path, f"not UTF-8 text ({exc.reason})") from None
+
+
+def _read_csv(source: str, text: str, required: Iterable[str]) -> FrameTable:
+    import polars as pl
+
+    header = next(csv.reader(io.StringIO(text)), None)
+    if not header:
+        raise FrameFileError(source, "empty file: expected a header of channel names", line=1)
+    names = [h.strip() for h in header]
+    _check_names(source, names, required)
+    try:
+        frame = pl.read_csv(
+            io.StringIO(text),
+            schema={n: pl.Float64 for n in names},
+            has_header=True,
+            new_columns=names,
+        )
+        data = frame.to_numpy(order="c").astype(np.float64, copy=False)
+    except Exception:  # any parse failure gets an exact location below
+        raise _first_bad_cell(source, text, names) from None
+    if data.ndim != 2 or data.shape[1] != len(names):
+        raise _first_bad_cell(source, text, names)
+    finite = np.isfinite(data)
+    if not finite.all():
+        row, col = np.argwhere(~finite)[0]
+        raise FrameFileError(source, f"not finite: {data[row, col]!r}", line=int(row) + 2, column=names[col])
+    return _split_time(names, data)
+
+
+def _split_time(names: list[str], data: FloatArray) -> FrameTable:
+    if TIME in names:
+        ti = names.index(TIME)
+        keep = [i for i in range(len(names)) if i != ti]
+        return FrameTable(tuple(names[i] for i in keep), np.ascontiguousarray(data[:, keep]), data[:, ti].copy())
+    return FrameTable(tuple(names), data)
+
+
+def _read_jsonl(source: str, text: str, required: Iterable[str]) -> FrameTable:
+    names: list[str] | None = None
+    rows: list[list[float]] = []
+    for line_no, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            obj = orjson.loads(line)
+        except orjson.JSONDecodeError as exc:
+            raise FrameFileError(source, f"not JSON: {exc}", line=line_no) from None
+        if not isinstance(obj, dict):
+            raise FrameFileError(source, "expected a JSON object", line=line_no)
+        if names is None:
+            names = list(obj)
+            _check_names(source, names, required)
+        elif set(obj) != set(names):
+            odd = sorted(set(obj) ^ set(names))[0]
+            raise FrameFileError(source, "channels differ from the first frame", line=line_no, column=odd)
+        row = []
+        for name in names:
+            value = obj[name]
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise FrameFileError(source, f"not a number: {value!r}", line=line_no, column=name)
+            if not np.isfinite(value):
+                raise FrameFileError(source, f"not finite: {value!r}", line=line_no, column=name)
+            row.append(float(value))
+        rows.append(row)
+    if names is None:
+        raise FrameFileError(source, "empty file: no frames")
+    return _split_time(names, np.array(rows, dtype=np.float64).reshape(len(rows), len(names)))
+
+
+def read_frames(path: str, required: Iterable[str] = (), fmt: str | None = None) -> FrameTable:
+    """Read a whole frame file, validated; see the module docstring."""
+    kind = file_format(path, fmt)
+    text = _read_text(path)
+    source = "<stdin>" if path == "-" else path
+    required = tuple(required)
+    return _read_csv(source, text, required) if kind == "csv" else _read_jsonl(source, text, required)
+
+
+@contextmanager
+def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
+    """Yield a file beside ``path`` that replaces it only on success."""
+    if path == "-":
+        yield sys.stdout.buffer
+        sys.stdout.buffer.flush()
+        return
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+ProgressCallback = Callable[[int], None]
+WRITE_SLICE = 65536
+
+
+def write_frames(
+    path: str, table: FrameTable, fmt: str | None = None, progress: ProgressCallback | None = None
+) -> None:
+    """Write ``table`` to ``path`` (atomically), calling ``progress(frames)`` as it goes."""
+    kind = file_format(path, fmt)
+    names = ([TIME] if table.t is not None else []) + list(table.names)
+    columns = ([table.t] if table.t is not None else []) + [table.values[:, i] for i in range(len(table.names))]
+    with _atomic_binary(path) as fh:
+        if kind == "csv":
+            import polars as pl
+
+            frame = pl.DataFrame(dict(zip(names, columns, strict=True)))
+            for start in range(0, max(len(table), 1), WRITE_SLICE):
+                part = frame.slice(start, WRITE_SLICE)
+                part.write_csv(fh, include_header=start == 0)
+                if progress:
+                    progress(part.height)
+        else:
+            for start in range(0, len(table), WRITE_SLICE):
+                block = np.column_stack([c[start : start + WRITE_SLICE] for c in columns]).tolist()
+                fh.write(b"".join(orjson.dumps(dict(zip(names, row, strict=True))) + b"\n" for row in block))
+                if progress:
+                    progress(len(block))

@@ -1,0 +1,111 @@
+"""The animator layer over the rules: per-channel gain and offset, then smoothing.
+
+The thesis keys controls on top of its automation; here that is ``value * gain +
+offset`` per rider channel, in output units (after the length scale). An optional
+critically damped filter then smooths each channel; its time constant lives in the
+preset (``[smoothing]``), 0 switches it off.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pydantic
+
+from riderlive.channels import RIDER_NAMES
+from riderlive.configfile import ConfigError, StrictModel, read_toml, validate
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class AnimatorFile(StrictModel):
+    """``[offsets]`` and ``[gains]`` tables keyed by rider channel name."""
+
+    offsets: dict[str, float] = pydantic.Field(default_factory=dict)
+    gains: dict[str, float] = pydantic.Field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class AnimatorLayer:
+    """Per-channel ``gain`` and ``offset`` on the rider channels (defaults 1 and 0)."""
+
+    offsets: dict[str, float] = field(default_factory=dict)
+    gains: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for table in (self.offsets, self.gains):
+            for name, value in table.items():
+                if name not in RIDER_NAMES:
+                    raise KeyError(f"unknown rider channel {name!r}")
+                if not math.isfinite(value):
+                    raise ValueError(f"{name}: must be a finite number")
+
+    @property
+    def is_identity(self) -> bool:
+        return all(v == 0.0 for v in self.offsets.values()) and all(v == 1.0 for v in self.gains.values())
+
+    def gain_vector(self) -> FloatArray:
+        return np.array([self.gains.get(n, 1.0) for n in RIDER_NAMES])
+
+    def offset_vector(self) -> FloatArray:
+        return np.array([self.offsets.get(n, 0.0) for n in RIDER_NAMES])
+
+    @classmethod
+    def load(cls, path: str | Path) -> AnimatorLayer:
+        """Read a TOML file with ``[offsets]`` and ``[gains]`` tables."""
+        source = str(path)
+        model = validate(AnimatorFile, read_toml(path), source)
+        for table_name, table in (("offsets", model.offsets), ("gains", model.gains)):
+            for name in table:
+                if name not in RIDER_NAMES:
+                    raise ConfigError(source, f"{table_name}.{name}", "unknown rider channel")
+        return cls(offsets=dict(model.offsets), gains=dict(model.gains))
+
+
+@dataclass(frozen=True, slots=True)
+class DamperState:
+    """Position and velocity of each channel's critically damped follower."""
+
+    value: FloatArray
+    velocity: FloatArray
+
+
+def damper_start(target: FloatArray) -> DamperState:
+    """A follower at rest on ``target``."""
+    return DamperState(value=np.array(target, dtype=np.float64), velocity=np.zeros_like(target, dtype=np.float64))
+
+
+def damper_step(state: DamperState, target: FloatArray, dt: float, time_constant: float) -> DamperState:
+    """Advance a critically damped follower by ``dt`` seconds toward ``target``.
+
+    The exact solution of ``x'' = w^2 (target - x) - 2 w x'`` with the target held
+    over the step (``w = 1 / time_constant``), so it is stable at any ``dt`` and a
+    sequence of steps does not depend on how time is cut.
+    """
+    if time_constant <= 0.0 or dt <= 0.0:
+        return DamperState(value=np.array(target, dtype=np.float64), velocity=state.velocity * 0.0)
+    omega = 1.0 / time_constant
+    decay = math.exp(-omega * dt)
+    delta = state.value - target
+    drive = state.velocity + omega * delta
+    return DamperState(
+        value=target + (delta + drive * dt) * decay,
+        velocity=(state.velocity - omega * drive * dt) * decay,
+    )
+
+
+def damp_series(values: FloatArray, times: FloatArray, time_constant: float) -> FloatArray:
+    """Run the follower over a whole take: ``values`` is (N, C), ``times`` is (N,)."""
+    out = np.empty_like(values)
+    if len(values) == 0:
+        return out
+    state = damper_start(values[0])
+    out[0] = state.value
+    for i in range(1, len(values)):
+        state = damper_step(state, values[i], float(times[i] - times[i - 1]), time_constant)
+        out[i] = state.value
+    return out

@@ -1,0 +1,92 @@
+"""The rider engine: horse frames in, rider frames out, one frame or a whole take.
+
+A horse frame is a sequence of floats in the order of ``channels.HORSE``; a rider
+frame is a sequence in the order of ``channels.RIDER``. Lengths come in the user's
+units and are multiplied by ``scale`` into the thesis rig's units; translation
+outputs are divided by ``scale`` on the way out. The animator layer (gain, offset)
+applies in output units. Both paths evaluate the same rule source
+(:mod:`riderlive.rules.kuhnel2003`); :func:`evaluate_batch` works in cache-sized
+chunks so a million frames stay fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from riderlive.channels import HORSE, HORSE_INDEX, RIDER, Kind
+from riderlive.rules.animator import AnimatorLayer
+from riderlive.rules.kuhnel2003 import ARRAY_OPS, RULE_INPUTS, SCALAR_OPS, RuleFunction, make_rules
+from riderlive.rules.params import RuleParams
+
+FloatArray = npt.NDArray[np.float64]
+
+_INPUT_COLUMNS: tuple[int, ...] = tuple(HORSE_INDEX[name] for name in RULE_INPUTS)
+_INPUT_IS_LENGTH: tuple[bool, ...] = tuple(HORSE[HORSE_INDEX[name]].kind is Kind.TRANSLATION for name in RULE_INPUTS)
+_OUTPUT_IS_LENGTH: tuple[bool, ...] = tuple(c.kind is Kind.TRANSLATION for c in RIDER)
+BATCH_CHUNK = 4096
+"""Frames per chunk of the batch path: its temporaries stay in the CPU cache."""
+
+
+@dataclass(frozen=True)
+class RiderModel:
+    """Everything static about turning horse frames into rider frames."""
+
+    params: RuleParams = field(default_factory=RuleParams)
+    scale: float = 1.0
+    animator: AnimatorLayer = field(default_factory=AnimatorLayer)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.scale) and self.scale > 0.0):
+            raise ValueError(f"scale must be a finite number > 0, got {self.scale!r}")
+        object.__setattr__(self, "_scalar", make_rules(self.params, SCALAR_OPS))
+        object.__setattr__(self, "_array", make_rules(self.params, ARRAY_OPS))
+        in_gain = tuple(self.scale if is_len else 1.0 for is_len in _INPUT_IS_LENGTH)
+        out_scale = np.array([1.0 / self.scale if is_len else 1.0 for is_len in _OUTPUT_IS_LENGTH])
+        gain = out_scale * self.animator.gain_vector()
+        offset = self.animator.offset_vector()
+        identity = bool(np.all(gain == 1.0) and np.all(offset == 0.0))
+        object.__setattr__(self, "_in_gain", in_gain)
+        object.__setattr__(self, "_unit_input", all(g == 1.0 for g in in_gain))
+        object.__setattr__(self, "_out_gain", gain)
+        object.__setattr__(self, "_out_offset", offset)
+        pairs = None if identity else tuple(zip(gain.tolist(), offset.tolist(), strict=True))
+        object.__setattr__(self, "_out_pairs", pairs)
+
+    def evaluate(self, horse: Sequence[float]) -> list[float]:
+        """One frame on Python floats (the live tick's path)."""
+        rules: RuleFunction = self._scalar  # type: ignore[attr-defined]
+        if self._unit_input:  # type: ignore[attr-defined]
+            args = [horse[i] for i in _INPUT_COLUMNS]
+        else:
+            args = [horse[i] * g for i, g in zip(_INPUT_COLUMNS, self._in_gain, strict=True)]  # type: ignore[attr-defined]
+        out = rules(*args)
+        pairs = self._out_pairs  # type: ignore[attr-defined]
+        if pairs is None:
+            return list(out)
+        return [v * g + o for v, (g, o) in zip(out, pairs, strict=True)]
+
+    def evaluate_batch(self, horse: FloatArray) -> FloatArray:
+        """Many frames at once: ``horse`` is (N, len(HORSE)), the result (N, len(RIDER))."""
+        horse = np.asarray(horse, dtype=np.float64)
+        if horse.ndim != 2 or horse.shape[1] != len(HORSE):
+            raise ValueError(f"expected an (N, {len(HORSE)}) array, got {horse.shape}")
+        n = horse.shape[0]
+        by_channel = np.empty((len(RIDER), n), dtype=np.float64)
+        rules: RuleFunction = self._array  # type: ignore[attr-defined]
+        in_gain = np.array(self._in_gain)[:, None]  # type: ignore[attr-defined]
+        for start in range(0, n, BATCH_CHUNK):
+            stop = min(start + BATCH_CHUNK, n)
+            columns = np.ascontiguousarray(horse[start:stop, _INPUT_COLUMNS].T)
+            if not self._unit_input:  # type: ignore[attr-defined]
+                columns *= in_gain
+            for row, column in zip(by_channel, rules(*columns), strict=True):
+                row[start:stop] = column
+        out = by_channel.T  # (N, C) view, column-major: each channel stays contiguous
+        if self._out_pairs is not None:  # type: ignore[attr-defined]
+            out *= self._out_gain  # type: ignore[attr-defined]
+            out += self._out_offset  # type: ignore[attr-defined]
+        return out

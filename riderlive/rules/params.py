@@ -1,0 +1,227 @@
+"""Every weight, offset and limit of the rider rules, as a validated preset.
+
+A preset is a TOML file with one table per rule group (see ``config/presets``).
+``config/presets/kuhnel2003.toml`` holds the thesis' Appendix B values with the
+readings of ``docs/rules.md`` (errata); ``kuhnel2003_literal.toml`` reproduces every
+self-contradiction of Appendix B verbatim. Lengths are in the thesis rig's units,
+angles in degrees.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pydantic
+
+from riderlive.configfile import CONFIG_DIR, StrictModel, load, read_toml, validate
+
+PRESET_DIR = CONFIG_DIR / "presets"
+"""The shipped presets (the repository's ``config/presets``)."""
+
+
+class LowerBack(StrictModel):
+    """Eq. 1-3: lower back forward/back (clamped by foot heights), side, twist."""
+
+    pivot_height_offset: float = 2.0  # h1, added to the rear pivot's height
+    pivot_weight: float = 0.07  # w1, rear pivot pitch x (height + h1)
+    front_feet_weight: float = 0.25  # w2, front hooves' mean position (enters negated)
+    back_feet_weight: float = 0.25  # w3, back hooves' mean position
+    pivot_rotation_offset: float = 5.0  # h2, added to |pitch|
+    pivot_rotation_weight: float = 0.1  # w4
+    front_height_weight: float = 0.9  # w5
+    back_height_weight: float = 0.4  # w6
+    height_term_weight: float = 0.4  # w7
+    front_height_limit: float = 18.0  # front hoof height sum used at most
+    back_height_limit: float = 15.0  # back hoof height sum used at most
+    side_gain: float = -1.0  # Eq. 2: against the horse's roll
+    twist_gain: float = 0.5  # Eq. 3: twist toward the side lean
+
+
+class Waist(StrictModel):
+    """Eq. 4: the waist bends a little more than the lower back."""
+
+    gain: float = 1.7
+
+
+class Hip(StrictModel):
+    """Eq. 5-6: hips follow the lower back and the horse's hips."""
+
+    forward_gain: float = 0.8
+    side_pivot_gain: float = 0.5
+    side_rear_hoof_gain: float = 2.0
+
+
+class Lift(StrictModel):
+    """Eq. 7: lift out of the seat."""
+
+    front_height_gain: float = 2.0  # w1
+    gain: float = 0.01  # w2
+    limit: float = 15.0
+
+
+class SeatShift(StrictModel):
+    """Eq. 8: shift forward/back in the saddle, within +-limit."""
+
+    pivot_gain: float = 2.0
+    gain: float = 0.1
+    limit: float = pydantic.Field(default=1.0, ge=0.0)
+
+
+class Squash(StrictModel):
+    """Eq. 9: spine joints translate with a fraction of the lift."""
+
+    rest_spine_c: float = 0.482
+    rest_spine_d: float = 0.564
+    rest_spine_f: float = 0.949
+    rest_neck: float = 1.392
+    rest_head_a: float = 1.002
+    offset: float = 0.1  # h1: start a little squashed
+    spine_divisor: float = 6.0
+    neck_divisor: float = 7.0
+
+    @pydantic.field_validator("spine_divisor", "neck_divisor")
+    @classmethod
+    def _nonzero(cls, value: float) -> float:
+        if value == 0.0:
+            raise ValueError("must not be zero")
+        return value
+
+
+class Head(StrictModel):
+    """Eq. 10-11: the head counters the lower back and the lift."""
+
+    back_gain: float = 0.9
+    lift_gain: float = 18.0
+    offset: float = 5.0  # head starts 5 degrees down
+    back_max: float = 17.0  # lower back used at most
+    back_min: float = -20.0  # lower back used at least
+    side_gain: float = 0.8  # Eq. 11 per Appendix B (section 8 writes -1)
+
+
+class Wrists(StrictModel):
+    """Eq. 12-13: wrists forward/back and up/down."""
+
+    back_gain: float = 0.0001
+    pivot_gain: float = 0.008
+    back_limit: float = 17.0
+    height_gain: float = 0.03
+    height_limit: float = 20.0
+    pivot_height_gain: float = 0.0005
+
+
+class Feet(StrictModel):
+    """Eq. 14-17: feet forward/back, pitch, side, twist, toward the belly."""
+
+    height_limit: float = 15.0
+    side_gain: float = -1.7  # ry per hoof height
+    side_offset: float = -1.0
+    twist_gain: float = 0.1  # rx per hoof height, right foot negated
+    twist_offset: float = 1.0
+    belly_gain: float = -0.05
+    belly_offset: float = 2.0
+    belly_pivot_gain: float = 0.05
+    forward_pivot_gain: float = 0.005
+    forward_offset: float = 0.08  # Eq. 14's h1 (section 8 writes 0.8)
+    forward_back_mid_gain: float = 0.02
+    forward_back_gain: float = 0.005
+    pitch_offset: float = 3.0
+    pitch_scale: float = -6.0
+    pitch_gain: float = 2.0
+
+
+class Knees(StrictModel):
+    """Eq. 18 and the knee lift."""
+
+    rest_tz: float = 0.0  # the "initial position": 0 = output is relative to the rig's rest
+    belly_gain: float = 1.1
+    lift_gain: float = 0.03
+    lift_offset: float = -1.0
+
+
+class HairCloth(StrictModel):
+    """The hair and cloth attributes of Appendix B."""
+
+    height_offset: float = -2.0
+    hair_up_gain: float = 0.7
+    hair_side_gain: float = -0.02
+    cloth_up_gain: float = 0.7
+    cloth_side_pivot_gain: float = -0.5
+    cloth_side_rear_hoof_gain: float = -2.0
+
+
+class Smoothing(StrictModel):
+    """Optional output filter of the animator layer; 0 s = off (the thesis)."""
+
+    time_constant: float = pydantic.Field(default=0.0, ge=0.0, le=10.0)  # seconds
+
+
+class Errata(StrictModel):
+    """Where Appendix B contradicts itself: numbers that select a reading.
+
+    The defaults are the readings chosen in ``docs/rules.md``; the literal
+    Appendix B values are given in each comment.
+    """
+
+    front_clamped_lf_tx_offset: float = 0.0  # literal 2.5 (Eq. 1, second branch)
+    wrist_clamped_sign: float = pydantic.Field(default=1.0, ge=-1.0, le=1.0)  # literal -1
+    pivot_rest_offset: float = 0.0  # literal 0.572 (Eq. 12 and 14, one branch each)
+    seat_shift_test_back_gain: float = 1.0  # literal 1.7 (test uses the waist)
+    left_foot_clamped_sign: float = pydantic.Field(default=1.0, ge=-1.0, le=1.0)  # literal -1
+    left_foot_clamped_belly_pivot_gain: float = 0.05  # literal 0.02
+    waist_side_from_lower_back: float = 1.0  # literal 0: waist.ry is never assigned
+    right_knee_from_left_foot: float = pydantic.Field(default=0.0, ge=0.0, le=1.0)  # literal 1
+
+
+class RuleParams(StrictModel):
+    """A complete preset. Unset keys keep the thesis values."""
+
+    name: str = "kuhnel2003"
+    description: str = ""
+    lower_back: LowerBack = LowerBack()
+    waist: Waist = Waist()
+    hip: Hip = Hip()
+    lift: Lift = Lift()
+    seat_shift: SeatShift = SeatShift()
+    squash: Squash = Squash()
+    head: Head = Head()
+    wrists: Wrists = Wrists()
+    feet: Feet = Feet()
+    knees: Knees = Knees()
+    hair_cloth: HairCloth = HairCloth()
+    smoothing: Smoothing = Smoothing()
+    errata: Errata = Errata()
+
+    def with_values(self, changes: dict[str, float]) -> RuleParams:
+        """Return a copy with dotted keys (``"head.lift_gain"``) changed, validated."""
+        data: dict[str, Any] = self.model_dump()
+        for dotted, value in changes.items():
+            group, _, key = dotted.partition(".")
+            if group not in data or not isinstance(data[group], dict) or key not in data[group]:
+                raise KeyError(f"unknown rule parameter {dotted!r}")
+            data[group][key] = value
+        return validate(RuleParams, data, f"preset {self.name!r}")
+
+    def flat(self) -> dict[str, float]:
+        """All numeric parameters as ``{"group.key": value}``."""
+        out: dict[str, float] = {}
+        for group, table in self.model_dump().items():
+            if isinstance(table, dict):
+                out.update({f"{group}.{k}": float(v) for k, v in table.items()})
+        return out
+
+
+def load_preset(name_or_path: str | Path) -> RuleParams:
+    """Load a preset by file path or by the name of a shipped preset."""
+    path = Path(name_or_path)
+    if not path.suffix and not path.exists():
+        path = PRESET_DIR / f"{name_or_path}.toml"
+    params = load(RuleParams, path)
+    if "name" not in read_toml(path):
+        params = params.model_copy(update={"name": path.stem})
+    return params
+
+
+def shipped_presets() -> list[str]:
+    """Names of the presets shipped with the package."""
+    return sorted(p.stem for p in PRESET_DIR.glob("*.toml"))
