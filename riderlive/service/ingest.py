@@ -160,7 +160,7 @@ class IngestEndpoint:
                 "max_rate": config.input.max_rate,
             }
         )
-        driving = False
+        driving: bool | None = None
         try:
             if first is not None:
                 self.handle(producer, first)
