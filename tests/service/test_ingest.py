@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 
 import numpy as np
@@ -115,7 +116,7 @@ def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, fo
         easing = [np.array(f["values"]) for f in follower.frames if first["seq"] <= f["seq"] < back["seq"]]
         distance = [np.abs(v - neutral).max() for v in easing]
         assert distance[0] <= np.abs(posed - neutral).max() + 1e-9
-        assert all(b <= a + 1e-9 for a, b in zip(distance, distance[1:], strict=False)), "eases monotonically"
+        assert all(b <= a + 1e-9 for a, b in itertools.pairwise(distance)), "eases monotonically"
         assert distance[-1] < 1e-9, "reaches the neutral pose"
         steps = np.abs(np.diff(np.array(easing), axis=0)).max()
         assert steps < np.abs(posed - neutral).max() / 10, "no jump while easing (0.4 s at 200 Hz)"
