@@ -84,6 +84,8 @@ class PublishSection(StrictModel):
     send_timeout: float = pydantic.Field(default=2.0, gt=0.0, le=60.0)
     """A client whose send takes longer than this is cut off."""
     max_clients: int = pydantic.Field(default=256, ge=1)
+    send_buffer_bytes: int = pydantic.Field(default=65536, ge=4096, le=16 * 1024 * 1024)
+    """Kernel send buffer per client (SO_SNDBUF): how much may queue for a slow reader."""
 
 
 class TakesSection(StrictModel):

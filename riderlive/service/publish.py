@@ -34,6 +34,7 @@ from riderlive.service.codecs import (
     encode_frame,
     parse_message,
 )
+from riderlive.service.wsprotocol import ABORT
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -71,6 +72,13 @@ class Subscriber:
     def offer_control(self, message: dict[str, Any]) -> None:
         self.control.append(orjson.dumps(message).decode())
         self.wake.set()
+
+
+def abort_transport(websocket: WebSocket) -> None:
+    """Drop a stuck connection at once (see :mod:`riderlive.service.wsprotocol`)."""
+    abort = websocket.scope.get("extensions", {}).get(ABORT)
+    if abort is not None:
+        abort()
 
 
 async def _send(websocket: WebSocket, data: str | bytes) -> None:
@@ -172,13 +180,15 @@ class Hub:
 
     @staticmethod
     async def _close(client: Subscriber, code: int, reason: str) -> None:
-        with contextlib.suppress(Exception):  # a stuck transport is dropped by the close timeout
-            await asyncio.wait_for(client.websocket.close(code=code, reason=reason), 1.0)
+        """Close a client that does not read: try a close frame, then drop the connection."""
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(client.websocket.close(code=code, reason=reason), 0.5)
+        abort_transport(client.websocket)
 
     async def __call__(self, websocket: WebSocket) -> None:
         service = self.service
         config = service.config
-        offered = auth.subprotocols(websocket.headers.get("sec-websocket-protocol"))
+        offered = list(websocket.scope.get("subprotocols", []))
         if len(self.clients) >= config.publish.max_clients:
             await websocket.close(code=1013, reason="too many clients")
             return

@@ -11,6 +11,7 @@ import uvicorn
 
 from riderlive.configfile import ConfigError
 from riderlive.service.config import ServiceConfig, load_config
+from riderlive.service.wsprotocol import protocol_class
 
 
 def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) -> uvicorn.Config:
@@ -20,7 +21,7 @@ def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) ->
         host=config.server.host,
         port=config.server.port,
         fd=fd,
-        ws="websockets",
+        ws=protocol_class(config.publish.send_buffer_bytes),
         ws_per_message_deflate=False,
         ws_max_size=max(4 * config.input.max_message_bytes, 1 << 20),
         log_level=config.server.log_level,
@@ -52,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     if config.server.port == 0:
         sock = socket.socket(socket.AF_INET6 if ":" in config.server.host else socket.AF_INET)
         sock.bind((config.server.host, 0))
+        sock.listen(2048)
         print(f"riderlive serve: listening on port {sock.getsockname()[1]}", file=sys.stderr, flush=True)
     server = uvicorn.Server(uvicorn_config(create_app(config), config))
     server.run(sockets=[sock] if sock else None)
