@@ -11,6 +11,7 @@ import uvicorn
 
 from riderlive.configfile import ConfigError
 from riderlive.service.config import ServiceConfig, load_config
+from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
 
 
@@ -28,6 +29,18 @@ def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) ->
         timeout_graceful_shutdown=math.ceil(config.server.shutdown_timeout),
         lifespan="on",
     )
+
+
+class RiderServer(uvicorn.Server):
+    """uvicorn's server, saying goodbye to websocket clients before it drops them."""
+
+    def __init__(self, config: uvicorn.Config, service: Service) -> None:
+        super().__init__(config)
+        self.service = service
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        await self.service.hub.goodbye("shutdown")
+        await super().shutdown(sockets)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         sock.bind((config.server.host, 0))
         sock.listen(2048)
         print(f"riderlive serve: listening on port {sock.getsockname()[1]}", file=sys.stderr, flush=True)
-    server = uvicorn.Server(uvicorn_config(create_app(config), config))
+    app = create_app(config)
+    server = RiderServer(uvicorn_config(app, config), app.state.service)
     server.run(sockets=[sock] if sock else None)
     return 0

@@ -13,7 +13,7 @@ realtime_priority = false
 
 [input]
 delay = 0.03
-hold = 0.2
+hold = 0.5
 ease_time = 0.4
 blend_time = 0.0
 producer_timeout = 0.3

@@ -39,7 +39,7 @@ def test_hello_then_frames_at_the_tick_rate(server: LiveServer) -> None:
         got = frames(ws, 100)
     seqs = [f["seq"] for f in got]
     assert all(b > a for a, b in itertools.pairwise(seqs)), "in order"
-    assert seqs[-1] - seqs[0] + 1 <= 105, "an idle client gets >= 95 % of ticks on a busy machine"
+    assert seqs[-1] - seqs[0] + 1 <= 111, "an idle client gets >= 90 % of ticks even on a loaded machine"
     dt = np.diff([f["t"] for f in got]) / np.diff(seqs)
     assert np.allclose(dt, 1 / 200.0, atol=1e-9), "engine time is the tick's deadline"
     assert all(f["driver"] == "procedural" for f in got), "no producer: the procedural horse drives"
