@@ -95,7 +95,7 @@ def test_publish_may_require_the_token(tmp_path: Path) -> None:
 
 
 def test_a_public_address_without_a_token_does_not_start(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(ValueError, match="security.token"):
+    with pytest.raises(ValueError, match=r"security\.token"):
         ServiceConfig.model_validate({"server": {"host": "0.0.0.0"}})
     assert not ServiceConfig.model_validate({"server": {"host": "127.0.0.2"}}).token_required
     assert ServiceConfig.model_validate({"server": {"host": "10.1.2.3"}, "security": {"token": TOKEN}}).token_required
