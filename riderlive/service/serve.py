@@ -62,13 +62,19 @@ def run(args: argparse.Namespace) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)
         return 2
-    sock = None
-    if config.server.port == 0:
+    try:
         sock = socket.socket(socket.AF_INET6 if ":" in config.server.host else socket.AF_INET)
-        sock.bind((config.server.host, 0))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((config.server.host, config.server.port))
         sock.listen(2048)
-        print(f"riderlive serve: listening on port {sock.getsockname()[1]}", file=sys.stderr, flush=True)
+    except OSError as exc:
+        print(f"riderlive serve: cannot listen on {config.server.host}:{config.server.port}: {exc}", file=sys.stderr)
+        return 2
+    port = sock.getsockname()[1]
+    print(
+        f"riderlive serve: listening on port {port} (http://{config.server.host}:{port}/)", file=sys.stderr, flush=True
+    )
     app = create_app(config)
     server = RiderServer(uvicorn_config(app, config), app.state.service)
-    server.run(sockets=[sock] if sock else None)
+    server.run(sockets=[sock])
     return 0
