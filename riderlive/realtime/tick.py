@@ -15,6 +15,7 @@ import contextlib
 import logging
 import os
 import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -52,6 +53,8 @@ class TickSetup:
     seed: int | None = None
     mode: Mode = Mode.INPUT
     realtime_priority: bool = True
+    isolation: str = "process"
+    """``process`` (the design) or ``thread`` (in the web process; a baseline for benchmarks)."""
     rig_file: str | None = None
     rig_port: str | None = None
     park_timeout: float = 5.0
@@ -195,6 +198,7 @@ class TickLoop:
                 float(result.producer),
                 newest_rx,
                 done,
+                lateness,
                 *result.horse,
                 *result.rider,
             ]
@@ -232,15 +236,18 @@ class TickLoop:
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:
     """Entry point of the spawned tick process."""
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
+    in_process = threading.current_thread() is threading.main_thread()
+    if in_process:
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
     notify_fd = notify.fileno()
     os.set_blocking(notify_fd, False)
     output: TickOutput | None = None
     if setup.rig_file:
         output = RigOutput(setup.rig_file, setup.rig_port)
     loop = TickLoop(setup, commands, notify_fd, output)
-    signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
+    if in_process:
+        signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
     loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
     try:
         if output is not None:

@@ -42,6 +42,9 @@ class SecuritySection(StrictModel):
 class TickSection(StrictModel):
     rate: float = pydantic.Field(default=120.0, ge=30.0, le=1000.0)
     realtime_priority: bool = True
+    isolation: Literal["process", "thread"] = "process"
+    """``process``: the tick in its own process (the design). ``thread``: in the web
+    process, sharing its GIL; only as a baseline for benchmarks."""
     length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
     """Thesis rig units per service length unit (25 = the service speaks metres)."""
     preset: str = "kuhnel2003"

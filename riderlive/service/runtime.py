@@ -50,6 +50,7 @@ def make_setup(config: ServiceConfig, params: RuleParams) -> TickSetup:
         seed=source.seed,
         mode=Mode.PROCEDURAL if source.kind == "procedural" else Mode.INPUT,
         realtime_priority=config.tick.realtime_priority,
+        isolation=config.tick.isolation,
         rig_file=config.rig.file,
         rig_port=config.rig.port,
         park_timeout=config.rig.park_timeout,
