@@ -42,6 +42,8 @@ class SecuritySection(StrictModel):
 class TickSection(StrictModel):
     rate: float = pydantic.Field(default=120.0, ge=30.0, le=1000.0)
     realtime_priority: bool = True
+    spin: float | None = pydantic.Field(default=None, ge=0.0, le=0.005)
+    """Seconds the tick spins before each deadline; unset: 0.25 ms at SCHED_FIFO, else 1 ms."""
     isolation: Literal["process", "thread"] = "process"
     """``process``: the tick in its own process (the design). ``thread``: in the web
     process, sharing its GIL; only as a baseline for benchmarks."""

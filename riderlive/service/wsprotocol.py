@@ -7,6 +7,13 @@
 - ``scope["extensions"]["riderlive.abort"]`` aborts the transport. ASGI has no abort:
   a close frame waits behind data the client never read, and ``transport.close()``
   waits for the buffer to drain, so a cut-off client would otherwise never be freed.
+- ``scope["extensions"]["riderlive.transport"]`` is the connection's asyncio transport,
+  for the publisher's fast path: a frame from server to client is not masked, so its
+  wire bytes are the same for every client with the same subscription; they are
+  built once per tick and written to each transport, skipping the per-message ASGI
+  and protocol layers (about 30 us each, times 100 clients, times the tick rate).
+  Only whole frames are written, from the event loop's thread, like the protocol's
+  own writes, so frames never interleave.
 """
 
 from __future__ import annotations
@@ -18,6 +25,22 @@ from typing import Any
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 ABORT = "riderlive.abort"
+TRANSPORT = "riderlive.transport"
+
+
+def frame_header(opcode: int, length: int) -> bytes:
+    """The header of an unmasked, unfragmented websocket frame (RFC 6455 section 5.2)."""
+    if length < 126:
+        return bytes((0x80 | opcode, length))
+    if length < 1 << 16:
+        return bytes((0x80 | opcode, 126)) + length.to_bytes(2, "big")
+    return bytes((0x80 | opcode, 127)) + length.to_bytes(8, "big")
+
+
+def wire_frame(data: str | bytes) -> bytes:
+    """A text (str) or binary (bytes) message as the bytes a server puts on the wire."""
+    payload = data.encode() if isinstance(data, str) else data
+    return frame_header(1 if isinstance(data, str) else 2, len(payload)) + payload
 
 
 def protocol_class(send_buffer_bytes: int) -> type[WebSocketsSansIOProtocol]:
@@ -35,6 +58,8 @@ def protocol_class(send_buffer_bytes: int) -> type[WebSocketsSansIOProtocol]:
             super().handle_connect(event)
             scope: Any = getattr(self, "scope", None)
             if scope is not None:
-                scope.setdefault("extensions", {})[ABORT] = self.transport.abort
+                extensions = scope.setdefault("extensions", {})
+                extensions[ABORT] = self.transport.abort
+                extensions[TRANSPORT] = self.transport
 
     return RiderWebSocketProtocol
