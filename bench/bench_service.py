@@ -44,10 +44,10 @@ def burn(stop_at: float) -> None:
         x += 1
 
 
-def start_server(rate: float, isolation: str, workdir: Path) -> tuple[subprocess.Popen[str], int]:
+def start_server(rate: float, isolation: str, workdir: Path, nice: int) -> tuple[subprocess.Popen[str], int]:
     config = workdir / f"{isolation}.toml"
     config.write_text(
-        f'[server]\nlog_level = "warning"\n[tick]\nrate = {rate}\nisolation = "{isolation}"\n'
+        f'[server]\nlog_level = "warning"\nnice = {nice}\n[tick]\nrate = {rate}\nisolation = "{isolation}"\n'
         "[publish]\nsend_timeout = 2.0\nmax_clients = 1000\n"
     )
     proc = subprocess.Popen(
@@ -73,6 +73,19 @@ def start_server(rate: float, isolation: str, workdir: Path) -> tuple[subprocess
             pass
         time.sleep(0.2)
     raise RuntimeError("server did not start")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of one process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
 
 
 def histogram(text: str, name: str) -> list[tuple[float, float]]:
@@ -219,7 +232,7 @@ def delivery(stats: list[ClientStats], start: float, stop: float, decimation: in
     return min(fractions), sum(fractions) / len(fractions)
 
 
-async def drive(port: int, args: argparse.Namespace) -> dict[str, float]:
+async def drive(port: int, args: argparse.Namespace, pid: int | None = None) -> dict[str, float]:
     url = f"ws://127.0.0.1:{port}"
     http = f"http://127.0.0.1:{port}"
     stop = asyncio.Event()
@@ -229,12 +242,15 @@ async def drive(port: int, args: argparse.Namespace) -> dict[str, float]:
     await asyncio.sleep(2.0)  # everyone connected and subscribed
     async with httpx.AsyncClient() as client:
         before = (await client.get(http + "/metrics")).text
+        pids = [pid, *children(pid)] if pid else []
+        cpu_before = [cpu_seconds(p) for p in pids]
         t_start = time.perf_counter()
         await asyncio.sleep(args.seconds / 2)
         stall = stalled_client(port)
         t_stall = time.perf_counter()
         await asyncio.sleep(args.seconds / 2)
         t_end = time.perf_counter()
+        cpu_after = [cpu_seconds(p) for p in pids]
         after = (await client.get(http + "/metrics")).text
         state = (await client.get(http + "/api/state")).json()
     sent = sorted(c["sent"] for c in state["clients"])
@@ -262,13 +278,17 @@ async def drive(port: int, args: argparse.Namespace) -> dict[str, float]:
         "worst_after": worst_after,
         "mean_after": mean_after,
         "cut_off": metric(after, "riderlive_clients_cut_off_total"),
+        "web_cpu": (cpu_after[0] - cpu_before[0]) / (t_end - t_start) if pids else float("nan"),
+        "tick_cpu": sum(a - b for a, b in zip(cpu_after[1:], cpu_before[1:], strict=True)) / (t_end - t_start)
+        if pids
+        else float("nan"),
     }
 
 
 def run(isolation: str, args: argparse.Namespace, workdir: Path) -> dict[str, float]:
-    proc, port = start_server(args.rate, isolation, workdir)
+    proc, port = start_server(args.rate, isolation, workdir, args.nice)
     try:
-        return asyncio.run(drive(port, args))
+        return asyncio.run(drive(port, args, proc.pid))
     finally:
         proc.terminate()
         proc.wait(20)
@@ -283,6 +303,7 @@ def main() -> None:
     parser.add_argument("--client-rate", type=float, default=120.0)
     parser.add_argument("--producer-rate", type=float, default=120.0)
     parser.add_argument("--no-burner", action="store_true")
+    parser.add_argument("--nice", type=int, default=0, help="server.nice of the service (e.g. -10)")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-service-"))
     baseline_args = argparse.Namespace(**{**vars(args), "seconds": args.baseline_seconds or args.seconds})
@@ -314,6 +335,8 @@ def main() -> None:
         ("worst client delivery, stall", "worst_after", "{:.3f}"),
         ("mean client delivery, stall", "mean_after", "{:.3f}"),
         ("stalled clients cut off", "cut_off", "{:.0f}"),
+        ("web process CPU (cores)", "web_cpu", "{:.2f}"),
+        ("tick process(es) CPU (cores)", "tick_cpu", "{:.2f}"),
     )
     print(f"{'':38}{'process (design)':>18}{'thread (baseline)':>19}")
     for label, key, fmt in rows:

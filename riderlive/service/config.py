@@ -22,6 +22,8 @@ class ServerSection(StrictModel):
     cors_origins: list[str] = pydantic.Field(default_factory=list)
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
     shutdown_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+    nice: int = pydantic.Field(default=0, ge=-20, le=19)
+    """Scheduling niceness of the web process (negative needs privileges; falls back with a warning)."""
 
 
 class SecuritySection(StrictModel):

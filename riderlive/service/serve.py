@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import socket
 import sys
 
@@ -74,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"riderlive serve: listening on port {port} (http://{config.server.host}:{port}/)", file=sys.stderr, flush=True
     )
+    if config.server.nice:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
+        except OSError as exc:
+            print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
     app = create_app(config)
     server = RiderServer(uvicorn_config(app, config), app.state.service)
     server.run(sockets=[sock])

@@ -26,7 +26,7 @@ send_timeout = 0.5
 """
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live
