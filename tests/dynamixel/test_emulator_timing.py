@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import subprocess
 import sys
 import time
@@ -79,7 +80,7 @@ def test_parse_servo() -> None:
 def test_cli_serves_a_bus_and_reports(tmp_path: Path) -> None:
     link_path = tmp_path / "bus"
     cmd = [sys.executable, "-m", "riderlive", "servo-emu", "--servo", "1:xl430-w250", "--servo", "2:XL330-M288"]
-    cmd += ["--duration", "3", "--link", str(link_path), "--fault", "overload:2@0"]
+    cmd += ["--duration", "20", "--link", str(link_path), "--fault", "overload:2@0"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True, env={"PYTHONPATH": str(REPO)})
     try:
         assert proc.stdout is not None
@@ -96,6 +97,7 @@ def test_cli_serves_a_bus_and_reports(tmp_path: Path) -> None:
             time.sleep(0.05)
         assert ph.read1ByteTxRx(port, 2, 70) == (0x20, COMM_SUCCESS, 0x80)
         port.closePort()
+        proc.send_signal(signal.SIGINT)  # stops cleanly, like Ctrl-C
         out, _ = proc.communicate(timeout=10)
     finally:
         proc.kill()
