@@ -345,7 +345,7 @@ class EmulatedBus:
                 return []
             address, length = le_int(params[0:2]), le_int(params[2:4])
             requests = [(servo_id, address, length) for servo_id in params[4:]]
-            return self._group_read(requests, active, fast=inst == Instruction.FAST_SYNC_READ)
+            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_SYNC_READ)
         if inst in (Instruction.BULK_READ, Instruction.FAST_BULK_READ):
             if len(params) % 5 or not params:
                 return []
@@ -353,7 +353,7 @@ class EmulatedBus:
                 (params[i], le_int(params[i + 1 : i + 3]), le_int(params[i + 3 : i + 5]))
                 for i in range(0, len(params), 5)
             ]
-            return self._group_read(requests, active, fast=inst == Instruction.FAST_BULK_READ)
+            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_BULK_READ)
         if inst == Instruction.SYNC_WRITE and len(params) >= 4:
             address, length = le_int(params[0:2]), le_int(params[2:4])
             body = params[4:]
@@ -388,7 +388,7 @@ class EmulatedBus:
             if len(params) != 4:
                 error = StatusError.DATA_LENGTH
             else:
-                error, data = servo.read(le_int(params[0:2]), le_int(params[2:4]))
+                error, data = servo.read(le_int(params[0:2]), le_int(params[2:4]), now)
         elif inst in (Instruction.WRITE, Instruction.REG_WRITE):
             if len(params) < 3:
                 error = StatusError.DATA_LENGTH
@@ -415,7 +415,7 @@ class EmulatedBus:
         return inst == Instruction.PING or level == 2 or (level == 1 and inst in READ_INSTRUCTIONS)
 
     def _group_read(
-        self, requests: Sequence[tuple[int, int, int]], active: dict[int, EmulatedServo], *, fast: bool
+        self, requests: Sequence[tuple[int, int, int]], active: dict[int, EmulatedServo], now: float, *, fast: bool
     ) -> list[_Chunk]:
         replies: list[tuple[EmulatedServo | None, int, bytes]] = []
         for servo_id, address, length in requests:
@@ -423,7 +423,7 @@ class EmulatedBus:
             if servo is None or not self._answers(servo, Instruction.SYNC_READ):
                 replies.append((None, servo_id, bytes(length)))
                 continue
-            error, data = servo.read(address, length)
+            error, data = servo.read(address, length, now)
             replies.append((servo, servo.status_error(error), data if not error else bytes(length) if fast else b""))
         if not fast:
             return [_Chunk(s, encode_status(s.id, err, data)) for s, err, data in replies if s is not None]

@@ -17,6 +17,7 @@ call. Register semantics follow the ROBOTIS e-manual:
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, replace
 
 from riderlive.dynamixel import emulator_motion as motion
@@ -24,6 +25,7 @@ from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
     EXTENDED_POSITION_RANGE,
+    MODELS,
     POSITION_MODES,
     RETURN_DELAY_UNIT_S,
     VELOCITY_UNIT_RPM,
@@ -38,6 +40,16 @@ from riderlive.dynamixel.tables import (
     StatusError,
     model_spec,
 )
+
+
+def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
+    """(address, struct format to read, format to write, mask) of an item."""
+    code = {1: "b", 2: "h", 4: "i"}[spec.size]
+    return spec.address, "<" + (code if spec.signed else code.upper()), "<" + code.upper(), (1 << (8 * spec.size)) - 1
+
+
+_LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
+_WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
 """Items that become read-only while the Bus Watchdog has tripped."""
@@ -77,12 +89,13 @@ class EmulatedServo:
     # -- raw register access (no checks; for the bus, tests and fault injection) --------
 
     def get(self, item: Item) -> int:
-        spec = self.spec.items[item]
-        return int.from_bytes(self.memory[spec.address : spec.end], "little", signed=spec.signed)
+        address, read_format, _, _ = _LAYOUTS[self.spec.model][item]
+        value: int = struct.unpack_from(read_format, self.memory, address)[0]
+        return value
 
     def set(self, item: Item, value: int) -> None:
-        spec = self.spec.items[item]
-        self.memory[spec.address : spec.end] = (value % (1 << (8 * spec.size))).to_bytes(spec.size, "little")
+        address, _, write_format, mask = _LAYOUTS[self.spec.model][item]
+        struct.pack_into(write_format, self.memory, address, value & mask)
 
     @property
     def id(self) -> int:
@@ -117,7 +130,9 @@ class EmulatedServo:
 
     def feed_watchdog(self, now: float) -> None:
         """An instruction packet for this servo (or broadcast) arrived at ``now``."""
-        self.advance(now)
+        watchdog = self.memory[_WATCHDOG_ADDRESS]
+        if 0 < watchdog < 0x80 and now > self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S:
+            self.advance(now)  # the deadline passed before this packet: trip first
         self._last_instruction = now
 
     def advance(self, now: float) -> None:
@@ -203,10 +218,11 @@ class EmulatedServo:
 
     # -- instructions ----------------------------------------------------------------------
 
-    def read(self, address: int, length: int) -> tuple[StatusError, bytes]:
-        """READ: ``length`` bytes from ``address`` (gaps between items read as 0)."""
+    def read(self, address: int, length: int, now: float) -> tuple[StatusError, bytes]:
+        """READ at ``now``: ``length`` bytes from ``address`` (gaps between items read as 0)."""
         if length < 1 or address + length > len(self.memory):
             return StatusError.ACCESS, b""
+        self.advance(now)
         return StatusError.NONE, bytes(self.memory[address : address + length])
 
     def check_write(self, address: int, data: bytes) -> StatusError:
@@ -214,10 +230,17 @@ class EmulatedServo:
         end = address + len(data)
         if not data or end > len(self.memory):
             return StatusError.ACCESS
-        covered = [spec for spec in self.spec if spec.address < end and spec.end > address]
-        if sum(spec.size for spec in covered) != len(data):
-            partial = any(spec.address < address or spec.end > end for spec in covered)
-            return StatusError.DATA_LENGTH if partial else StatusError.ACCESS
+        owner = self.spec.byte_owner
+        covered: list[ItemSpec] = []
+        position = address
+        while position < end:
+            spec = owner[position]
+            if spec is None:
+                return StatusError.ACCESS
+            if spec.address != position or spec.end > end:
+                return StatusError.DATA_LENGTH
+            covered.append(spec)
+            position = spec.end
         for spec in covered:
             if spec.access is Access.R:
                 return StatusError.ACCESS
@@ -269,7 +292,6 @@ class EmulatedServo:
             self.set(Item.GOAL_VELOCITY, 0)
         if self.watchdog_tripped and self.get(Item.BUS_WATCHDOG) == 0:
             self.watchdog_tripped = False
-        self._sync_outputs(now)
         return StatusError.NONE
 
     def reg_write(self, address: int, data: bytes) -> StatusError:
