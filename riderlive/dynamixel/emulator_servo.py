@@ -75,7 +75,9 @@ class EmulatedServo:
         self._last_instruction = now
         self.watchdog_tripped = False
         self.registered: tuple[int, bytes] | None = None
-        self.external_load = 0.0
+        self._external_load = 0.0
+        self._profile_cache: motion.Profile | None = None
+        self._synced: tuple[object, ...] = ()
         self.deaf_until = 0.0
         """The servo ignores the bus until this time (rebooting)."""
         self.thermal = motion.ThermalParams()
@@ -94,8 +96,24 @@ class EmulatedServo:
         return value
 
     def set(self, item: Item, value: int) -> None:
+        self._put(item, value)
+        self._profile_cache = None
+        self._synced = ()
+
+    def _put(self, item: Item, value: int) -> None:
+        """Store without invalidating the cached profile (for the model's own outputs)."""
         address, _, write_format, mask = _LAYOUTS[self.spec.model][item]
         struct.pack_into(write_format, self.memory, address, value & mask)
+
+    @property
+    def external_load(self) -> float:
+        """Extra effort from outside (something pushing on the horn), 0..1; heats the servo."""
+        return self._external_load
+
+    @external_load.setter
+    def external_load(self, value: float) -> None:
+        self._external_load = value
+        self._profile_cache = None
 
     @property
     def id(self) -> int:
@@ -160,6 +178,11 @@ class EmulatedServo:
         self._sync_outputs(now)
 
     def _profile(self) -> motion.Profile:
+        if self._profile_cache is None:
+            self._profile_cache = self._make_profile()
+        return self._profile_cache
+
+    def _make_profile(self) -> motion.Profile:
         cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
         profile_velocity = self.get(Item.PROFILE_VELOCITY)
         velocity_cap = motion.velocity_from_register(round(min(profile_velocity or cap, cap)))
@@ -182,27 +205,31 @@ class EmulatedServo:
     def _sync_outputs(self, now: float) -> None:
         """Write the model state into the read-only present-value registers."""
         state = self.state
+        self._put(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
+        key = (state, self._profile_cache, self.voltage)
+        if key == self._synced:
+            return  # nothing the registers show has changed
+        self._synced = key
         offset = self.get(Item.HOMING_OFFSET)
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
-        self.set(Item.PRESENT_POSITION, position)
-        self.set(Item.POSITION_TRAJECTORY, position)
-        self.set(Item.PRESENT_VELOCITY, velocity)
-        self.set(Item.VELOCITY_TRAJECTORY, velocity)
+        self._put(Item.PRESENT_POSITION, position)
+        self._put(Item.POSITION_TRAJECTORY, position)
+        self._put(Item.PRESENT_VELOCITY, velocity)
+        self._put(Item.VELOCITY_TRAJECTORY, velocity)
         moving = abs(velocity) > self.get(Item.MOVING_THRESHOLD) or (
             self.torque_on and abs(state.velocity) > 0 and not self.watchdog_tripped
         )
-        self.set(Item.MOVING, int(moving))
-        self.set(Item.MOVING_STATUS, 0x01 if not moving and self.torque_on else 0x00)
+        self._put(Item.MOVING, int(moving))
+        self._put(Item.MOVING_STATUS, 0x01 if not moving and self.torque_on else 0x00)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
         if self.spec.has(Item.PRESENT_CURRENT):
-            self.set(Item.PRESENT_CURRENT, round(signed_effort * self.get(Item.CURRENT_LIMIT)))
+            self._put(Item.PRESENT_CURRENT, round(signed_effort * self.get(Item.CURRENT_LIMIT)))
         if self.spec.has(Item.PRESENT_LOAD):
-            self.set(Item.PRESENT_LOAD, round(signed_effort * 1000))
-        self.set(Item.PRESENT_PWM, round(signed_effort * self.get(Item.PWM_LIMIT)))
-        self.set(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
-        self.set(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
-        self.set(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
+            self._put(Item.PRESENT_LOAD, round(signed_effort * 1000))
+        self._put(Item.PRESENT_PWM, round(signed_effort * self.get(Item.PWM_LIMIT)))
+        self._put(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
+        self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
 
     # -- hardware errors -----------------------------------------------------------------
 
@@ -284,6 +311,8 @@ class EmulatedServo:
         torque_before = self.torque_on
         mode_before = self.get(Item.OPERATING_MODE)
         self.memory[address : address + len(data)] = data
+        self._profile_cache = None
+        self._synced = ()
         if self.torque_on and not torque_before:
             # Torque on holds where the horn is: the goal becomes the present position.
             self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
