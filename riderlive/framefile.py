@@ -102,7 +102,7 @@ def _first_bad_cell(source: str, text: str, names: Sequence[str]) -> FrameFileEr
             except ValueError:
                 return FrameFileError(source, f"not a number: {cell!r}", line=line_no, column=name)
             if not np.isfinite(value):
-                return FrameFileError(source, f"not finite: {cell!r}", line=line_no, column=name)
+                return FrameFileError(source, f"not finite: {cell.strip()}", line=line_no, column=name)
     return FrameFileError(source, "could not be parsed as CSV")
 
 
@@ -137,10 +137,8 @@ def _read_csv(source: str, text: str, required: Iterable[str]) -> FrameTable:
         raise _first_bad_cell(source, text, names) from None
     if data.ndim != 2 or data.shape[1] != len(names):
         raise _first_bad_cell(source, text, names)
-    finite = np.isfinite(data)
-    if not finite.all():
-        row, col = np.argwhere(~finite)[0]
-        raise FrameFileError(source, f"not finite: {data[row, col]!r}", line=int(row) + 2, column=names[col])
+    if not np.isfinite(data).all():  # NaN, inf, or an empty cell read as null
+        raise _first_bad_cell(source, text, names)
     return _split_time(names, data)
 
 
