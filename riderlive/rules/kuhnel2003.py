@@ -123,6 +123,11 @@ def make_rules(p: RuleParams, ops: Ops) -> RuleFunction:
         wr.pivot_height_gain,
     )
     pivot_rest = er.pivot_rest_offset
+    # The literal readings of Appendix B's contradictions cost array work only when chosen.
+    literal_eq1_offset = eq1_front_clamped_offset != 0.0
+    literal_shift_test = shift_test_back_gain != 1.0
+    literal_wrist_sign = wrist_clamped != wrist_limit
+    literal_pivot_rest = pivot_rest != 0.0
     # Eq. 14-18
     feet_limit, foot_side_gain, foot_side_offset = ft.height_limit, ft.side_gain, ft.side_offset
     foot_twist_gain, foot_twist_offset = ft.twist_gain, ft.twist_offset
@@ -136,6 +141,8 @@ def make_rules(p: RuleParams, ops: Ops) -> RuleFunction:
     foot_pitch_offset, foot_pitch_gain = ft.pitch_offset, ft.pitch_scale * ft.pitch_gain
     knee_rest, knee_belly_gain, knee_from_left = kn.rest_tz, kn.belly_gain, er.right_knee_from_left_foot
     knee_lift_gain, knee_lift_offset = kn.lift_gain, kn.lift_offset
+    literal_left_foot = left_clamped_sign != 1.0 or left_clamped_belly_pivot_gain != belly_pivot_gain
+    literal_right_knee = knee_from_left != 0.0
     # hair and cloth
     hc_offset, hair_up_gain, cloth_up_gain = hc.height_offset, hc.hair_up_gain, hc.cloth_up_gain
     hair_side_gain = er.waist_side_from_lower_back * hc.hair_side_gain
@@ -164,8 +171,10 @@ def make_rules(p: RuleParams, ops: Ops) -> RuleFunction:
         abs_pitch = fabs(piv_rz)
 
         # Eq. 1: lower back forward (+) / back; hoof heights used up to 18 (front), 15 (back).
-        only_front_clamped = (front_h >= front_limit) & (back_h < back_limit)
-        front_x_eq1 = where(only_front_clamped, front_x - eq1_front_clamped_offset, front_x)
+        front_x_eq1 = front_x
+        if literal_eq1_offset:  # E7: an offset in the front-clamped-only branch
+            only_front_clamped = (front_h >= front_limit) & (back_h < back_limit)
+            front_x_eq1 = where(only_front_clamped, front_x - eq1_front_clamped_offset, front_x)
         lower_back = (
             piv_rz * ((piv_ty + eq1_h1) * eq1_w1)
             + back_x * eq1_w3
@@ -191,12 +200,13 @@ def make_rules(p: RuleParams, ops: Ops) -> RuleFunction:
 
         # Eq. 8: seat shift within +-limit.
         pitch2 = piv_rz * shift_pivot_gain
-        shift_test = (pitch2 - lower_back * shift_test_back_gain) * shift_gain
-        shift = where(
-            shift_test > shift_limit,
-            shift_limit,
-            where(shift_test < -shift_limit, -shift_limit, (pitch2 - lower_back) * shift_gain),
-        )
+        shift_value = (pitch2 - lower_back) * shift_gain
+        if literal_shift_test:  # E13: the clamp tests the waist, the value uses the lower back
+            shift_test = (pitch2 - lower_back * shift_test_back_gain) * shift_gain
+            inside = where(shift_test < -shift_limit, -shift_limit, shift_value)
+            shift = where(shift_test > shift_limit, shift_limit, inside)
+        else:
+            shift = minimum(maximum(shift_value, -shift_limit), shift_limit)
 
         # Eq. 9: squash and stretch.
         spine_lift = lift / spine_div
@@ -208,33 +218,45 @@ def make_rules(p: RuleParams, ops: Ops) -> RuleFunction:
         head_side = piv_rx * head_side_gain
 
         # Eq. 12-13: wrists, the lower back clamped to +-17.
-        back_low = lower_back <= -wrist_limit
-        wrist_back = where(lower_back >= wrist_limit, wrist_clamped, where(back_low, -wrist_clamped, lower_back))
-        wrist_pitch = where(back_low, fabs(piv_rz - pivot_rest), abs_pitch)
+        if literal_wrist_sign:  # E5: the clamped branches flip the sign
+            back_high, back_low = lower_back >= wrist_limit, lower_back <= -wrist_limit
+            wrist_back = where(back_high, wrist_clamped, where(back_low, -wrist_clamped, lower_back))
+        else:
+            wrist_back = minimum(maximum(lower_back, -wrist_limit), wrist_limit)
+        wrist_pitch = abs_pitch
+        if literal_pivot_rest:  # E6: 0.572 in the lower-back <= -17 branch
+            wrist_pitch = where(lower_back <= -wrist_limit, fabs(piv_rz - pivot_rest), abs_pitch)
         wrist_fwd = wrist_back * wrist_back_gain - front_x * (wrist_pitch * wrist_pivot_gain)
         wrist_up = minimum(all_h, wrist_height_limit) * wrist_height_gain - piv_ty * wrist_pivot_height_gain
 
         # Eq. 16-17 and the knee lift: the hoof height sum is used up to 15.
-        feet_clamped = all_h > feet_limit
         h15 = minimum(all_h, feet_limit)
         rt_side = h15 * foot_side_gain + foot_side_offset
-        lf_side = where(feet_clamped, left_clamped_sign * rt_side, rt_side)
         rt_twist = -h15 * foot_twist_gain + foot_twist_offset
         lf_twist = h15 * foot_twist_gain + foot_twist_offset
         belly = h15 * belly_gain + belly_offset
         rt_belly = belly - piv_rx * belly_pivot_gain
-        lf_belly = where(feet_clamped, left_clamped_sign * belly - piv_rx * left_clamped_belly_pivot_gain, rt_belly)
+        lf_side, lf_belly = rt_side, rt_belly
+        if literal_left_foot:  # E4: the left foot's clamped branch flips sign and uses 0.02
+            feet_clamped = all_h > feet_limit
+            lf_side = where(feet_clamped, left_clamped_sign * rt_side, rt_side)
+            lf_clamped = left_clamped_sign * belly - piv_rx * left_clamped_belly_pivot_gain
+            lf_belly = where(feet_clamped, lf_clamped, rt_belly)
         knee_lift = h15 * knee_lift_gain + knee_lift_offset
 
         # Eq. 14-15: feet forward/back; the front-hoof term only ever moves the feet back.
         reach = front_x * -(abs_pitch * reach_pivot_gain + reach_offset + mid_rz * reach_mid_gain)
-        foot_pitch = where(reach <= 0.0, abs_pitch, fabs(piv_rz - pivot_rest))
+        foot_pitch = abs_pitch
+        if literal_pivot_rest:  # E6: 0.572 in the forward branch
+            foot_pitch = where(reach <= 0.0, abs_pitch, fabs(piv_rz - pivot_rest))
         foot_fwd = minimum(reach, 0.0) - foot_pitch * lower_back * foot_back_gain
         foot_rz = (foot_fwd + foot_pitch_offset) * foot_pitch_gain
 
         # Eq. 18: knees against the feet.
         lf_knee = knee_rest - lf_belly * knee_belly_gain
-        rt_knee = knee_rest - (rt_belly + (lf_belly - rt_belly) * knee_from_left) * knee_belly_gain
+        rt_knee = knee_rest - rt_belly * knee_belly_gain
+        if literal_right_knee:  # E14: the right knee reads the left foot
+            rt_knee = knee_rest - (rt_belly + (lf_belly - rt_belly) * knee_from_left) * knee_belly_gain
 
         heights = all_h + hc_offset
         hair_up = heights * hair_up_gain
