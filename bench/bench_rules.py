@@ -19,14 +19,14 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from riderlive.channels import HORSE_NAMES  # noqa: E402
-from riderlive.rules.engine import RiderModel  # noqa: E402
-from riderlive.rules.params import RuleParams  # noqa: E402
+from riderlive.channels import HORSE_NAMES
+from riderlive.rules.engine import RiderModel
+from riderlive.rules.params import RuleParams
 
 
-def plain_rules(h: dict[str, float], p: RuleParams) -> dict[str, float]:  # noqa: PLR0914
+def plain_rules(h: dict[str, float], p: RuleParams) -> dict[str, float]:
     """The baseline: Appendix B written the obvious way, dict in, dict out."""
     lb, wr, ft = p.lower_back, p.wrists, p.feet
     front_h = h["lfHoof.ty"] + h["rfHoof.ty"]
@@ -123,8 +123,10 @@ def main() -> None:
         model.evaluate_batch(horse)
         warm_times.append(time.perf_counter() - start)
     warm = args.frames / min(warm_times)
-    print(f"batch path, N={args.frames:,}, one core: {warm / 1e6:.2f} M frames/s warm (best of 5), "
-          f"{cold / 1e6:.2f} M frames/s cold (target >= 5)")
+    print(
+        f"batch path, N={args.frames:,}, one core: {warm / 1e6:.2f} M frames/s warm (best of 5), "
+        f"{cold / 1e6:.2f} M frames/s cold (target >= 5)"
+    )
     print(f"  ratio batch/scalar throughput = {warm / (1e6 / ours):.0f}x")
 
 
