@@ -436,7 +436,11 @@ class EmulatedBus:
         return chunks
 
     def _transmit(self, chunks: Sequence[_Chunk], start: float) -> None:
+        """Send the replies, applying reply faults; with wire timing, each at the moment its
+        last byte would have left the servo. Bytes due together go out in one write (a
+        write per chunk would wake the host once per servo)."""
         t = start
+        batch = bytearray()
         for chunk in chunks:
             faults = self._faults[id(chunk.servo)]
             if faults.drop is not None and faults.drop.fires():
@@ -450,15 +454,25 @@ class EmulatedBus:
                 data = corrupt(data)
             if self.wire_timing:
                 t += (chunk.servo.return_delay_s if chunk.waits_return_delay else 0.0) + len(data) * 10 / self.baud
-                self._sleep_until(t)
-            try:
-                os.write(self._master, data)
-            except OSError:
-                self.stats.dropped_replies += 1
-                continue
+                if not chunk.chained:  # a fast-read chain is useless to the host until complete
+                    self._flush(batch)
+                    self._sleep_until(t)
+            batch += data
             self.stats.replies += 1
-            self.stats.bytes_out += len(data)
+        if self.wire_timing:
+            self._sleep_until(t)
+        self._flush(batch)
         self._bus_free_at = t
+
+    def _flush(self, batch: bytearray) -> None:
+        if not batch:
+            return
+        try:
+            os.write(self._master, batch)
+            self.stats.bytes_out += len(batch)
+        except OSError:
+            self.stats.dropped_replies += 1
+        batch.clear()
 
     def _sleep_until(self, deadline: float) -> None:
         """Sleep, then spin the last 0.2 ms (OS sleeps overshoot by ~0.1 ms)."""
