@@ -78,6 +78,7 @@ class EmulatedServo:
         self._external_load = 0.0
         self._profile_cache: motion.Profile | None = None
         self._synced: tuple[object, ...] = ()
+        self._output_limits = (0, 0, 0, 0)
         self.deaf_until = 0.0
         """The servo ignores the bus until this time (rebooting)."""
         self.thermal = motion.ThermalParams()
@@ -193,6 +194,12 @@ class EmulatedServo:
             goal_velocity = motion.velocity_from_register(self.get(Item.GOAL_VELOCITY))
         elif mode not in POSITION_MODES:
             goal_velocity = 0.0
+        self._output_limits = (
+            self.get(Item.HOMING_OFFSET),
+            self.get(Item.MOVING_THRESHOLD),
+            self.get(Item.CURRENT_LIMIT) if self.spec.has(Item.CURRENT_LIMIT) else 0,
+            self.get(Item.PWM_LIMIT),
+        )
         return motion.Profile(
             torque_on=self.torque_on and not self.watchdog_tripped,
             goal_position=float(self.get(Item.GOAL_POSITION) - self.get(Item.HOMING_OFFSET)),
@@ -206,28 +213,27 @@ class EmulatedServo:
         """Write the model state into the read-only present-value registers."""
         state = self.state
         self._put(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
-        key = (state, self._profile_cache, self.voltage)
+        profile = self._profile()
+        key = (state, profile, self.voltage)
         if key == self._synced:
             return  # nothing the registers show has changed
         self._synced = key
-        offset = self.get(Item.HOMING_OFFSET)
+        offset, threshold, current_limit, pwm_limit = self._output_limits
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
         self._put(Item.PRESENT_POSITION, position)
         self._put(Item.POSITION_TRAJECTORY, position)
         self._put(Item.PRESENT_VELOCITY, velocity)
         self._put(Item.VELOCITY_TRAJECTORY, velocity)
-        moving = abs(velocity) > self.get(Item.MOVING_THRESHOLD) or (
-            self.torque_on and abs(state.velocity) > 0 and not self.watchdog_tripped
-        )
+        moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
         self._put(Item.MOVING, int(moving))
-        self._put(Item.MOVING_STATUS, 0x01 if not moving and self.torque_on else 0x00)
+        self._put(Item.MOVING_STATUS, 0x01 if not moving and profile.torque_on else 0x00)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
-        if self.spec.has(Item.PRESENT_CURRENT):
-            self._put(Item.PRESENT_CURRENT, round(signed_effort * self.get(Item.CURRENT_LIMIT)))
-        if self.spec.has(Item.PRESENT_LOAD):
+        if current_limit:
+            self._put(Item.PRESENT_CURRENT, round(signed_effort * current_limit))
+        else:
             self._put(Item.PRESENT_LOAD, round(signed_effort * 1000))
-        self._put(Item.PRESENT_PWM, round(signed_effort * self.get(Item.PWM_LIMIT)))
+        self._put(Item.PRESENT_PWM, round(signed_effort * pwm_limit))
         self._put(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
         self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
 
