@@ -294,9 +294,10 @@ class EmulatedBus:
             self.received.append(raw)
             self.stats.packets += 1
             now = arrived
-            if self.wire_timing:
+            if self.wire_timing:  # the instruction's last byte arrives after its wire time;
+                # the servos act at that moment, but only replies wait for the clock
                 now = max(arrived, self._bus_free_at) + len(raw) * 10 / self.baud
-                self._sleep_until(now)
+                self._bus_free_at = now
             active = self._active(now)
             try:
                 packet = decode_instruction(raw)
@@ -475,10 +476,9 @@ class EmulatedBus:
         batch.clear()
 
     def _sleep_until(self, deadline: float) -> None:
-        """Sleep, then spin the last 0.2 ms (OS sleeps overshoot by ~0.1 ms)."""
+        """Sleep, then yield-spin the last millisecond (OS sleeps overshoot, more so under load)."""
         while True:
             remaining = deadline - self.clock()
             if remaining <= 0:
                 return
-            if remaining > 0.0003:
-                time.sleep(remaining - 0.0002)
+            time.sleep(remaining - 0.001 if remaining > 0.0015 else 0)
