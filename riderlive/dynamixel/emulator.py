@@ -123,6 +123,8 @@ class EmulatedBus:
         self.stats = BusStats()
         self.received: deque[bytes] = deque(maxlen=1024)
         """The last instruction packets received, raw (for byte-exact assertions)."""
+        self.arrivals: deque[tuple[float, bytes]] = deque(maxlen=1024)
+        """(clock time its last byte arrived on the emulated wire, raw packet) of the same."""
         self.port = ""
         self._master = self._slave = -1
         self._reader = PacketReader()
@@ -298,6 +300,7 @@ class EmulatedBus:
                 # the servos act at that moment, but only replies wait for the clock
                 now = max(arrived, self._bus_free_at) + len(raw) * 10 / self.baud
                 self._bus_free_at = now
+            self.arrivals.append((now, raw))
             active = self._active(now)
             try:
                 packet = decode_instruction(raw)
