@@ -10,13 +10,17 @@ as fast as the wire allows; without wire timing it shows the software overhead a
 
 Baseline, measured in the same run: the same SDK loop against a bare responder process
 that answers each Fast Sync Read with a canned reply (no register memory, no model):
-the floor of SDK + pty + process wake-ups on this machine at this moment.
+the floor of SDK + pty + process wake-ups on this machine at this moment. "emu CPU" is
+the emulator thread's CPU time per tick (ms) handling packets: unlike the wall-clock
+figures it hardly depends on what else the machine is running.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import re
 import select
 import signal
 import statistics
@@ -145,12 +149,14 @@ def main() -> int:
                 times = measure(port_path, n, baud, args.ticks)
             finally:
                 proc.send_signal(signal.SIGINT)
-                proc.communicate(timeout=10)
+                out, _ = proc.communicate(timeout=10)
+            found = re.search(r"([0-9.]+) s CPU handling", out)
+            cpu = float(found.group(1)) / (len(times) + 20) if found else math.nan
             p50 = statistics.median(times)
             p99 = sorted(times)[int(0.99 * (len(times) - 1))]
             print(
                 f"{baud:>9} {'on' if wire_timing else 'off':>11} {theory * 1e3:>9.2f} {p50 * 1e3:>7.2f} "
-                f"{p99 * 1e3:>7.2f} {1 / p50:>8.0f} {theory / p50:>8.2f} {floor / p50:>8.2f}"
+                f"{p99 * 1e3:>7.2f} {1 / p50:>8.0f} {theory / p50:>8.2f} {floor / p50:>8.2f} {cpu * 1e3:>8.2f}"
             )
     return 0
 

@@ -19,7 +19,6 @@ built in turn by each servo, so a servo missing from the chain truncates it.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import logging
 import os
@@ -87,6 +86,8 @@ class BusStats:
     dropped_replies: int = 0
     corrupted_replies: int = 0
     internal_errors: int = 0
+    handling_cpu_s: float = 0.0
+    """CPU time the bus thread spent handling packets (not waiting for the wire), s."""
 
 
 @dataclass(frozen=True)
@@ -232,9 +233,7 @@ class EmulatedBus:
                 elif fault.kind is FaultKind.REAPPEAR:
                     faults.vanished = False
                 elif fault.kind is FaultKind.OVERHEAT:
-                    hot = servo.get(Item.TEMPERATURE_LIMIT) + 1.0
-                    servo.state = dataclasses.replace(servo.state, temperature=hot)
-                    servo.raise_hardware_error(HardwareError.OVERHEATING)
+                    servo.heat_to(servo.get(Item.TEMPERATURE_LIMIT) + 1.0)
                 elif fault.kind is FaultKind.OVERLOAD:
                     servo.raise_hardware_error(HardwareError.OVERLOAD)
                 elif fault.kind is FaultKind.VOLTAGE:
@@ -277,11 +276,13 @@ class EmulatedBus:
             if isinstance(item, Garbage):
                 self.stats.garbage_bytes += len(item.data)
                 continue
+            started = time.thread_time()
             try:
                 self._handle(item, now)
             except Exception:  # an emulator bug must not kill the bus
                 self.stats.internal_errors += 1
                 log.exception("servo-emu: failed on packet %s", item.hex(" "))
+            self.stats.handling_cpu_s += time.thread_time() - started
 
     def _active(self, now: float) -> dict[int, EmulatedServo]:
         """Servos that hear the bus now: present, at the bus baud, not rebooting."""

@@ -49,6 +49,10 @@ def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
 
 
 _LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
+CONTROL_PERIOD_S = motion.SUBSTEP_S
+"""The emulated servo's control loop period: its state changes in whole cycles."""
+THERMAL_CHUNK_CYCLES = 10
+"""Longest stretch integrated at once (control cycles) before checking the temperature."""
 _WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
@@ -164,19 +168,25 @@ class EmulatedServo:
                 self.watchdog_tripped = True
                 self.set(Item.BUS_WATCHDOG, -1)
                 self.state = replace(self.state, velocity=0.0)
-                self.set(Item.GOAL_POSITION, round(self.state.position))
+                self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
                 self.set(Item.GOAL_VELOCITY, 0)
         self._integrate(now)
 
     def _integrate(self, now: float) -> None:
-        dt = now - self._last_advance
-        if dt <= 0:
+        """Run whole control cycles (1 kHz, like the servo's own loop) up to ``now``."""
+        cycles = int((now - self._last_advance) / CONTROL_PERIOD_S)
+        if cycles <= 0:
             return
-        self.state = motion.step(self.state, self._profile(), dt, self.thermal)
-        self._last_advance = now
-        if self.state.temperature >= self.get(Item.TEMPERATURE_LIMIT):
-            self.raise_hardware_error(HardwareError.OVERHEATING)
-        self._sync_outputs(now)
+        limit = self.get(Item.TEMPERATURE_LIMIT)
+        while cycles > 0:  # in chunks, so overheating shuts down near the crossing
+            chunk = min(cycles, THERMAL_CHUNK_CYCLES)
+            cycles -= chunk
+            dt = chunk * CONTROL_PERIOD_S
+            self._last_advance += dt
+            self.state = motion.step(self.state, self._profile(), dt, self.thermal)
+            if self.state.temperature >= limit and not self.hardware_error & HardwareError.OVERHEATING:
+                self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._sync_outputs(self._last_advance)
 
     def _profile(self) -> motion.Profile:
         if self._profile_cache is None:
@@ -238,6 +248,14 @@ class EmulatedServo:
         self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
 
     # -- hardware errors -----------------------------------------------------------------
+
+    def heat_to(self, temperature_c: float) -> None:
+        """Set the winding temperature (fault injection); over the limit it overheats."""
+        self.state = replace(self.state, temperature=temperature_c)
+        if temperature_c >= self.get(Item.TEMPERATURE_LIMIT):
+            self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._synced = ()
+        self._sync_outputs(self._last_advance)
 
     def raise_hardware_error(self, bits: int) -> None:
         """Latch hardware error ``bits``; those enabled in Shutdown (63) turn torque off."""

@@ -10,8 +10,8 @@
 The emulator thread shares the GIL with the SDK's busy-polling reads, so the fixtures
 lower the interpreter's switch interval while a bus runs (otherwise each reply can wait
 one 5 ms switch interval). They also raise the SDK's reply timeout from 34 ms to
-~100 ms (its module constant ``LATENCY_TIMER``, as for a slow USB adapter): on a loaded
-2-core machine a thread can stall for more than 34 ms, which would fail a test at random.
+~200 ms (its module constant ``LATENCY_TIMER``, as for a slow USB adapter): on a loaded
+2-core machine a thread can stall for more than 34 ms (100 ms seen), which would fail a test at random.
 """
 
 from __future__ import annotations
@@ -56,8 +56,8 @@ def open_sdk(bus: EmulatedBus) -> SdkLink:
     return SdkLink(port, PacketHandler(2.0))
 
 
-SDK_LATENCY_TIMER_MS = 50
-"""Patched into ``dynamixel_sdk.port_handler.LATENCY_TIMER``: reply timeout 2 x 50 + 2 ms."""
+SDK_LATENCY_TIMER_MS = 100
+"""Patched into ``dynamixel_sdk.port_handler.LATENCY_TIMER``: reply timeout 2 x 100 + 2 ms."""
 
 
 @pytest.fixture

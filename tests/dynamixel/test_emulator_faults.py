@@ -121,13 +121,13 @@ def test_bus_watchdog_stops_the_servo_and_locks_goals(bus: EmulatedBus, sdk: Sdk
     ph, port = sdk.ph, sdk.port
     assert ph.write4ByteTxRx(port, 1, 112, 30) == (COMM_SUCCESS, 0)  # slow profile: ~0.47 turn/s
     assert ph.write1ByteTxRx(port, 1, 64, 1) == (COMM_SUCCESS, 0)
-    assert ph.write1ByteTxRx(port, 1, 98, 5) == (COMM_SUCCESS, 0)  # 100 ms
+    assert ph.write1ByteTxRx(port, 1, 98, 8) == (COMM_SUCCESS, 0)  # 160 ms
     assert ph.write4ByteTxRx(port, 1, 116, 4000) == (COMM_SUCCESS, 0)
     # Fed every 10 ms, the watchdog holds and the servo keeps moving.
-    for _ in range(15):
+    for _ in range(20):
         time.sleep(0.01)
-        assert ph.read1ByteTxRx(port, 1, 98) == (5, COMM_SUCCESS, 0)
-    time.sleep(0.2)  # silence: the watchdog expires after 100 ms
+        assert ph.read1ByteTxRx(port, 1, 98) == (8, COMM_SUCCESS, 0)
+    time.sleep(0.3)  # silence: the watchdog expires after 160 ms
     value, result, error = ph.read1ByteTxRx(port, 1, 98)
     assert (value, result, error) == (0xFF, COMM_SUCCESS, 0)  # -1: Bus Watchdog Error
     stopped = bus.position(1)
@@ -144,12 +144,13 @@ def test_bus_watchdog_stops_the_servo_and_locks_goals(bus: EmulatedBus, sdk: Sdk
 def test_the_watchdog_trips_at_its_deadline_not_at_the_next_packet(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert sdk.ph.write1ByteTxRx(sdk.port, 3, 64, 1) == (COMM_SUCCESS, 0)
     assert sdk.ph.write4ByteTxRx(sdk.port, 3, 112, 20) == (COMM_SUCCESS, 0)
-    assert sdk.ph.write1ByteTxRx(sdk.port, 3, 98, 1) == (COMM_SUCCESS, 0)  # 20 ms
     assert sdk.ph.write4ByteTxRx(sdk.port, 3, 116, 3000) == (COMM_SUCCESS, 0)
+    assert sdk.ph.write1ByteTxRx(sdk.port, 3, 98, 1) == (COMM_SUCCESS, 0)  # 20 ms
     time.sleep(0.15)
-    # Moving at 20 x 0.229 rev/min = 312.6 pulse/s for 20 ms: ~6 pulses, not ~47.
-    travelled = bus.position(3) - 2048
-    assert 2 <= travelled <= 15
+    (goal_at, _), (watchdog_at, _) = list(bus.arrivals)[-2:]
+    # Moving at 20 x 0.229 rev/min = 312.6 pulse/s until 20 ms after the last packet, not 150 ms.
+    expected = 312.6 * (watchdog_at - goal_at + 0.020)
+    assert bus.position(3) - 2048 == pytest.approx(expected, abs=2.0)
 
 
 def test_a_vanished_servo_stops_by_its_watchdog(bus: EmulatedBus, sdk: SdkLink) -> None:
