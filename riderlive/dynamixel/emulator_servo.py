@@ -82,6 +82,7 @@ class EmulatedServo:
         self._external_load = 0.0
         self._profile_cache: motion.Profile | None = None
         self._synced: tuple[object, ...] = ()
+        self._outputs_stale = True
         self._output_limits = (0, 0, 0, 0)
         self.deaf_until = 0.0
         """The servo ignores the bus until this time (rebooting)."""
@@ -104,6 +105,7 @@ class EmulatedServo:
         self._put(item, value)
         self._profile_cache = None
         self._synced = ()
+        self._outputs_stale = True
 
     def _put(self, item: Item, value: int) -> None:
         """Store without invalidating the cached profile (for the model's own outputs)."""
@@ -158,8 +160,12 @@ class EmulatedServo:
             self.advance(now)  # the deadline passed before this packet: trip first
         self._last_instruction = now
 
-    def advance(self, now: float) -> None:
-        """Run the motion and thermal model up to ``now``; trip the watchdog on time."""
+    def advance(self, now: float, *, outputs: bool = True) -> None:
+        """Run the motion and thermal model up to ``now``; trip the watchdog on time.
+
+        ``outputs=False`` leaves the present-value registers stale (a write needs only the
+        model state); anything that reads registers advances with outputs.
+        """
         watchdog = self.get(Item.BUS_WATCHDOG)
         if self.torque_on and watchdog > 0 and not self.watchdog_tripped:
             deadline = self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S
@@ -171,6 +177,8 @@ class EmulatedServo:
                 self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
                 self.set(Item.GOAL_VELOCITY, 0)
         self._integrate(now)
+        if outputs and self._outputs_stale:
+            self._sync_outputs(self._last_advance)
 
     def _integrate(self, now: float) -> None:
         """Run whole control cycles (1 kHz, like the servo's own loop) up to ``now``."""
@@ -178,15 +186,22 @@ class EmulatedServo:
         if cycles <= 0:
             return
         limit = self.get(Item.TEMPERATURE_LIMIT)
-        while cycles > 0:  # in chunks, so overheating shuts down near the crossing
-            chunk = min(cycles, THERMAL_CHUNK_CYCLES)
+        while cycles > 0:  # in pieces, so overheating shuts the servo down when it happens
+            chunk = cycles
+            if not self.hardware_error & HardwareError.OVERHEATING:
+                effort = motion.holding_effort(self._profile())
+                crossing = motion.seconds_until_temperature(self.state, effort, limit, self.thermal)
+                if crossing is not None:
+                    chunk = min(cycles, max(1, math.ceil(crossing / CONTROL_PERIOD_S)))
+                if self.state.moving:  # acceleration adds heat the estimate does not see
+                    chunk = min(chunk, THERMAL_CHUNK_CYCLES)
             cycles -= chunk
             dt = chunk * CONTROL_PERIOD_S
             self._last_advance += dt
             self.state = motion.step(self.state, self._profile(), dt, self.thermal)
             if self.state.temperature >= limit and not self.hardware_error & HardwareError.OVERHEATING:
                 self.raise_hardware_error(HardwareError.OVERHEATING)
-        self._sync_outputs(self._last_advance)
+        self._outputs_stale = True
 
     def _profile(self) -> motion.Profile:
         if self._profile_cache is None:
@@ -226,8 +241,10 @@ class EmulatedServo:
         profile = self._profile()
         key = (state, profile, self.voltage)
         if key == self._synced:
+            self._outputs_stale = False
             return  # nothing the registers show has changed
         self._synced = key
+        self._outputs_stale = False
         offset, threshold, current_limit, pwm_limit = self._output_limits
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
@@ -331,12 +348,13 @@ class EmulatedServo:
         error = self.check_write(address, data)
         if error is not StatusError.NONE:
             return error
-        self.advance(now)
+        self.advance(now, outputs=False)
         torque_before = self.torque_on
         mode_before = self.get(Item.OPERATING_MODE)
         self.memory[address : address + len(data)] = data
         self._profile_cache = None
         self._synced = ()
+        self._outputs_stale = True
         if self.torque_on and not torque_before:
             # Torque on holds where the horn is: the goal becomes the present position.
             self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
