@@ -9,7 +9,7 @@ only from the profile limits, as on a well-tuned, lightly loaded servo.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from riderlive.dynamixel.tables import ACCELERATION_UNIT_RPM2, PULSES_PER_TURN, VELOCITY_UNIT_RPM
 
@@ -133,9 +133,7 @@ def step(state: MotionState, profile: Profile, dt: float, thermal: ThermalParams
         effort = min(1.0, HOLDING_EFFORT + abs(accel) / ACCEL_FOR_FULL_EFFORT + profile.external_load)
     steady = thermal.ambient_c + thermal.full_effort_rise_c * effort * effort
     temperature = steady + (state.temperature - steady) * math.exp(-dt / thermal.time_constant_s)
-    return replace(
-        state, position=position, velocity=velocity, acceleration=accel, temperature=temperature, effort=effort
-    )
+    return MotionState(position, velocity, accel, temperature, effort)
 
 
 def holding_effort(profile: Profile) -> float:

@@ -49,10 +49,67 @@ def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
 
 
 _LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
+
+
+@dataclass(frozen=True)
+class _Block:
+    """Contiguous items read or written with one struct call (gaps padded)."""
+
+    address: int
+    layout: struct.Struct
+    items: tuple[Item, ...]
+
+    def read(self, memory: bytearray) -> dict[Item, int]:
+        return dict(zip(self.items, self.layout.unpack_from(memory, self.address), strict=True))
+
+    def write(self, memory: bytearray, values: dict[Item, int]) -> None:
+        self.layout.pack_into(memory, self.address, *(values[item] for item in self.items))
+
+
+def _block(spec: ModelSpec, wanted: tuple[Item, ...]) -> _Block:
+    present = sorted((spec.items[item] for item in wanted if spec.has(item)), key=lambda s: s.address)
+    fmt, position = "<", present[0].address
+    for item in present:
+        if item.address < position:
+            raise ValueError(f"{item.item} overlaps the previous item")
+        code = {1: "b", 2: "h", 4: "i"}[item.size]
+        fmt += "x" * (item.address - position) + (code if item.signed else code.upper())
+        position = item.end
+    return _Block(present[0].address, struct.Struct(fmt), tuple(item.item for item in present))
+
+
+_PROFILE_ITEMS = (
+    Item.BUS_WATCHDOG,
+    Item.GOAL_PWM,
+    Item.GOAL_CURRENT,
+    Item.GOAL_VELOCITY,
+    Item.PROFILE_ACCELERATION,
+    Item.PROFILE_VELOCITY,
+    Item.GOAL_POSITION,
+)
+_LIMIT_ITEMS = (Item.HOMING_OFFSET, Item.MOVING_THRESHOLD, Item.PWM_LIMIT, Item.CURRENT_LIMIT)
+_OUTPUT_ITEMS = (
+    Item.MOVING,
+    Item.MOVING_STATUS,
+    Item.PRESENT_PWM,
+    Item.PRESENT_CURRENT,
+    Item.PRESENT_LOAD,
+    Item.PRESENT_VELOCITY,
+    Item.PRESENT_POSITION,
+    Item.VELOCITY_TRAJECTORY,
+    Item.POSITION_TRAJECTORY,
+    Item.PRESENT_INPUT_VOLTAGE,
+    Item.PRESENT_TEMPERATURE,
+)
+_BLOCKS = {
+    model: (_block(spec, _PROFILE_ITEMS), _block(spec, _LIMIT_ITEMS), _block(spec, _OUTPUT_ITEMS))
+    for model, spec in MODELS.items()
+}
 CONTROL_PERIOD_S = motion.SUBSTEP_S
 """The emulated servo's control loop period: its state changes in whole cycles."""
 THERMAL_CHUNK_CYCLES = 10
 """Longest stretch integrated at once (control cycles) before checking the temperature."""
+_OVERHEATING = int(HardwareError.OVERHEATING)
 _WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
@@ -74,6 +131,8 @@ class EmulatedServo:
     def __init__(self, setup: ServoSetup, baud: int, now: float = 0.0) -> None:
         self.spec: ModelSpec = model_spec(setup.model)
         self.memory = bytearray(self.spec.table_size)
+        self._layout = _LAYOUTS[self.spec.model]
+        self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
         self._boot_time = now
         self._last_advance = now
         self._last_instruction = now
@@ -97,7 +156,7 @@ class EmulatedServo:
     # -- raw register access (no checks; for the bus, tests and fault injection) --------
 
     def get(self, item: Item) -> int:
-        address, read_format, _, _ = _LAYOUTS[self.spec.model][item]
+        address, read_format, _, _ = self._layout[item]
         value: int = struct.unpack_from(read_format, self.memory, address)[0]
         return value
 
@@ -109,7 +168,7 @@ class EmulatedServo:
 
     def _put(self, item: Item, value: int) -> None:
         """Store without invalidating the cached profile (for the model's own outputs)."""
-        address, _, write_format, mask = _LAYOUTS[self.spec.model][item]
+        address, _, write_format, mask = self._layout[item]
         struct.pack_into(write_format, self.memory, address, value & mask)
 
     @property
@@ -128,7 +187,7 @@ class EmulatedServo:
 
     @property
     def torque_on(self) -> bool:
-        return self.get(Item.TORQUE_ENABLE) == 1
+        return self.memory[self._torque_address] == 1
 
     @property
     def hardware_error(self) -> int:
@@ -188,7 +247,7 @@ class EmulatedServo:
         limit = self.get(Item.TEMPERATURE_LIMIT)
         while cycles > 0:  # in pieces, so overheating shuts the servo down when it happens
             chunk = cycles
-            if not self.hardware_error & HardwareError.OVERHEATING:
+            if not self.hardware_error & _OVERHEATING:
                 effort = motion.holding_effort(self._profile())
                 crossing = motion.seconds_until_temperature(self.state, effort, limit, self.thermal)
                 if crossing is not None:
@@ -199,7 +258,7 @@ class EmulatedServo:
             dt = chunk * CONTROL_PERIOD_S
             self._last_advance += dt
             self.state = motion.step(self.state, self._profile(), dt, self.thermal)
-            if self.state.temperature >= limit and not self.hardware_error & HardwareError.OVERHEATING:
+            if self.state.temperature >= limit and not self.hardware_error & _OVERHEATING:
                 self.raise_hardware_error(HardwareError.OVERHEATING)
         self._outputs_stale = True
 
@@ -209,25 +268,27 @@ class EmulatedServo:
         return self._profile_cache
 
     def _make_profile(self) -> motion.Profile:
+        goals_block, limits_block, _ = _BLOCKS[self.spec.model]
+        goals = goals_block.read(self.memory)
+        limits = limits_block.read(self.memory)
         cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
-        profile_velocity = self.get(Item.PROFILE_VELOCITY)
-        velocity_cap = motion.velocity_from_register(round(min(profile_velocity or cap, cap)))
-        accel = self.get(Item.PROFILE_ACCELERATION)
+        velocity_cap = motion.velocity_from_register(round(min(goals[Item.PROFILE_VELOCITY] or cap, cap)))
+        accel = goals[Item.PROFILE_ACCELERATION]
         mode = self.get(Item.OPERATING_MODE)
         goal_velocity = None
         if mode == OperatingMode.VELOCITY:
-            goal_velocity = motion.velocity_from_register(self.get(Item.GOAL_VELOCITY))
+            goal_velocity = motion.velocity_from_register(goals[Item.GOAL_VELOCITY])
         elif mode not in POSITION_MODES:
             goal_velocity = 0.0
         self._output_limits = (
-            self.get(Item.HOMING_OFFSET),
-            self.get(Item.MOVING_THRESHOLD),
-            self.get(Item.CURRENT_LIMIT) if self.spec.has(Item.CURRENT_LIMIT) else 0,
-            self.get(Item.PWM_LIMIT),
+            limits[Item.HOMING_OFFSET],
+            limits[Item.MOVING_THRESHOLD],
+            limits.get(Item.CURRENT_LIMIT, 0),
+            limits[Item.PWM_LIMIT],
         )
         return motion.Profile(
-            torque_on=self.torque_on and not self.watchdog_tripped,
-            goal_position=float(self.get(Item.GOAL_POSITION) - self.get(Item.HOMING_OFFSET)),
+            torque_on=self.memory[self._torque_address] == 1 and not self.watchdog_tripped,
+            goal_position=float(goals[Item.GOAL_POSITION] - limits[Item.HOMING_OFFSET]),
             max_velocity=velocity_cap,
             max_acceleration=motion.acceleration_from_register(accel) if accel else math.inf,
             goal_velocity=goal_velocity,
@@ -248,21 +309,25 @@ class EmulatedServo:
         offset, threshold, current_limit, pwm_limit = self._output_limits
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
-        self._put(Item.PRESENT_POSITION, position)
-        self._put(Item.POSITION_TRAJECTORY, position)
-        self._put(Item.PRESENT_VELOCITY, velocity)
-        self._put(Item.VELOCITY_TRAJECTORY, velocity)
         moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
-        self._put(Item.MOVING, int(moving))
-        self._put(Item.MOVING_STATUS, 0x01 if not moving and profile.torque_on else 0x00)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
-        if current_limit:
-            self._put(Item.PRESENT_CURRENT, round(signed_effort * current_limit))
-        else:
-            self._put(Item.PRESENT_LOAD, round(signed_effort * 1000))
-        self._put(Item.PRESENT_PWM, round(signed_effort * pwm_limit))
-        self._put(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
-        self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
+        _, _, outputs = _BLOCKS[self.spec.model]
+        outputs.write(
+            self.memory,
+            {
+                Item.MOVING: int(moving),
+                Item.MOVING_STATUS: 0x01 if not moving and profile.torque_on else 0x00,
+                Item.PRESENT_PWM: round(signed_effort * pwm_limit),
+                Item.PRESENT_CURRENT: round(signed_effort * current_limit),
+                Item.PRESENT_LOAD: round(signed_effort * 1000),
+                Item.PRESENT_VELOCITY: velocity,
+                Item.PRESENT_POSITION: position,
+                Item.VELOCITY_TRAJECTORY: velocity,
+                Item.POSITION_TRAJECTORY: position,
+                Item.PRESENT_INPUT_VOLTAGE: round(self.voltage * 10),
+                Item.PRESENT_TEMPERATURE: min(255, max(0, round(state.temperature))),
+            },
+        )
 
     # -- hardware errors -----------------------------------------------------------------
 
