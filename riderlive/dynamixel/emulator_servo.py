@@ -133,6 +133,7 @@ class EmulatedServo:
         self.memory = bytearray(self.spec.table_size)
         self._layout = _LAYOUTS[self.spec.model]
         self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
+        self._goal_address = self.spec.items[Item.GOAL_POSITION].address
         self._boot_time = now
         self._last_advance = now
         self._last_instruction = now
@@ -414,6 +415,14 @@ class EmulatedServo:
         if error is not StatusError.NONE:
             return error
         self.advance(now, outputs=False)
+        cache = self._profile_cache
+        if address == self._goal_address and len(data) == 4 and cache is not None:
+            # The common case, a new goal position: patch the cached profile.
+            self.memory[address : address + 4] = data
+            goal = int.from_bytes(data, "little", signed=True) - self._output_limits[0]
+            self._profile_cache = replace(cache, goal_position=float(goal))
+            self._outputs_stale = True
+            return StatusError.NONE
         torque_before = self.torque_on
         mode_before = self.get(Item.OPERATING_MODE)
         self.memory[address : address + len(data)] = data
