@@ -480,9 +480,13 @@ class EmulatedBus:
         batch.clear()
 
     def _sleep_until(self, deadline: float) -> None:
-        """Sleep, then yield-spin the last millisecond (OS sleeps overshoot, more so under load)."""
-        while True:
-            remaining = deadline - self.clock()
-            if remaining <= 0:
-                return
-            time.sleep(remaining - 0.001 if remaining > 0.0015 else 0)
+        """Sleep, then spin the last millisecond: OS sleeps overshoot, and a yield on a busy
+        machine can give the core away for a whole time slice."""
+        remaining = deadline - self.clock()
+        if remaining <= 0:
+            return
+        end = time.perf_counter() + remaining  # real time, whatever clock the bus runs on
+        if remaining > 0.0015:
+            time.sleep(remaining - 0.001)
+        while time.perf_counter() < end:
+            pass
