@@ -425,7 +425,7 @@ class EmulatedBus:
         replies: list[tuple[EmulatedServo | None, int, bytes]] = []
         for servo_id, address, length in requests:
             servo = active.get(servo_id)
-            if servo is None or not self._answers(servo, Instruction.SYNC_READ):
+            if servo is None or not self._answers(servo, Instruction.SYNC_READ) or (fast and not servo.fast_read):
                 replies.append((None, servo_id, bytes(length)))
                 continue
             error, data = servo.read(address, length, now)

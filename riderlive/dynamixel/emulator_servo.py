@@ -123,6 +123,9 @@ class ServoSetup:
     id: int
     model: str
     position: int = 2048
+    fast_read: bool | None = None
+    """Whether it answers FAST_SYNC/BULK_READ; None: as the model's firmware does.
+    False emulates an older firmware, which ignores those instructions."""
 
 
 class EmulatedServo:
@@ -130,6 +133,7 @@ class EmulatedServo:
 
     def __init__(self, setup: ServoSetup, baud: int, now: float = 0.0) -> None:
         self.spec: ModelSpec = model_spec(setup.model)
+        self.fast_read = self.spec.fast_sync_read if setup.fast_read is None else setup.fast_read
         self.memory = bytearray(self.spec.table_size)
         self._layout = _LAYOUTS[self.spec.model]
         self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
