@@ -21,6 +21,7 @@ import struct
 from dataclasses import dataclass, replace
 
 from riderlive.dynamixel import emulator_motion as motion
+from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS
 from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
@@ -41,70 +42,6 @@ from riderlive.dynamixel.tables import (
     model_spec,
 )
 
-
-def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
-    """(address, struct format to read, format to write, mask) of an item."""
-    code = {1: "b", 2: "h", 4: "i"}[spec.size]
-    return spec.address, "<" + (code if spec.signed else code.upper()), "<" + code.upper(), (1 << (8 * spec.size)) - 1
-
-
-_LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
-
-
-@dataclass(frozen=True)
-class _Block:
-    """Contiguous items read or written with one struct call (gaps padded)."""
-
-    address: int
-    layout: struct.Struct
-    items: tuple[Item, ...]
-
-    def read(self, memory: bytearray) -> dict[Item, int]:
-        return dict(zip(self.items, self.layout.unpack_from(memory, self.address), strict=True))
-
-    def write(self, memory: bytearray, values: dict[Item, int]) -> None:
-        self.layout.pack_into(memory, self.address, *(values[item] for item in self.items))
-
-
-def _block(spec: ModelSpec, wanted: tuple[Item, ...]) -> _Block:
-    present = sorted((spec.items[item] for item in wanted if spec.has(item)), key=lambda s: s.address)
-    fmt, position = "<", present[0].address
-    for item in present:
-        if item.address < position:
-            raise ValueError(f"{item.item} overlaps the previous item")
-        code = {1: "b", 2: "h", 4: "i"}[item.size]
-        fmt += "x" * (item.address - position) + (code if item.signed else code.upper())
-        position = item.end
-    return _Block(present[0].address, struct.Struct(fmt), tuple(item.item for item in present))
-
-
-_PROFILE_ITEMS = (
-    Item.BUS_WATCHDOG,
-    Item.GOAL_PWM,
-    Item.GOAL_CURRENT,
-    Item.GOAL_VELOCITY,
-    Item.PROFILE_ACCELERATION,
-    Item.PROFILE_VELOCITY,
-    Item.GOAL_POSITION,
-)
-_LIMIT_ITEMS = (Item.HOMING_OFFSET, Item.MOVING_THRESHOLD, Item.PWM_LIMIT, Item.CURRENT_LIMIT)
-_OUTPUT_ITEMS = (
-    Item.MOVING,
-    Item.MOVING_STATUS,
-    Item.PRESENT_PWM,
-    Item.PRESENT_CURRENT,
-    Item.PRESENT_LOAD,
-    Item.PRESENT_VELOCITY,
-    Item.PRESENT_POSITION,
-    Item.VELOCITY_TRAJECTORY,
-    Item.POSITION_TRAJECTORY,
-    Item.PRESENT_INPUT_VOLTAGE,
-    Item.PRESENT_TEMPERATURE,
-)
-_BLOCKS = {
-    model: (_block(spec, _PROFILE_ITEMS), _block(spec, _LIMIT_ITEMS), _block(spec, _OUTPUT_ITEMS))
-    for model, spec in MODELS.items()
-}
 CONTROL_PERIOD_S = motion.SUBSTEP_S
 """The emulated servo's control loop period: its state changes in whole cycles."""
 THERMAL_CHUNK_CYCLES = 10
@@ -135,7 +72,7 @@ class EmulatedServo:
         self.spec: ModelSpec = model_spec(setup.model)
         self.fast_read = self.spec.fast_sync_read if setup.fast_read is None else setup.fast_read
         self.memory = bytearray(self.spec.table_size)
-        self._layout = _LAYOUTS[self.spec.model]
+        self._layout = LAYOUTS[self.spec.model]
         self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
         self._goal_address = self.spec.items[Item.GOAL_POSITION].address
         self._boot_time = now
@@ -273,7 +210,7 @@ class EmulatedServo:
         return self._profile_cache
 
     def _make_profile(self) -> motion.Profile:
-        goals_block, limits_block, _ = _BLOCKS[self.spec.model]
+        goals_block, limits_block, _ = BLOCKS[self.spec.model]
         goals = goals_block.read(self.memory)
         limits = limits_block.read(self.memory)
         cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
@@ -316,7 +253,7 @@ class EmulatedServo:
         velocity = motion.velocity_to_register(state.velocity)
         moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
-        _, _, outputs = _BLOCKS[self.spec.model]
+        _, _, outputs = BLOCKS[self.spec.model]
         outputs.write(
             self.memory,
             {
