@@ -137,7 +137,7 @@ def apply(model: Model, state: State, at: float, command: Command) -> State:
         gait = state.gait if spec.resumes_gait else Gait.HALT
         speed = state.gait_speed if spec.resumes_gait else None
         return _set_gait(
-            model, replace(state, move=None, move_started=None), at, gait, speed, None, blend=model.resume_blend
+            model, replace(state, move=None, move_started=None), at, SetGait(gait, speed), blend=model.resume_blend
         )
     if isinstance(command, Perform):
         spec = MOVE_TABLE[command.move]
@@ -145,19 +145,18 @@ def apply(model: Model, state: State, at: float, command: Command) -> State:
         state = _blend_to(state, at, MoveLayer(spec.spline, at), model.move_blend)
         state = replace(state, move=command.move, move_started=at)
         return _schedule(state, at + spec.duration - model.resume_blend, _Resume(at))
-    return _set_gait(model, replace(state, move=None, move_started=None), at, command.gait, command.speed, command.ramp)
+    return _set_gait(model, replace(state, move=None, move_started=None), at, command)
 
 
 def _set_gait(
     model: Model,
     state: State,
     at: float,
-    gait: Gait,
-    speed: float | None,
-    ramp: float | None,
+    cmd: SetGait,
     *,
     blend: float | None = None,
 ) -> State:
+    gait, speed, ramp = cmd.gait, cmd.speed, cmd.ramp
     target = _target_speed(gait, speed)
     same = gait is state.gait and isinstance(state.layer, GaitLayer)
     omega = SETTLE_RATIO / ramp if ramp else (2.0 if same else 3.0)
