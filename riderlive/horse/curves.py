@@ -7,6 +7,7 @@ keeps state or reads a clock.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -98,6 +99,7 @@ class Ramp:
         return Ramp(t, float(v), float(a), target, omega)
 
 
+@functools.lru_cache(maxsize=1024)
 def _splitmix_scalar(seed: int, k: int) -> float:
     z = (seed * 0x9E3779B97F4A7C15 + (k & _MASK) * 0xD1B54A32D192ED03 + 0x632BE59BD9B4E019) & _MASK
     z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK

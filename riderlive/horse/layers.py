@@ -12,14 +12,14 @@ rotation (deg: ``rz`` + nose up, ``rx`` + roll left, ``ry`` + yaw left).
 from __future__ import annotations
 
 import bisect
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.horse.curves import TAU, Ops, Ramp, hermite, smoothstep, stride_noise, swing_bump
-from riderlive.horse.gaits import GaitSpec, Harmonic, Leg
+from riderlive.horse.curves import TAU, Ops, Ramp, smoothstep, stride_noise
+from riderlive.horse.gaits import GaitSpec, Leg
 
 BODY_CHANNELS = 19
 """Channels a layer produces: everything of ``channels.HORSE`` but ``root.*``."""
@@ -32,12 +32,6 @@ class Layer(Protocol):
     """A source of body poses, valid for any time at or after its start."""
 
     def pose(self, t: Any, ops: Ops) -> list[Any]: ...
-
-
-def _harmonic(h: Harmonic, phase: Any, ops: Ops) -> Any:
-    if h.amplitude == 0.0:
-        return 0.0
-    return h.amplitude * ops.cos(TAU * h.k * (phase - h.at))
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +50,20 @@ class GaitLayer:
     phase0: float = 0.0
     variation: float = 0.0
     seed: int = 0
+    legs: tuple[tuple[float, float, float, float, int], ...] = field(init=False, repr=False, compare=False)
+    trunk: tuple[tuple[float, float, float, bool], ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        spec = self.spec
+        legs = tuple(
+            (spec.offset[leg], spec.duty[leg], spec.lift[0 if leg.is_front else 1], leg.side * PADDLE, 7919 * (leg + 1))
+            for leg in Leg
+        )
+        order = (spec.surge, spec.heave, spec.sway, spec.roll, spec.yaw, spec.pitch, spec.bend)
+        varied = (False, True, False, False, False, True, False)
+        trunk = tuple((h.amplitude, TAU * h.k, h.at, v) for h, v in zip(order, varied, strict=True))
+        object.__setattr__(self, "legs", legs)
+        object.__setattr__(self, "trunk", trunk)
 
     def phase(self, t: Any, ops: Ops) -> tuple[Any, Any]:
         """``(stride phase, speed)`` at ``t``."""
@@ -64,41 +72,39 @@ class GaitLayer:
         return self.phase0 + a * (t - self.speed.t0) + b * x, v
 
     def pose(self, t: Any, ops: Ops) -> list[Any]:
-        spec = self.spec
         phase, v = self.phase(t, ops)
-        a, b = spec.frequency_slope
-        freq = a + b * v
-        vary = self.variation
+        a, b = self.spec.frequency_slope
+        half_step = v / (2.0 * (a + b * v))  # reach = duty * half_step: half the support sweep
+        vary, where, floor = self.variation, ops.where, ops.floor
         out: list[Any] = []
-        for leg in Leg:
-            duty = spec.duty[leg]
-            p = phase - spec.offset[leg]
-            stride = ops.floor(p)
+        for offset, duty, peak, paddle, salt in self.legs:
+            p = phase - offset
+            stride = floor(p)
             p = p - stride
-            reach = v * duty / (2.0 * freq)  # half the support sweep
+            reach = duty * half_step
             swing = 1.0 - duty
             s = (p - duty) / swing
-            lift = spec.lift[0] if leg.is_front else spec.lift[1]
-            if vary:
-                lift = lift * (1.0 + vary * stride_noise(self.seed + 7919 * (leg + 1), p + stride, ops))
-            bump = swing_bump(s)
+            s2 = s * s
+            lift = peak * (1.0 + vary * stride_noise(self.seed + salt, p + stride, ops)) if vary else peak
+            q = s - s2
+            bump = 16.0 * q * q  # swing_bump(s)
             support = p < duty
-            tx = ops.where(
-                support,
-                reach * (1.0 - 2.0 * p / duty),
-                hermite(s, -reach, reach, -2.0 * reach * swing / duty, -2.0 * reach * swing / duty),
-            )
-            out.append(tx)
-            out.append(ops.where(support, 0.0, lift * bump))
-            out.append(ops.where(support, 0.0, leg.side * PADDLE * bump))
+            # support: back at the ground's speed; transfer: Hermite -reach -> reach leaving
+            # and meeting the support's velocity (slope -2 reach swing / duty per unit s)
+            slope = -2.0 * reach * swing / duty
+            s3 = s2 * s
+            flight = reach * (6.0 * s2 - 4.0 * s3 - 1.0) + slope * (2.0 * s3 - 3.0 * s2 + s)
+            out.append(where(support, reach * (1.0 - 2.0 * p / duty), flight))
+            out.append(where(support, 0.0, lift * bump))
+            out.append(where(support, 0.0, paddle * bump))
         gain = 1.0 + vary * stride_noise(self.seed, phase, ops) if vary else 1.0
-        out.append(_harmonic(spec.surge, phase, ops))
-        out.append(gain * _harmonic(spec.heave, phase, ops))
-        out.append(_harmonic(spec.sway, phase, ops))
-        out.append(_harmonic(spec.roll, phase, ops))
-        out.append(_harmonic(spec.yaw, phase, ops))
-        out.append(gain * _harmonic(spec.pitch, phase, ops))
-        out.append(_harmonic(spec.bend, phase, ops))
+        cos = ops.cos
+        for amplitude, w, at, varied in self.trunk:
+            if amplitude == 0.0:
+                out.append(0.0)
+            else:
+                value = amplitude * cos(w * (phase - at))
+                out.append(gain * value if varied else value)
         return out
 
 
