@@ -55,7 +55,7 @@ class _Resume:
 
 @dataclass(frozen=True, slots=True)
 class _Settle:
-    blend: BlendLayer
+    """A blend's end: drop every finished blend from the layer chain."""
 
 
 Command = SetGait | Perform | _Resume | _Settle
@@ -130,15 +130,28 @@ def _retarget(state: State, at: float, target: float, omega: float) -> State:
     return replace(state, ramp=state.ramp.retarget(at, target, omega), x0=state.x0 + float(x))
 
 
+MAX_BLENDS = 6
+"""Fading layers kept at once; a burst of more commands drops the oldest (the only non-C1 case)."""
+
+
+def _prune(layer: Layer, at: float, keep: int = MAX_BLENDS) -> Layer:
+    """``layer`` without the blends finished by ``at`` and with at most ``keep`` blends."""
+    if not isinstance(layer, BlendLayer):
+        return layer
+    if at >= layer.t0 + layer.duration or keep <= 0:
+        return _prune(layer.after, at, keep)
+    return replace(layer, before=_prune(layer.before, at, keep - 1))
+
+
 def _blend_to(state: State, at: float, layer: Layer, duration: float) -> State:
-    blend = BlendLayer(state.layer, layer, at, duration)
-    return _schedule(replace(state, layer=blend), at + duration, _Settle(blend))
+    blend = BlendLayer(_prune(state.layer, at, MAX_BLENDS - 1), layer, at, duration)
+    return _schedule(replace(state, layer=blend), at + duration, _Settle())
 
 
 def apply(model: Model, state: State, at: float, command: Command) -> State:
     """The state after ``command`` takes effect at time ``at`` (s)."""
     if isinstance(command, _Settle):
-        return replace(state, layer=command.blend.after) if state.layer is command.blend else state
+        return replace(state, layer=_prune(state.layer, at))
     if isinstance(command, _Resume):
         if state.move_started != command.started or state.move is None:
             return state
@@ -173,16 +186,24 @@ def _set_gait(
     if gait is Gait.HALT:
         return _blend_to(state, at, HaltLayer(), blend or 0.8)
     if same:  # a speed change within the gait: same layer, phase carried over
-        old = state.layer
-        assert isinstance(old, GaitLayer)
-        phase, _ = old.phase(at, SCALAR)
-        own = old.speed.retarget(at, target, omega)  # the legs' own speed, C1
-        return replace(state, layer=_gait_layer(model, gait, own, float(phase)))
+        return replace(state, layer=_retarget_gait(model, state.layer, at, target, omega))
+    incoming = state.layer.after if isinstance(state.layer, BlendLayer) else None
+    if isinstance(incoming, GaitLayer) and incoming.spec.gait is gait and isinstance(state.layer, BlendLayer):
+        # already blending into this gait: only its speed changes (a slider stays cheap)
+        return replace(state, layer=replace(state.layer, after=_retarget_gait(model, incoming, at, target, omega)))
     spec = GAIT_TABLE[gait]
     v_now = min(max(state.ramp.v0, spec.speed[0]), spec.speed[1])
     legs = _gait_layer(model, gait, Ramp(at, v_now, 0.0, target, omega))
     duration = blend or min(max(1.0 / spec.frequency_at(target), 0.4), 1.2)
     return _blend_to(state, at, legs, duration)
+
+
+def _retarget_gait(model: Model, layer: Layer, at: float, target: float, omega: float) -> GaitLayer:
+    """The same gait layer heading for a new speed from ``at``: phase and speed stay C1."""
+    assert isinstance(layer, GaitLayer)
+    phase, _ = layer.phase(at, SCALAR)
+    own = layer.speed.retarget(at, target, omega)  # the legs' own speed
+    return _gait_layer(model, layer.spec.gait, own, float(phase))
 
 
 def command(model: Model, state: State, cmd: SetGait | Perform) -> State:
