@@ -9,7 +9,8 @@
   ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres, degrees) for
   ``t`` in seconds, non-decreasing; ``set_gait(gait, speed=None)`` changes gait or
   speed at any time, ``perform(move)`` starts a movement from the current state,
-  ``play(script)`` follows a :class:`ShotScript` from now on. Every channel stays C1
+  ``play(script)`` follows a :class:`ShotScript` from now on; ``gait``, ``move`` and
+  ``speed`` (m/s) report what it is doing. Every channel stays C1
   across every change. A seed turns on seeded stride-to-stride variation.
 - ``generate(script, rate)`` / ``generate_gait(gait, seconds, rate)``: a whole take as
   a :class:`riderlive.framefile.FrameTable` (NumPy, same numbers as the live path).
@@ -24,6 +25,7 @@ back's bend; ``root.tx`` distance travelled, ``root.ty/tz/ry`` 0 (straight, flat
 from __future__ import annotations
 
 from riderlive.framefile import FrameTable
+from riderlive.horse.curves import SCALAR
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
 from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
@@ -78,6 +80,14 @@ class ProceduralHorse:
     @property
     def gait(self) -> str:
         return (self._state.gait if self._state else self._start[0]).value
+
+    @property
+    def speed(self) -> float:
+        """Ground speed (m/s) at the last sample."""
+        if self._state is None:
+            return initial(self.model, *self._start).gait_speed
+        v, _, _ = self._state.ramp.at(self._state.t, SCALAR)
+        return float(v)
 
     @property
     def move(self) -> str | None:

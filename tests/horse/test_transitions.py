@@ -184,3 +184,12 @@ def test_a_burst_of_commands_keeps_the_layer_chain_bounded() -> None:
     for i in range(400, 700):
         horse.sample(i / 100.0)
     assert horse.state is not None and _blends(horse.state.layer) == 0  # everything settled
+
+
+def test_speed_follows_commands() -> None:
+    horse = ProceduralHorse("gallop")
+    assert horse.speed == 12.0
+    horse.sample(0.0)
+    horse.perform("stop")
+    horse.sample(5.0)
+    assert horse.speed < 0.05 and horse.gait == "halt" and horse.move is None
