@@ -85,6 +85,14 @@ def test_lift_peaks_twice_per_trot_stride() -> None:
     assert np.ptp(lift) > 0.0
 
 
+def test_in_the_trot_the_rider_only_bounces() -> None:
+    """Section 6.3: the hooves stay under the horse, so the rider bounces but hardly leans."""
+    table = _take({"gait": "trot", "seconds": 6.0})
+    rider = RIDER.evaluate_batch(table.values)
+    assert np.abs(rider[:, RIDER_INDEX["lower_back.rz"]]).max() < 2.0
+    assert np.ptp(rider[:, RIDER_INDEX["cog.ty"]]) * DEFAULT_SCALE > 0.5  # lift, rig units
+
+
 def test_rider_leans_forward_at_take_off_and_back_at_landing() -> None:
     table = _take({"gait": "canter", "seconds": LEAD_IN, "speed": 5.5}, "jump")
     back = _lower_back(table)
