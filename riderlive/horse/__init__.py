@@ -27,7 +27,7 @@ from __future__ import annotations
 from riderlive.framefile import FrameTable
 from riderlive.horse.curves import SCALAR
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
-from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step
+from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, unschedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
 
@@ -104,12 +104,12 @@ class ProceduralHorse:
         return out
 
     def set_gait(self, gait: str, speed: float | None = None) -> None:
-        """Change gait and/or speed (m/s, within the gait's range) from now, C1."""
+        """Change gait and/or speed (m/s, within the gait's range) from now, C1; ends a playing script."""
         g = parse_gait(gait)
         self._apply(SetGait(g, None if speed is None else float(speed)), validate=True)
 
     def perform(self, move: str) -> None:
-        """Start a movement (jump, rear, stop, buck) from the current state."""
+        """Start a movement (jump, rear, stop, buck) from the current state; ends a playing script."""
         self._apply(Perform(parse_move(move)))
 
     def play(self, script: ShotScript) -> None:
@@ -122,7 +122,8 @@ class ProceduralHorse:
         if self._state is None:
             self._queued.append(cmd)
             return
+        state = unschedule(self._state)  # a new command or script replaces a script in progress
         if isinstance(cmd, ShotScript):
-            self._state = cmd.start(self.model, self._state.t, self._state)
+            self._state = cmd.start(self.model, state.t, state)
         else:
-            self._state = command(self.model, self._state, cmd)
+            self._state = command(self.model, state, cmd)

@@ -211,6 +211,13 @@ def command(model: Model, state: State, cmd: SetGait | Perform) -> State:
     return apply(model, state, state.t, cmd)
 
 
+def unschedule(state: State) -> State:
+    """Drop every queued user command (a script's remaining segments); internal events stay."""
+    kept = [e for e in state.events if not isinstance(e[2], SetGait | Perform)]
+    heapq.heapify(kept)
+    return replace(state, events=tuple(kept))
+
+
 def schedule(state: State, at: float, cmd: SetGait | Perform) -> State:
     """Queue a user command for time ``at`` (a shot script's next segment)."""
     return _schedule(state, at, cmd)

@@ -193,3 +193,23 @@ def test_speed_follows_commands() -> None:
     horse.perform("stop")
     horse.sample(5.0)
     assert horse.speed < 0.05 and horse.gait == "halt" and horse.move is None
+
+
+def test_a_live_command_ends_a_playing_script() -> None:
+    script = load_script(CONFIG_DIR / "shots" / "ramp.toml")
+    horse = ProceduralHorse("walk")
+    horse.sample(0.0)
+    horse.play(script)
+    horse.sample(4.0)
+    assert horse.gait == "trot"
+    horse.set_gait("walk")
+    for i in range(1, 25):
+        horse.sample(4.0 + i)
+    assert horse.gait == "walk"  # the script's later segments were dropped
+    horse.play(load_script(CONFIG_DIR / "shots" / "stop.toml"))
+    horse.play(load_script(CONFIG_DIR / "shots" / "rear.toml"))  # replaces the stop script
+    seen = set()
+    for i in range(1, 800):
+        horse.sample(28.0 + i / 100)
+        seen.add(horse.move)
+    assert "rear" in seen and "stop" not in seen
