@@ -70,6 +70,7 @@ class ProceduralHorse:
         self._start = (parse_gait(gait), speed)
         initial(self.model, *self._start)  # validates gait and speed now
         self._state: State | None = None
+        self._t = 0.0  # time of the last sample (s)
         self._queued: list[SetGait | Perform | ShotScript] = []
 
     @property
@@ -86,7 +87,7 @@ class ProceduralHorse:
         """Ground speed (m/s) at the last sample."""
         if self._state is None:
             return initial(self.model, *self._start).gait_speed
-        v, _, _ = self._state.ramp.at(self._state.t, SCALAR)
+        v, _, _ = self._state.ramp.at(self._t, SCALAR)
         return float(v)
 
     @property
@@ -95,12 +96,17 @@ class ProceduralHorse:
 
     def sample(self, t: float) -> list[float]:
         """The frame at ``t`` (s): ``len(channels.HORSE)`` floats, metres and degrees."""
+        t = float(t)
         if self._state is None:
-            self._state = initial(self.model, *self._start, t=float(t))
+            self._state = initial(self.model, *self._start, t=t)
+            self._t = t
             for queued in self._queued:
                 self._apply(queued)
             self._queued.clear()
-        self._state, out = step(self.model, self._state, float(t))
+        elif not t >= self._t:
+            raise ValueError(f"time went backwards or is not finite: {t!r} after {self._t!r}")
+        self._t = t
+        self._state, out = step(self.model, self._state, t)
         return out
 
     def set_gait(self, gait: str, speed: float | None = None) -> None:
@@ -124,6 +130,6 @@ class ProceduralHorse:
             return
         state = unschedule(self._state)  # a new command or script replaces a script in progress
         if isinstance(cmd, ShotScript):
-            self._state = cmd.start(self.model, state.t, state)
+            self._state = cmd.start(self.model, self._t, state)
         else:
-            self._state = command(self.model, state, cmd)
+            self._state = command(self.model, state, cmd, self._t)

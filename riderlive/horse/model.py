@@ -10,7 +10,6 @@ evaluates the frame, so the output never depends on the sampling rate.
 
 from __future__ import annotations
 
-import copy
 import heapq
 import math
 from dataclasses import dataclass, field, replace
@@ -78,7 +77,11 @@ class Model:
 
 @dataclass(frozen=True)
 class State:
-    """Everything that changes: time of the last frame (s), motion, root ramp, events."""
+    """Everything that changes: motion, root ramp, pending events.
+
+    ``t`` is the time (s) of the last command or event applied: no later command may
+    precede it. A tick without events returns the same object, so a frame costs no copy.
+    """
 
     t: float
     layer: Layer
@@ -90,12 +93,6 @@ class State:
     move_started: float | None = None
     events: tuple[Event, ...] = field(default=())
     seq: int = 0
-
-    def at(self, t: float) -> State:
-        """This state with its clock at ``t`` (a cheap copy: the live tick's hot path)."""
-        new = copy.copy(self)
-        object.__setattr__(new, "t", t)
-        return new
 
 
 def _target_speed(gait: Gait, speed: float | None) -> float:
@@ -206,9 +203,12 @@ def _retarget_gait(model: Model, layer: Layer, at: float, target: float, omega: 
     return _gait_layer(model, layer.spec.gait, own, float(phase))
 
 
-def command(model: Model, state: State, cmd: SetGait | Perform) -> State:
-    """Apply a user command now (at the time of the last frame)."""
-    return apply(model, state, state.t, cmd)
+def command(model: Model, state: State, cmd: SetGait | Perform, at: float | None = None) -> State:
+    """Apply a user command at ``at`` (s; default the state's time), after any events due by then."""
+    if at is not None:
+        state = advance(model, state, at)
+    when = state.t if at is None else at
+    return replace(apply(model, state, when, cmd), t=when)
 
 
 def unschedule(state: State) -> State:
@@ -224,7 +224,7 @@ def schedule(state: State, at: float, cmd: SetGait | Perform) -> State:
 
 
 def advance(model: Model, state: State, t: float) -> State:
-    """Apply every event due at or before ``t``, each at its own time."""
+    """Apply every event due at or before ``t``, each at its own time (``t`` >= ``state.t``)."""
     if not math.isfinite(t):
         raise ValueError(f"time must be finite, got {t!r}")
     if t < state.t:
@@ -233,7 +233,7 @@ def advance(model: Model, state: State, t: float) -> State:
         events = list(state.events)
         at, _, cmd = heapq.heappop(events)
         state = apply(model, replace(state, events=tuple(events), t=max(state.t, at)), at, cmd)
-    return state.at(t)
+    return state
 
 
 def frame(state: State, t: Any, ops: Ops) -> list[Any]:
@@ -263,7 +263,5 @@ def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, Floa
             hi = min(lo + CHUNK, stop)
             for column, values in enumerate(frame(state, times[lo:hi], ARRAY)):
                 out[lo:hi, column] = values
-        chunk = times[start:stop]
-        state = state.at(float(chunk[-1]))
         start = stop
     return state, out
