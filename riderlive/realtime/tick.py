@@ -185,12 +185,14 @@ class TickLoop:
             result = self.core.step(now)
             if self.output is not None:
                 try:
-                    status = self.output.tick(result.rider, now)
+                    status = self.output.tick(result.rider, deadline)
                 except Exception as exc:  # the driver owns its faults; the tick goes on
                     status = None
                     self.events.append(f"rig tick failed: {exc}")
                     self._status_dirty = True
-                if status is not None and clock.tick % rig_every == 0:
+                if status is not None and (
+                    clock.tick % rig_every == 0 or self.rig is None or status.get("state") != self.rig.get("state")
+                ):
                     self.rig = status
                     self._status_dirty = True
             done = time.perf_counter() - setup.start
