@@ -16,7 +16,7 @@ import pytest
 
 pytest.importorskip("riderlive.dynamixel.driver")
 
-from tests.service.live_server import ROOT, LiveServer  # noqa: E402
+from tests.service.live_server import ROOT, LiveServer
 
 
 def rig_state(live: LiveServer) -> str | None:
@@ -32,11 +32,27 @@ def wait_state(live: LiveServer, wanted: set[str], timeout: float = 15.0) -> str
         if state in wanted:
             return state
         time.sleep(0.1)
-    raise AssertionError(f"rig state {state!r}, wanted {wanted}")
+    raise AssertionError(f"rig state {state!r}, wanted {wanted}: {live.get('/api/state').json()['tick']}")
+
+
+def relaxed_rig(tmp_path: Path) -> Path:
+    """bench3 with short ramps and generous bus budgets (this machine may be saturated)."""
+    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
+    for key, value in (
+        ("reply_budget_s", "0.3"),
+        ("bus_watchdog_ms", "600"),
+        ("soft_start_s", "0.3"),
+        ("park_s", "0.3"),
+    ):
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 40.0\n", 1)
+    path = tmp_path / "bench3.toml"
+    path.write_text(text)
+    return path
 
 
 def test_serve_runs_estops_resets_and_parks_an_emulated_rig(tmp_path: Path) -> None:
-    rig_file = ROOT / "config" / "rigs" / "bench3.toml"
+    rig_file = relaxed_rig(tmp_path)
     emu = subprocess.Popen(
         [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
         stdout=subprocess.PIPE,
