@@ -18,6 +18,7 @@ import os
 import signal
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
@@ -84,7 +85,7 @@ class TickLoop:
         self.stopping_since: float | None = None
         self.estopped = False
         self.realtime = "off"
-        self.events: list[str] = []
+        self.events: deque[str] = deque(maxlen=10)
         self.rig: dict[str, Any] | None = None
         self._status_dirty = True
 
@@ -148,7 +149,7 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": self.rig,
-            "events": self.events[-10:],
+            "events": list(self.events),
         }
 
     def _publish_status(self) -> None:
