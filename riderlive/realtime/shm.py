@@ -19,6 +19,7 @@ reader re-checks the sequence word after copying.
 
 from __future__ import annotations
 
+import time
 from multiprocessing import resource_tracker, shared_memory
 
 import numpy as np
@@ -206,15 +207,21 @@ class SharedBlob:
         self._words[1] = len(data)
         self._words[0] = seq + 2
 
-    def read(self) -> bytes | None:
-        seq = int(self._words[0])
-        if seq % 2 or seq == 0:
-            return None
-        length = int(self._words[1])
+    def read(self, attempts: int = 5) -> bytes | None:
+        """The newest complete blob; None if none was written or every attempt met a write."""
         buf = self._shm.buf
         assert buf is not None
-        data = bytes(buf[16 : 16 + length])
-        return data if int(self._words[0]) == seq else None
+        for _ in range(attempts):
+            seq = int(self._words[0])
+            if seq == 0:
+                return None
+            if seq % 2 == 0:
+                length = int(self._words[1])
+                data = bytes(buf[16 : 16 + length])
+                if int(self._words[0]) == seq:
+                    return data
+            time.sleep(0.0001)
+        return None
 
     def close(self) -> None:
         del self._words

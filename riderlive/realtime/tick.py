@@ -142,6 +142,7 @@ class TickLoop:
             "mode": core.mode.value,
             "producer": core.producer,
             "gait": self.horse.gait,
+            "move": getattr(self.horse, "move", None),
             "speed": self.horse.speed,
             "estop": self.estopped,
             "realtime": self.realtime,

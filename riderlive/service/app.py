@@ -19,6 +19,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import HTMLResponse, PlainTextResponse
 from fastapi.staticfiles import StaticFiles
 
+import riderlive.horse as horse_module
 from riderlive import __version__
 from riderlive.configfile import ConfigError
 from riderlive.horse import GAITS
@@ -129,6 +130,9 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
 
     @app.post("/api/horse/perform", dependencies=ctl, summary="Ask the procedural horse for a move")
     async def perform(body: PerformRequest) -> dict[str, Any]:
+        moves = getattr(horse_module, "MOVES", None)
+        if moves is not None and body.move not in moves:
+            raise HTTPException(422, f"unknown move {body.move!r}; choose one of {', '.join(moves)}")
         service.link.send(cmd.Perform(body.move))
         return {"move": body.move, "queued": True}
 

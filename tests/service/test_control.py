@@ -70,6 +70,19 @@ def test_params_patch_changes_the_next_frames(server: LiveServer) -> None:
         follower.close()
 
 
+def test_the_procedural_horse_performs_a_move(server: LiveServer) -> None:
+    assert server.request("PUT", "/api/source", json={"kind": "procedural"}).status_code == 200
+    try:
+        assert server.request("POST", "/api/horse/perform", json={"move": "fly"}).status_code == 422
+        assert server.request("POST", "/api/horse/perform", json={"move": "jump"}).status_code == 200
+        deadline = time.perf_counter() + 3
+        while server.get("/api/state").json()["tick"].get("move") != "jump":
+            assert time.perf_counter() < deadline, server.get("/api/state").json()["tick"]
+            time.sleep(0.05)
+    finally:
+        server.request("PUT", "/api/source", json={"kind": "live"})
+
+
 def test_estop_and_reset_reach_the_tick(server: LiveServer) -> None:
     assert server.request("POST", "/api/estop").json() == {"estop": True}
     deadline = time.perf_counter() + 3
