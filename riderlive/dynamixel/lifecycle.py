@@ -51,8 +51,8 @@ _S = RigState
 TRANSITIONS: dict[RigState, frozenset[RigState]] = {
     _S.CLOSED: frozenset({_S.CONNECTING, _S.ESTOP}),
     _S.CONNECTING: frozenset({_S.CHECKING, _S.FAULT, _S.ESTOP, _S.CLOSED}),
-    _S.CHECKING: frozenset({_S.CONFIGURING, _S.FAULT, _S.ESTOP, _S.CLOSED}),
-    _S.CONFIGURING: frozenset({_S.SOFT_START, _S.FAULT, _S.ESTOP, _S.CLOSED}),
+    _S.CHECKING: frozenset({_S.CONFIGURING, _S.TORQUE_OFF, _S.FAULT, _S.ESTOP, _S.CLOSED}),
+    _S.CONFIGURING: frozenset({_S.SOFT_START, _S.TORQUE_OFF, _S.FAULT, _S.ESTOP, _S.CLOSED}),
     _S.SOFT_START: frozenset({_S.RUNNING, _S.PARKING, _S.FAULT, _S.ESTOP, _S.CLOSED}),
     _S.RUNNING: frozenset({_S.PARKING, _S.FAULT, _S.ESTOP, _S.CLOSED}),
     _S.PARKING: frozenset({_S.TORQUE_OFF, _S.FAULT, _S.ESTOP, _S.CLOSED}),
@@ -83,9 +83,9 @@ class PortLost(RigError):
 class ServoSilent(RigError):
     """A servo did not answer (within the retry budget)."""
 
-    def __init__(self, servo_id: int, detail: str) -> None:
+    def __init__(self, servo_id: int | None, detail: str) -> None:
         self.servo_id = servo_id
-        super().__init__(f"servo {servo_id}: {detail}")
+        super().__init__(f"servo {servo_id}: {detail}" if servo_id is not None else detail)
 
 
 class ModelMismatch(RigError):

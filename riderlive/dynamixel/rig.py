@@ -47,8 +47,8 @@ RIG_DIR = CONFIG_DIR / "rigs"
 DEG_PER_PULSE = 360.0 / PULSES_PER_TURN
 MIN_DEG = POSITION_RANGE[0] * DEG_PER_PULSE
 MAX_DEG = POSITION_RANGE[1] * DEG_PER_PULSE
-SDK_BAUDS = (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600, 1_000_000, 1_152_000)
-SDK_BAUDS += (2_000_000, 2_500_000, 3_000_000, 3_500_000, 4_000_000)
+SDK_BAUDS: tuple[int, ...] = (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600)
+SDK_BAUDS += (1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000, 4_000_000)
 """Baud rates ``dynamixel_sdk.PortHandler.setBaudRate`` accepts."""
 
 HardwareErrorName = Literal["input_voltage", "overheating", "motor_encoder", "electrical_shock", "overload"]
@@ -59,7 +59,7 @@ class BusConfig(StrictModel):
 
     port: str = "/dev/ttyUSB0"
     baud: int = 1_000_000
-    protocol: Literal[2.0] = 2.0
+    protocol: float = 2.0
     tick_hz: float = Field(100.0, gt=0.0, le=2000.0)
     """The rate the service calls ``tick()``; sizes the setup budget and the watchdog check."""
     read_divider: int = Field(4, ge=1, le=1000)
@@ -86,6 +86,13 @@ class BusConfig(StrictModel):
     """At start, REBOOT a servo that reports a hardware error instead of refusing to start."""
     shutdown: tuple[HardwareErrorName, ...] = ("input_voltage", "overheating", "electrical_shock", "overload")
     """Hardware errors on which a servo turns its own torque off (Shutdown, 63)."""
+
+    @pydantic.field_validator("protocol")
+    @classmethod
+    def _protocol_2(cls, value: float) -> float:
+        if value != 2.0:
+            raise ValueError("only Dynamixel Protocol 2.0 is supported")
+        return value
 
     @property
     def tick_s(self) -> float:
@@ -203,8 +210,12 @@ def rig_problems(rig: RigConfig) -> list[tuple[str, str]]:
             problems.append((f"{key}.park_deg", f"{servo.park:g} is outside [min_deg, max_deg]"))
         top_speed = spec.no_load_speed_rpm * 6.0
         if servo.max_speed_dps > top_speed:
-            problems.append((f"{key}.max_speed_dps", f"{servo.max_speed_dps:g} exceeds the {servo.model}'s "
-                             f"no-load speed ({top_speed:.0f} deg/s)"))
+            problems.append(
+                (
+                    f"{key}.max_speed_dps",
+                    f"{servo.max_speed_dps:g} exceeds the {servo.model}'s no-load speed ({top_speed:.0f} deg/s)",
+                )
+            )
         if servo.gain == 0.0:
             problems.append((f"{key}.gain", "0 would never move the servo"))
     return problems

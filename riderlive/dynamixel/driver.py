@@ -1,0 +1,511 @@
+"""The rig driver: rider frames in, one goal write per tick out, failing safe.
+
+:class:`RigDriver` runs the lifecycle of :mod:`riderlive.dynamixel.lifecycle` from the
+service's tick. Every step is non-blocking: connecting, checking and configuring are
+a generator of single bus transactions, run a few per tick within a share of the
+tick; running is one SYNC_WRITE of goal positions per tick plus, every
+``read_divider`` ticks, one (Fast) Sync Read of present position, input voltage,
+temperature and the status ERR byte (whose Alert bit says "read Hardware Error
+Status"). That steady write stream also feeds the servos' Bus Watchdog, so they stop
+by themselves when the service dies or the cable is pulled.
+
+``tick()`` never raises: a failure becomes a :class:`Fault` and a state (park, then
+torque off; or straight to torque off when the bus is gone). ``estop()`` may be
+called from another thread; it takes the bus between two transactions.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Generator, Sequence
+from functools import partial
+from typing import TypeVar
+
+from riderlive.channels import RIDER
+from riderlive.dynamixel.lifecycle import (
+    Fault,
+    Lifecycle,
+    ModelMismatch,
+    PortLost,
+    RigError,
+    RigState,
+    ServoHardwareError,
+    ServoSilent,
+)
+from riderlive.dynamixel.rig import (
+    RigConfig,
+    ServoMap,
+    deg_to_pulses,
+    profile_acceleration,
+    profile_velocity,
+    pulses_to_deg,
+    return_delay_units,
+    smoothstep,
+    watchdog_units,
+)
+from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
+from riderlive.dynamixel.status import BusCounters, RigStatus
+from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, OperatingMode, decode_hardware_error
+
+log = logging.getLogger("riderlive.dynamixel")
+T = TypeVar("T")
+Steps = Generator[None, None, T]
+
+_SETUP = frozenset({RigState.CONNECTING, RigState.CHECKING, RigState.CONFIGURING})
+_EEPROM_FIRST, _EEPROM_END = 9, 64
+"""The EEPROM span the driver configures (Return Delay Time .. Shutdown), read in one go."""
+
+
+def hardware_bits(raw: int) -> tuple[str, ...]:
+    """Hardware Error Status (70) -> bit names, e.g. ``("overheating", "overload")``."""
+    return tuple(str(bit.name).lower() for bit in decode_hardware_error(raw))
+
+
+class RigDriver:
+    """Drives one rig from the tick. See the module docstring for the contract."""
+
+    def __init__(self, config: RigConfig, port: str | None = None) -> None:
+        self.config = config if port is None else config.with_port(port)
+        bus = self.config.bus
+        self.map = ServoMap(self.config)
+        self._servos = list(self.config.servos.values())
+        spec = self._servos[0].spec
+        self._read_addr = spec.spec(Item.PRESENT_POSITION).address
+        self._read_len = spec.spec(Item.PRESENT_TEMPERATURE).end - self._read_addr
+        self._fast_capable = all(s.spec.fast_sync_read for s in self._servos)
+        self._bus = SdkBus(bus.port, bus.baud, bus.latency_timer_ms, bus.timeout_margin_ms)
+        self._life = Lifecycle()
+        self._lock = threading.Lock()
+        self._estop_requested = False
+        self._setup: Steps[None] | None = None
+        self._fault: Fault | None = None
+        self.counters = BusCounters()
+        n = len(self.map)
+        self._goals: list[float] = list(self.map.park)
+        self._clamped: list[bool] = [False] * n
+        self._present: list[float | None] = [None] * n
+        self._tracking: list[float | None] = [None] * n
+        self._temps: list[int | None] = [None] * n
+        self._volts: list[float | None] = [None] * n
+        self._hw: dict[int, tuple[str, ...]] = {}
+        self._disabled: set[int] = set()
+        self._ramp_from: list[float] = list(self._goals)
+        self._ramp_t0: float | None = None
+        self._last_now: float | None = None
+        self._since_read = 0
+        self._retrying = False
+        self._silent_since: float | None = None
+        self._plain_next = False
+        self._fast_failures = 0
+        self._use_fast = bus.fast_sync_read and self._fast_capable
+
+    # --- the interface the service calls -------------------------------------------
+
+    @property
+    def state(self) -> RigState:
+        return self._life.state
+
+    @property
+    def fault(self) -> Fault | None:
+        return self._fault
+
+    def open(self) -> bool:
+        """Start the lifecycle (connect, check, configure, soft start) over the next ticks."""
+        with self._lock:
+            if self.state is not RigState.CLOSED:
+                log.warning("open() ignored in state %s", self.state.value)
+                return False
+            self._begin(connect=True, reason="open()")
+            return True
+
+    def tick(self, rider: Sequence[float], now: float) -> RigStatus:
+        """One tick: ``rider`` in ``channels.RIDER`` order, ``now`` in perf_counter seconds."""
+        with self._lock:
+            first_tx = self._bus.transactions
+            wrote = read = False
+            self.counters.ticks += 1
+            try:
+                if self._estop_requested:
+                    self._do_estop(now, "estop()")
+                if self.state in _SETUP:
+                    self._run_setup()
+                elif self.state.torque_may_be_on:
+                    wrote, read = self._drive(rider, now)
+            except Exception as exc:  # nothing escapes tick(): the service must keep running
+                self._on_error(exc, now)
+            self._last_now = now
+            return self._status(now, wrote, read, self._bus.transactions - first_tx)
+
+    def estop(self) -> None:
+        """Torque off every servo now (or right after the transaction in flight)."""
+        self._estop_requested = True
+        if self._lock.acquire(timeout=self.config.bus.tick_s):
+            try:
+                if self._estop_requested:
+                    self._do_estop(time.perf_counter(), "estop()")
+            except Exception:
+                log.exception("e-stop: torque-off write failed")
+            finally:
+                self._lock.release()
+
+    def request_park(self) -> None:
+        """Ease to the park pose, then torque off (state TORQUE_OFF)."""
+        with self._lock:
+            now = time.perf_counter()
+            try:
+                if self.state in (RigState.SOFT_START, RigState.RUNNING):
+                    self._start_park(now, "request_park()")
+                elif self.state in (RigState.CHECKING, RigState.CONFIGURING):
+                    self._setup = None
+                    self._torque_off_all()
+                    self._go(RigState.TORQUE_OFF, "request_park() during setup", now)
+                elif self.state is RigState.CONNECTING:
+                    self._setup = None
+                    self._bus.close()
+                    self._go(RigState.CLOSED, "request_park() while connecting", now)
+            except Exception as exc:
+                self._on_error(exc, now)
+
+    def reset(self) -> bool:
+        """Leave FAULT / ESTOP / TORQUE_OFF: check and configure again, then soft start."""
+        with self._lock:
+            if self.state not in (RigState.FAULT, RigState.ESTOP, RigState.TORQUE_OFF):
+                log.warning("reset() ignored in state %s", self.state.value)
+                return False
+            self._begin(connect=not self._bus.is_open, reason="reset()")
+            return True
+
+    def reconnect(self) -> bool:
+        """Close and reopen the port (after it vanished), then start as reset() does."""
+        with self._lock:
+            if self.state not in (RigState.FAULT, RigState.ESTOP, RigState.TORQUE_OFF, RigState.CLOSED):
+                log.warning("reconnect() ignored in state %s", self.state.value)
+                return False
+            self._bus.close()
+            self._begin(connect=True, reason="reconnect()")
+            return True
+
+    def close(self) -> None:
+        """Park (bounded by ``park_s + close_timeout_s``), torque off, close the port."""
+        bus = self.config.bus
+        self.request_park()
+        deadline = time.perf_counter() + bus.park_s + bus.close_timeout_s
+        hold = [0.0] * len(RIDER)
+        next_tick = time.perf_counter()
+        while self.state is RigState.PARKING and time.perf_counter() < deadline:
+            self.tick(hold, time.perf_counter())
+            next_tick += bus.tick_s
+            time.sleep(max(0.0, next_tick - time.perf_counter()))
+        with self._lock:
+            self._setup = None
+            try:
+                if self._bus.is_open:
+                    self._torque_off_all()
+            except Exception:
+                log.exception("close(): torque-off write failed")
+            self._bus.close()
+            if self.state is not RigState.CLOSED:
+                self._go(RigState.CLOSED, "close()", time.perf_counter())
+
+    # --- lifecycle steps -------------------------------------------------------------
+
+    def _go(self, target: RigState, reason: str, now: float | None = None) -> None:
+        self._life.go(target, time.perf_counter() if now is None else now, reason)
+
+    def _begin(self, connect: bool, reason: str) -> None:
+        self._fault = None
+        self._hw.clear()
+        self._disabled.clear()
+        self._silent_since = None
+        self._retrying = self._plain_next = False
+        self._fast_failures = 0
+        self._use_fast = self.config.bus.fast_sync_read and self._fast_capable
+        self._go(RigState.CONNECTING if connect else RigState.CHECKING, reason)
+        self._setup = self._startup(connect)
+
+    def _run_setup(self) -> None:
+        """Run setup transactions until this tick's share of time is used."""
+        budget_end = time.perf_counter() + self.config.bus.setup_share * self.config.bus.tick_s
+        while self._setup is not None:
+            try:
+                next(self._setup)
+            except StopIteration:
+                self._setup = None
+            if time.perf_counter() >= budget_end:
+                break
+
+    def _retry(self, call: Callable[[], T]) -> Steps[T]:
+        """Retry one transaction while the servo stays silent, up to the reply budget."""
+        first_failure: float | None = None
+        while True:
+            try:
+                return call()
+            except ServoSilent:
+                now = time.perf_counter()
+                first_failure = now if first_failure is None else first_failure
+                if now - first_failure >= self.config.bus.reply_budget_s:
+                    raise
+            yield
+
+    def _startup(self, connect: bool) -> Steps[None]:
+        if connect:
+            self._bus.open()
+            self._check_latency()
+            yield
+            self._go(RigState.CHECKING, f"{self.config.bus.port} open at {self.config.bus.baud} baud")
+        for servo in self._servos:
+            found = yield from self._retry(partial(self._bus.ping, servo.id))
+            if found != servo.spec.model_number:
+                raise ModelMismatch(servo.id, servo.spec.model_number, found)
+            yield
+            yield from self._check_hardware(servo.id, servo.spec.spec(Item.HARDWARE_ERROR_STATUS))
+        self._go(RigState.CONFIGURING, f"{len(self._servos)} servos answered, no hardware errors")
+        yield from self._configure()
+        self._ramp_t0 = None
+        self._go(RigState.SOFT_START, "configured, torque on")
+
+    def _check_hardware(self, servo_id: int, status: ItemSpec) -> Steps[None]:
+        raw = yield from self._retry(lambda: self._bus.read(servo_id, status))
+        yield
+        if raw and self.config.bus.reboot_on_error:
+            log.warning("servo %d reports %s: rebooting it", servo_id, hardware_bits(raw))
+            self._bus.reboot(servo_id)
+            yield
+            yield from self._retry(lambda: self._bus.ping(servo_id))
+            raw = yield from self._retry(lambda: self._bus.read(servo_id, status))
+            yield
+        if raw:
+            raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
+
+    def _configure(self) -> Steps[None]:
+        bus = self.config.bus
+        for i, servo in enumerate(self._servos):
+            sid, spec = servo.id, servo.spec
+            self._bus.write(sid, spec.spec(Item.TORQUE_ENABLE), 0)
+            yield
+            self._bus.write(sid, spec.spec(Item.BUS_WATCHDOG), 0)  # also clears a Bus Watchdog Error
+            yield
+            wanted = {
+                Item.RETURN_DELAY_TIME: return_delay_units(bus.return_delay_us),
+                Item.DRIVE_MODE: 0,  # velocity-based profile, normal direction (direction is ours)
+                Item.OPERATING_MODE: int(OperatingMode.POSITION),
+                Item.HOMING_OFFSET: 0,  # zero_deg in the rig map is the only trim
+                Item.MAX_POSITION_LIMIT: deg_to_pulses(servo.max_deg),
+                Item.MIN_POSITION_LIMIT: deg_to_pulses(servo.min_deg),
+                Item.SHUTDOWN: bus.shutdown_mask,
+            }
+            eeprom = self._bus.read_raw(sid, _EEPROM_FIRST, _EEPROM_END - _EEPROM_FIRST)
+            yield
+            for item, value in wanted.items():  # EEPROM: write only what differs
+                item_spec = spec.spec(item)
+                at = item_spec.address - _EEPROM_FIRST
+                current = int.from_bytes(eeprom[at : at + item_spec.size], "little", signed=item_spec.signed)
+                if current != value:
+                    self._bus.write(sid, item_spec, value)
+                    yield
+            self._bus.write(sid, spec.spec(Item.PROFILE_ACCELERATION), profile_acceleration(servo.max_accel_dps2))
+            yield
+            self._bus.write(sid, spec.spec(Item.PROFILE_VELOCITY), profile_velocity(servo.max_speed_dps))
+            yield
+            present = pulses_to_deg(self._bus.read(sid, spec.spec(Item.PRESENT_POSITION)))
+            yield
+            start = min(max(present, servo.min_deg), servo.max_deg)
+            self._present[i], self._goals[i] = present, start
+            self._bus.write(sid, spec.spec(Item.GOAL_POSITION), deg_to_pulses(start))
+            yield
+        spec = self._servos[0].spec
+        self._bus.sync_write(spec.spec(Item.TORQUE_ENABLE), dict.fromkeys(self.map.ids, 1))
+        yield
+        if bus.bus_watchdog_ms:
+            units = watchdog_units(bus.bus_watchdog_ms)
+            self._bus.sync_write(spec.spec(Item.BUS_WATCHDOG), dict.fromkeys(self.map.ids, units))
+            yield
+
+    def _check_latency(self) -> None:
+        actual = usb_latency_timer_ms(self.config.bus.port)
+        if actual is not None and actual > self.config.bus.latency_timer_ms:
+            log.warning(
+                "%s: the adapter's latency timer is %d ms (rig map says %g): replies will be late; "
+                "set it to 1 ms (docs/hardware.md). Using %d ms for reply timeouts.",
+                self.config.bus.port,
+                actual,
+                self.config.bus.latency_timer_ms,
+                actual,
+            )
+            self._bus.port.latency_ms = float(actual)
+
+    # --- running ---------------------------------------------------------------------
+
+    def _drive(self, rider: Sequence[float], now: float) -> tuple[bool, bool]:
+        """One goal SYNC_WRITE, then the divided read. Returns (wrote, read)."""
+        bus = self.config.bus
+        state = self.state
+        dt = 0.0 if self._last_now is None else min(max(now - self._last_now, 0.0), 4.0 * bus.tick_s)
+        if self._ramp_t0 is None:
+            self._ramp_t0, self._ramp_from = now, list(self._goals)
+        elapsed = now - self._ramp_t0
+        if state is RigState.PARKING:
+            alpha = smoothstep(elapsed / bus.park_s) if bus.park_s > 0 else 1.0
+            targets = [f + alpha * (p - f) for f, p in zip(self._ramp_from, self.map.park, strict=True)]
+        else:
+            if len(rider) != len(RIDER) or not all(map(math.isfinite, rider)):
+                self.counters.bad_inputs += 1
+                if len(rider) != len(RIDER):
+                    rider = [math.nan] * len(RIDER)
+            targets = self.map.targets(rider, self._goals)
+            alpha = 1.0
+            if state is RigState.SOFT_START:
+                alpha = smoothstep(elapsed / bus.soft_start_s) if bus.soft_start_s > 0 else 1.0
+                targets = [f + alpha * (t - f) for f, t in zip(self._ramp_from, targets, strict=True)]
+        goals, clamped = self.map.limit(targets, self._goals, dt)
+        goal_spec = self._servos[0].spec.spec(Item.GOAL_POSITION)
+        pulses = {sid: deg_to_pulses(g) for sid, g in zip(self.map.ids, goals, strict=True)}
+        for sid in self._disabled:
+            del pulses[sid]
+        self._bus.sync_write(goal_spec, pulses)
+        self._goals, self._clamped = goals, clamped
+        self.counters.goal_writes += 1
+        self.counters.clamps += sum(clamped)
+        if self._estop_requested:
+            self._do_estop(now, "estop()")
+            return True, False
+        parked = state is RigState.PARKING and alpha >= 1.0
+        if parked and all(abs(g - p) < 1e-6 for g, p in zip(goals, self.map.park, strict=True)):
+            self._torque_off_all()
+            target = RigState.FAULT if self._fault is not None else RigState.TORQUE_OFF
+            self._go(target, "parked, torque off", now)
+            return True, False
+        if state is RigState.SOFT_START and alpha >= 1.0:
+            self._go(RigState.RUNNING, "soft start done", now)
+        self._since_read += 1
+        if self._fault is None and (self._retrying or self._since_read >= bus.read_divider):
+            self._since_read = 0
+            self._read(now)
+            return True, True
+        return True, False
+
+    def _read(self, now: float) -> None:
+        bus = self.config.bus
+        fast = self._use_fast and not self._plain_next
+        ids = [sid for sid in self.map.ids if sid not in self._disabled]
+        try:
+            block = self._bus.read_block(self._read_addr, self._read_len, ids, fast)
+        except ServoSilent as exc:
+            self.counters.read_failures += 1
+            if fast:
+                self.counters.fast_read_failures += 1
+                self._fast_failures += 1
+                self._plain_next = True  # the retry names the silent servo
+                if self._fast_failures >= bus.fast_read_fallback_after:
+                    self._use_fast = False
+                    log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
+            self._retrying = True
+            self._silent_since = now if self._silent_since is None else self._silent_since
+            if now - self._silent_since >= bus.reply_budget_s:
+                raise ServoSilent(exc.servo_id, f"no reply for {bus.reply_budget_s * 1000:.0f} ms ({exc})") from exc
+            return
+        self.counters.reads += 1
+        self._silent_since = None
+        self._retrying = self._plain_next = False
+        alerts = []
+        spec = self._servos[0].spec
+        volt_at = spec.spec(Item.PRESENT_INPUT_VOLTAGE).address - self._read_addr
+        temp_at = spec.spec(Item.PRESENT_TEMPERATURE).address - self._read_addr
+        for i, sid in enumerate(self.map.ids):
+            if sid not in block:
+                continue
+            error, data = block[sid]
+            present = pulses_to_deg(int.from_bytes(data[0:4], "little", signed=True))
+            self._present[i] = present
+            self._tracking[i] = self._goals[i] - present
+            self._volts[i] = int.from_bytes(data[volt_at : volt_at + 2], "little") / 10.0
+            self._temps[i] = data[temp_at]
+            if error & ALERT_BIT:
+                alerts.append(sid)
+        for sid in alerts:  # a second transaction, only when a servo raised its Alert bit
+            raw = self._bus.read(sid, spec.spec(Item.HARDWARE_ERROR_STATUS))
+            if raw:
+                raise ServoHardwareError(sid, hardware_bits(raw), raw)
+
+    def _start_park(self, now: float, reason: str) -> None:
+        self._ramp_t0, self._ramp_from = now, list(self._goals)
+        self._go(RigState.PARKING, reason, now)
+
+    def _torque_off_all(self) -> None:
+        """One SYNC_WRITE of Torque Enable = 0 to every servo (no replies to wait for)."""
+        spec = self._servos[0].spec.spec(Item.TORQUE_ENABLE)
+        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, 0))
+
+    def _do_estop(self, now: float, reason: str) -> None:
+        self._estop_requested = False
+        self._setup = None
+        self.counters.estops += 1
+        try:
+            if self._bus.is_open:
+                self._torque_off_all()
+        finally:
+            self._go(RigState.ESTOP, reason, now)
+
+    def _on_error(self, error: BaseException, now: float) -> None:
+        """Turn a failure into a fault and the safe state for it (never raises)."""
+        try:
+            fault = Fault.from_error(error, now)
+            self._fault = fault
+            self.counters.faults += 1
+            self._setup = None
+            log.error("rig fault in %s: %s", self.state.value, fault.message, exc_info=fault.kind.value == "internal")
+            state = self.state
+            if isinstance(error, PortLost):
+                self._quiet_torque_off()
+                self._bus.close()
+            elif isinstance(error, ServoHardwareError):
+                self._hw[error.servo_id] = error.bits
+                self._disabled.add(error.servo_id)
+                torque = self._servos[0].spec.spec(Item.TORQUE_ENABLE)
+                self._quietly(lambda: self._bus.write(error.servo_id, torque, 0))
+            if state in (RigState.SOFT_START, RigState.RUNNING) and not isinstance(error, PortLost):
+                self._start_park(now, f"fault: {fault.message}")
+                return
+            if state is not RigState.ESTOP:
+                if not isinstance(error, PortLost):
+                    self._quiet_torque_off()
+                self._go(RigState.FAULT, fault.message, now)
+        except Exception:
+            log.exception("rig: handling a fault failed; forcing FAULT")
+            self._life.state = RigState.FAULT
+
+    def _quietly(self, call: Callable[[], None]) -> None:
+        try:
+            call()
+        except (RigError, OSError) as exc:
+            log.warning("rig: best-effort write failed: %s", exc)
+
+    def _quiet_torque_off(self) -> None:
+        if self._bus.is_open:
+            self._quietly(self._torque_off_all)
+
+    def _status(self, now: float, wrote: bool, read: bool, transactions: int) -> RigStatus:
+        return RigStatus(
+            state=self.state,
+            at=now,
+            tick=self.counters.ticks,
+            names=self.map.names,
+            ids=self.map.ids,
+            goal_deg=tuple(self._goals),
+            clamped=tuple(self._clamped),
+            present_deg=tuple(self._present),
+            tracking_error_deg=tuple(self._tracking),
+            temperature_c=tuple(self._temps),
+            voltage_v=tuple(self._volts),
+            hardware_errors=dict(self._hw),
+            fault=self._fault,
+            wrote=wrote,
+            read=read,
+            fast_sync_read=self._use_fast,
+            transactions=transactions,
+            transitions=tuple(self._life.drain()),
+            counters=self.counters.to_dict(),
+        )

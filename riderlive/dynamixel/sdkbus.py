@@ -1,0 +1,210 @@
+"""The servo bus through the unmodified ``dynamixel-sdk``, with typed errors.
+
+The SDK reports result codes and never raises; a vanished port surfaces as an
+``OSError`` or ``serial.SerialException`` from pyserial and leaves the SDK's
+``is_using`` flag set. :class:`SdkBus` turns all of that into the lifecycle's
+exceptions (:class:`PortLost`, :class:`ServoSilent`, :class:`ServoRejected`) and
+frees the port after any failure, so the next transaction can run.
+
+Reply timeouts follow the SDK's formula (wire time + 2 x USB latency + margin) but
+with the configured latency timer instead of the SDK's fixed 16 ms, so a silent
+servo costs a few milliseconds of a tick, not 34.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import dynamixel_sdk as sdk
+import serial
+
+from riderlive.dynamixel.lifecycle import PortLost, RigError, ServoRejected, ServoSilent
+from riderlive.dynamixel.tables import ALERT_BIT, BROADCAST_ID, ItemSpec, StatusError
+
+T = TypeVar("T")
+
+_PORT_ERRORS = (OSError, serial.SerialException, AttributeError, TypeError)
+"""What pyserial raises when the device vanishes (AttributeError/TypeError: no handle)."""
+
+
+class RigPort(sdk.PortHandler):  # type: ignore[misc]
+    """A PortHandler whose reply timeout uses the configured adapter latency."""
+
+    def __init__(self, port_name: str, latency_ms: float, margin_ms: float) -> None:
+        super().__init__(port_name)
+        self.latency_ms = latency_ms
+        self.margin_ms = margin_ms
+
+    def setPacketTimeout(self, packet_length: int) -> None:
+        self.packet_start_time = self.getCurrentTime()
+        self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms + self.margin_ms
+
+
+def usb_latency_timer_ms(port: str) -> int | None:
+    """The FTDI latency timer of a ``/dev/ttyUSBn`` port in ms (None if not an FTDI)."""
+    name = os.path.basename(os.path.realpath(port))
+    path = Path("/sys/bus/usb-serial/devices") / name / "latency_timer"
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+class SdkBus:
+    """One serial port, Protocol 2.0; every method is one bus transaction."""
+
+    def __init__(self, port: str, baud: int, latency_ms: float, margin_ms: float) -> None:
+        self.port_name = port
+        self.baud = baud
+        self.port = RigPort(port, latency_ms, margin_ms)
+        self.packets = sdk.PacketHandler(2.0)
+        self._writers: dict[tuple[int, int], Any] = {}
+        self._reader: Any = None
+        self._reader_key: tuple[int, int, tuple[int, ...]] | None = None
+        self.transactions = 0
+
+    @property
+    def is_open(self) -> bool:
+        return bool(self.port.is_open)
+
+    def _guard(self, what: str, call: Callable[[], T]) -> T:
+        """Run one SDK call; a pyserial failure becomes PortLost; the port is freed."""
+        self.transactions += 1
+        try:
+            return call()
+        except _PORT_ERRORS as exc:
+            raise PortLost(f"{self.port_name}: {what} failed: {exc}") from exc
+        finally:
+            self.port.is_using = False
+
+    def open(self) -> None:
+        if self.is_open:
+            return
+        try:
+            ok = self.port.openPort() and self.port.setBaudRate(self.baud)
+        except _PORT_ERRORS as exc:
+            self.port.is_open = False
+            raise PortLost(f"cannot open {self.port_name}: {exc}") from exc
+        if not ok:
+            raise PortLost(f"cannot open {self.port_name} at {self.baud} baud")
+        self._writers.clear()
+        self._reader = None
+        self._reader_key = None
+
+    def close(self) -> None:
+        """Close the port, ignoring a handle that is already gone."""
+        try:
+            if self.port.ser is not None:
+                self.port.ser.close()
+        except _PORT_ERRORS:
+            pass
+        self.port.is_open = False
+        self.port.is_using = False
+
+    def _check(self, servo_id: int, what: str, result: int, error: int) -> None:
+        if result == sdk.COMM_TX_FAIL:
+            raise PortLost(f"{self.port_name}: could not send {what} to servo {servo_id}")
+        if result != sdk.COMM_SUCCESS:
+            raise ServoSilent(servo_id, f"{what}: {self.packets.getTxRxResult(result)}")
+        if error & ~ALERT_BIT:
+            raise ServoRejected(servo_id, what, StatusError(error & ~ALERT_BIT).name.lower())
+
+    def ping(self, servo_id: int) -> int:
+        """The servo's model number."""
+        model, result, error = self._guard("ping", lambda: self.packets.ping(self.port, servo_id))
+        self._check(servo_id, "ping", result, error)
+        return int(model)
+
+    def read(self, servo_id: int, spec: ItemSpec) -> int:
+        """One control-table item, decoded (signed where the table says so)."""
+        data, result, error = self._guard(
+            f"read {spec.item}", lambda: self.packets.readTxRx(self.port, servo_id, spec.address, spec.size)
+        )
+        self._check(servo_id, f"read {spec.item}", result, error)
+        return int.from_bytes(bytes(data[: spec.size]), "little", signed=spec.signed)
+
+    def read_raw(self, servo_id: int, address: int, length: int) -> bytes:
+        """``length`` bytes of the control table from ``address``."""
+        data, result, error = self._guard("read", lambda: self.packets.readTxRx(self.port, servo_id, address, length))
+        self._check(servo_id, f"read {length} bytes at {address}", result, error)
+        return bytes(data[:length])
+
+    def write(self, servo_id: int, spec: ItemSpec, value: int) -> None:
+        """Write one item and check the servo's status reply."""
+        raw = list(value.to_bytes(spec.size, "little", signed=value < 0))
+        result, error = self._guard(
+            f"write {spec.item}", lambda: self.packets.writeTxRx(self.port, servo_id, spec.address, spec.size, raw)
+        )
+        self._check(servo_id, f"write {spec.item}={value}", result, error)
+
+    def reboot(self, servo_id: int) -> None:
+        result, error = self._guard("reboot", lambda: self.packets.reboot(self.port, servo_id))
+        self._check(servo_id, "reboot", result, error)
+
+    def sync_write(self, spec: ItemSpec, values: Mapping[int, int]) -> None:
+        """One SYNC_WRITE of ``spec`` to every id in ``values`` (no replies: feeds no check)."""
+        key = (spec.address, spec.size)
+        writer = self._writers.get(key)
+        if writer is None:
+            writer = self._writers[key] = sdk.GroupSyncWrite(self.port, self.packets, spec.address, spec.size)
+        for servo_id, value in values.items():
+            raw = list(value.to_bytes(spec.size, "little", signed=value < 0))
+            if not writer.changeParam(servo_id, raw):
+                writer.addParam(servo_id, raw)
+        for servo_id in [i for i in writer.data_dict if i not in values]:
+            writer.removeParam(servo_id)
+        result = self._guard(f"sync write {spec.item}", writer.txPacket)
+        if result == sdk.COMM_TX_FAIL:
+            raise PortLost(f"{self.port_name}: could not send sync write {spec.item}")
+        if result != sdk.COMM_SUCCESS:
+            raise RigError(f"sync write {spec.item}: {self.packets.getTxRxResult(result)}")
+
+    def read_block(self, address: int, length: int, ids: Sequence[int], fast: bool) -> dict[int, tuple[int, bytes]]:
+        """SYNC_READ (or FAST_SYNC_READ) of ``length`` bytes at ``address`` from ``ids``.
+
+        Returns id -> (status ERR byte, data). Plain Sync Read names the first servo
+        that did not answer (ServoSilent with its id); Fast Sync Read cannot, and
+        raises ServoSilent without an id (``servo_id`` None).
+        """
+        key = (address, length, tuple(ids))
+        if self._reader_key != key:
+            self._reader = sdk.GroupSyncRead(self.port, self.packets, address, length)
+            for servo_id in ids:
+                self._reader.addParam(servo_id)
+            self._reader_key = key
+        reader = self._reader
+        if fast:
+            return self._guard("fast sync read", lambda: self._fast_read(reader, length, ids))
+        return self._guard("sync read", lambda: self._plain_read(reader, length, ids))
+
+    def _plain_read(self, reader: Any, length: int, ids: Sequence[int]) -> dict[int, tuple[int, bytes]]:
+        result = reader.txPacket()
+        if result != sdk.COMM_SUCCESS:
+            self._check(ids[0], "sync read", result, 0)
+        out: dict[int, tuple[int, bytes]] = {}
+        for servo_id in ids:
+            data, result, error = self.packets.readRx(self.port, servo_id, length)
+            if result != sdk.COMM_SUCCESS:
+                raise ServoSilent(servo_id, f"sync read: {self.packets.getTxRxResult(result)}")
+            out[servo_id] = (int(error), bytes(data))
+        return out
+
+    def _fast_read(self, reader: Any, length: int, ids: Sequence[int]) -> dict[int, tuple[int, bytes]]:
+        result = reader.fastSyncReadTxPacket()
+        if result != sdk.COMM_SUCCESS:
+            self._check(ids[0], "fast sync read", result, 0)
+        chunk = length + 4  # ERR, ID, data, CRC
+        raw, result, _ = self.packets.fastSyncReadRx(self.port, BROADCAST_ID, chunk * len(ids))
+        if result != sdk.COMM_SUCCESS:
+            raise ServoSilent(None, f"fast sync read: {self.packets.getTxRxResult(result)}")
+        raw = bytes(raw)
+        out: dict[int, tuple[int, bytes]] = {}
+        for start in range(0, len(raw) - chunk + 1, chunk):
+            out[raw[start + 1]] = (raw[start], raw[start + 2 : start + 2 + length])
+        missing = [i for i in ids if i not in out]
+        if missing:
+            raise ServoSilent(missing[0], "fast sync read: no data")
+        return out
