@@ -34,6 +34,7 @@ from riderlive.dynamixel.lifecycle import (
     RigState,
     ServoHardwareError,
     ServoSilent,
+    TickGap,
 )
 from riderlive.dynamixel.rig import (
     RigConfig,
@@ -95,6 +96,7 @@ class RigDriver:
         self._ramp_from: list[float] = list(self._goals)
         self._ramp_t0: float | None = None
         self._last_now: float | None = None
+        self._last_write: float | None = None
         self._since_read = 0
         self._retrying = False
         self._silent_since: float | None = None
@@ -223,6 +225,7 @@ class RigDriver:
         self._retrying = self._plain_next = False
         self._fast_failures = 0
         self._use_fast = self.config.bus.fast_sync_read and self._fast_capable
+        self._last_write = None
         self._go(RigState.CONNECTING if connect else RigState.CHECKING, reason)
         self._setup = self._startup(connect)
 
@@ -238,17 +241,21 @@ class RigDriver:
                 break
 
     def _retry(self, call: Callable[[], T]) -> Steps[T]:
-        """Retry one transaction while the servo stays silent, up to the reply budget."""
+        """One setup transaction, retried on later ticks while the servo stays silent
+        (up to the reply budget), then a yield."""
         first_failure: float | None = None
         while True:
             try:
-                return call()
+                value = call()
+                break
             except ServoSilent:
                 now = time.perf_counter()
                 first_failure = now if first_failure is None else first_failure
                 if now - first_failure >= self.config.bus.reply_budget_s:
                     raise
             yield
+        yield
+        return value
 
     def _startup(self, connect: bool) -> Steps[None]:
         if connect:
@@ -260,7 +267,6 @@ class RigDriver:
             found = yield from self._retry(partial(self._bus.ping, servo.id))
             if found != servo.spec.model_number:
                 raise ModelMismatch(servo.id, servo.spec.model_number, found)
-            yield
             yield from self._check_hardware(servo.id, servo.spec.spec(Item.HARDWARE_ERROR_STATUS))
         self._go(RigState.CONFIGURING, f"{len(self._servos)} servos answered, no hardware errors")
         yield from self._configure()
@@ -268,15 +274,12 @@ class RigDriver:
         self._go(RigState.SOFT_START, "configured, torque on")
 
     def _check_hardware(self, servo_id: int, status: ItemSpec) -> Steps[None]:
-        raw = yield from self._retry(lambda: self._bus.read(servo_id, status))
-        yield
+        raw = yield from self._retry(partial(self._bus.read, servo_id, status))
         if raw and self.config.bus.reboot_on_error:
             log.warning("servo %d reports %s: rebooting it", servo_id, hardware_bits(raw))
-            self._bus.reboot(servo_id)
-            yield
-            yield from self._retry(lambda: self._bus.ping(servo_id))
-            raw = yield from self._retry(lambda: self._bus.read(servo_id, status))
-            yield
+            yield from self._retry(partial(self._bus.reboot, servo_id))
+            yield from self._retry(partial(self._bus.ping, servo_id))
+            raw = yield from self._retry(partial(self._bus.read, servo_id, status))
         if raw:
             raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
 
@@ -284,10 +287,10 @@ class RigDriver:
         bus = self.config.bus
         for i, servo in enumerate(self._servos):
             sid, spec = servo.id, servo.spec
-            self._bus.write(sid, spec.spec(Item.TORQUE_ENABLE), 0)
-            yield
-            self._bus.write(sid, spec.spec(Item.BUS_WATCHDOG), 0)  # also clears a Bus Watchdog Error
-            yield
+            write, read = partial(self._bus.write, sid), partial(self._bus.read, sid)
+            yield from self._retry(partial(write, spec.spec(Item.TORQUE_ENABLE), 0))
+            # Bus Watchdog 0 also clears a Bus Watchdog Error left by a previous run
+            yield from self._retry(partial(write, spec.spec(Item.BUS_WATCHDOG), 0))
             wanted = {
                 Item.RETURN_DELAY_TIME: return_delay_units(bus.return_delay_us),
                 Item.DRIVE_MODE: 0,  # velocity-based profile, normal direction (direction is ours)
@@ -297,32 +300,36 @@ class RigDriver:
                 Item.MIN_POSITION_LIMIT: deg_to_pulses(servo.min_deg),
                 Item.SHUTDOWN: bus.shutdown_mask,
             }
-            eeprom = self._bus.read_raw(sid, _EEPROM_FIRST, _EEPROM_END - _EEPROM_FIRST)
-            yield
+            eeprom = yield from self._retry(
+                partial(self._bus.read_raw, sid, _EEPROM_FIRST, _EEPROM_END - _EEPROM_FIRST)
+            )
             for item, value in wanted.items():  # EEPROM: write only what differs
                 item_spec = spec.spec(item)
                 at = item_spec.address - _EEPROM_FIRST
                 current = int.from_bytes(eeprom[at : at + item_spec.size], "little", signed=item_spec.signed)
                 if current != value:
-                    self._bus.write(sid, item_spec, value)
-                    yield
-            self._bus.write(sid, spec.spec(Item.PROFILE_ACCELERATION), profile_acceleration(servo.max_accel_dps2))
-            yield
-            self._bus.write(sid, spec.spec(Item.PROFILE_VELOCITY), profile_velocity(servo.max_speed_dps))
-            yield
-            present = pulses_to_deg(self._bus.read(sid, spec.spec(Item.PRESENT_POSITION)))
-            yield
+                    yield from self._retry(partial(write, item_spec, value))
+            accel = profile_acceleration(servo.max_accel_dps2)
+            yield from self._retry(partial(write, spec.spec(Item.PROFILE_ACCELERATION), accel))
+            velocity = profile_velocity(servo.max_speed_dps)
+            yield from self._retry(partial(write, spec.spec(Item.PROFILE_VELOCITY), velocity))
+            present = pulses_to_deg((yield from self._retry(partial(read, spec.spec(Item.PRESENT_POSITION)))))
             start = min(max(present, servo.min_deg), servo.max_deg)
             self._present[i], self._goals[i] = present, start
-            self._bus.write(sid, spec.spec(Item.GOAL_POSITION), deg_to_pulses(start))
-            yield
+            yield from self._retry(partial(write, spec.spec(Item.GOAL_POSITION), deg_to_pulses(start)))
         spec = self._servos[0].spec
         self._bus.sync_write(spec.spec(Item.TORQUE_ENABLE), dict.fromkeys(self.map.ids, 1))
         yield
         if bus.bus_watchdog_ms:
-            units = watchdog_units(bus.bus_watchdog_ms)
-            self._bus.sync_write(spec.spec(Item.BUS_WATCHDOG), dict.fromkeys(self.map.ids, units))
+            self._arm_watchdog()
             yield
+
+    def _arm_watchdog(self) -> None:
+        """Clear a tripped Bus Watchdog (write 0), then arm it: two SYNC_WRITEs."""
+        spec = self._servos[0].spec.spec(Item.BUS_WATCHDOG)
+        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, 0))
+        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, watchdog_units(self.config.bus.bus_watchdog_ms)))
+        self._last_write = time.perf_counter()
 
     def _check_latency(self) -> None:
         actual = usb_latency_timer_ms(self.config.bus.port)
@@ -344,6 +351,12 @@ class RigDriver:
         bus = self.config.bus
         state = self.state
         dt = 0.0 if self._last_now is None else min(max(now - self._last_now, 0.0), 4.0 * bus.tick_s)
+        watchdog_s = bus.bus_watchdog_ms / 1000.0
+        if watchdog_s and self._last_write is not None and now - self._last_write >= watchdog_s - bus.tick_s:
+            gap = now - self._last_write
+            self._arm_watchdog()  # the goals are read-only while it is tripped
+            if state is not RigState.PARKING:
+                raise TickGap(gap, watchdog_s)
         if self._ramp_t0 is None:
             self._ramp_t0, self._ramp_from = now, list(self._goals)
         elapsed = now - self._ramp_t0
@@ -367,6 +380,7 @@ class RigDriver:
             del pulses[sid]
         self._bus.sync_write(goal_spec, pulses)
         self._goals, self._clamped = goals, clamped
+        self._last_write = now
         self.counters.goal_writes += 1
         self.counters.clamps += sum(clamped)
         if self._estop_requested:

@@ -116,6 +116,17 @@ class ServoRejected(RigError):
         super().__init__(f"servo {servo_id}: {what} rejected ({detail})")
 
 
+class TickGap(RigError):
+    """The ticks stopped for longer than the Bus Watchdog: the servos stopped themselves."""
+
+    def __init__(self, gap_s: float, watchdog_s: float) -> None:
+        self.gap_s = gap_s
+        super().__init__(
+            f"no goal write for {gap_s * 1000:.0f} ms (Bus Watchdog {watchdog_s * 1000:.0f} ms): "
+            "the servos may have stopped themselves"
+        )
+
+
 class FaultKind(enum.Enum):
     """Why the rig stopped; the value is what gets published."""
 
@@ -124,6 +135,7 @@ class FaultKind(enum.Enum):
     MODEL_MISMATCH = "model_mismatch"
     HARDWARE_ERROR = "hardware_error"
     REJECTED = "rejected"
+    TICK_GAP = "tick_gap"
     INTERNAL = "internal"
 
 
@@ -151,6 +163,8 @@ class Fault:
             return cls(FaultKind.HARDWARE_ERROR, str(error), at, servo_id, error.bits)
         if isinstance(error, ServoRejected):
             return cls(FaultKind.REJECTED, str(error), at, servo_id)
+        if isinstance(error, TickGap):
+            return cls(FaultKind.TICK_GAP, str(error), at)
         return cls(FaultKind.INTERNAL, f"{type(error).__name__}: {error}", at, servo_id)
 
     def to_dict(self) -> dict[str, Any]:

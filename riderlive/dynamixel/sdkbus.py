@@ -30,6 +30,22 @@ _PORT_ERRORS = (OSError, serial.SerialException, AttributeError, TypeError)
 """What pyserial raises when the device vanishes (AttributeError/TypeError: no handle)."""
 
 
+_ID, _ERR, _PARAMS = 4, 8, 9
+"""Offsets in a status packet: ID, ERR, first parameter."""
+_STATUS_BYTES = 11
+"""A status packet without parameters: header 4, ID, LEN 2, INST, ERR, CRC 2."""
+
+
+def _u16(value: int) -> tuple[int, int]:
+    return value & 0xFF, value >> 8 & 0xFF
+
+
+def _instruction(servo_id: int, instruction: int, params: list[int]) -> list[int]:
+    """An SDK-style packet buffer (the SDK fills header, stuffing and CRC)."""
+    length = len(params) + 3
+    return [0, 0, 0, 0, servo_id, *_u16(length), instruction, *params, 0, 0]
+
+
 class RigPort(sdk.PortHandler):  # type: ignore[misc]
     """A PortHandler whose reply timeout uses the configured adapter latency."""
 
@@ -65,6 +81,7 @@ class SdkBus:
         self._reader: Any = None
         self._reader_key: tuple[int, int, tuple[int, ...]] | None = None
         self.transactions = 0
+        self.stale_replies = 0
 
     @property
     def is_open(self) -> bool:
@@ -112,37 +129,52 @@ class SdkBus:
         if error & ~ALERT_BIT:
             raise ServoRejected(servo_id, what, StatusError(error & ~ALERT_BIT).name.lower())
 
+    def _transact(self, what: str, servo_id: int, packet: list[int], reply_params: int) -> bytes:
+        """Send one instruction packet; return the params of the servo's status reply.
+
+        A reply of the wrong length or from another id is a late answer to an earlier
+        instruction (after a timeout): it is skipped, counted, and the wait goes on.
+        """
+
+        def run() -> tuple[list[int], int, int]:
+            result = self.packets.txPacket(self.port, packet)
+            if result != sdk.COMM_SUCCESS:
+                return [], result, 0
+            self.port.setPacketTimeout(_STATUS_BYTES + reply_params)
+            while True:
+                reply, result = self.packets.rxPacket(self.port, False)
+                if result != sdk.COMM_SUCCESS:
+                    return [], result, 0
+                if reply[_ID] == servo_id and len(reply) == _STATUS_BYTES + reply_params:
+                    return reply[_PARAMS : _PARAMS + reply_params], result, reply[_ERR]
+                self.stale_replies += 1
+
+        params, result, error = self._guard(what, run)
+        self._check(servo_id, what, result, error)
+        return bytes(params)
+
     def ping(self, servo_id: int) -> int:
         """The servo's model number."""
-        model, result, error = self._guard("ping", lambda: self.packets.ping(self.port, servo_id))
-        self._check(servo_id, "ping", result, error)
-        return int(model)
-
-    def read(self, servo_id: int, spec: ItemSpec) -> int:
-        """One control-table item, decoded (signed where the table says so)."""
-        data, result, error = self._guard(
-            f"read {spec.item}", lambda: self.packets.readTxRx(self.port, servo_id, spec.address, spec.size)
-        )
-        self._check(servo_id, f"read {spec.item}", result, error)
-        return int.from_bytes(bytes(data[: spec.size]), "little", signed=spec.signed)
+        params = self._transact("ping", servo_id, _instruction(servo_id, sdk.INST_PING, []), 3)
+        return int.from_bytes(params[0:2], "little")
 
     def read_raw(self, servo_id: int, address: int, length: int) -> bytes:
         """``length`` bytes of the control table from ``address``."""
-        data, result, error = self._guard("read", lambda: self.packets.readTxRx(self.port, servo_id, address, length))
-        self._check(servo_id, f"read {length} bytes at {address}", result, error)
-        return bytes(data[:length])
+        packet = _instruction(servo_id, sdk.INST_READ, [*_u16(address), *_u16(length)])
+        return self._transact(f"read {length} bytes at {address}", servo_id, packet, length)
+
+    def read(self, servo_id: int, spec: ItemSpec) -> int:
+        """One control-table item, decoded (signed where the table says so)."""
+        return int.from_bytes(self.read_raw(servo_id, spec.address, spec.size), "little", signed=spec.signed)
 
     def write(self, servo_id: int, spec: ItemSpec, value: int) -> None:
         """Write one item and check the servo's status reply."""
-        raw = list(value.to_bytes(spec.size, "little", signed=value < 0))
-        result, error = self._guard(
-            f"write {spec.item}", lambda: self.packets.writeTxRx(self.port, servo_id, spec.address, spec.size, raw)
-        )
-        self._check(servo_id, f"write {spec.item}={value}", result, error)
+        data = list(value.to_bytes(spec.size, "little", signed=value < 0))
+        packet = _instruction(servo_id, sdk.INST_WRITE, [*_u16(spec.address), *data])
+        self._transact(f"write {spec.item}={value}", servo_id, packet, 0)
 
     def reboot(self, servo_id: int) -> None:
-        result, error = self._guard("reboot", lambda: self.packets.reboot(self.port, servo_id))
-        self._check(servo_id, "reboot", result, error)
+        self._transact("reboot", servo_id, _instruction(servo_id, sdk.INST_REBOOT, []), 0)
 
     def sync_write(self, spec: ItemSpec, values: Mapping[int, int]) -> None:
         """One SYNC_WRITE of ``spec`` to every id in ``values`` (no replies: feeds no check)."""
