@@ -242,7 +242,7 @@ class RigDriver:
 
     def _retry(self, call: Callable[[], T]) -> Steps[T]:
         """One setup transaction, retried on later ticks while the servo stays silent
-        (up to the reply budget), then a yield."""
+        (up to ``setup_retry_s``), then a yield."""
         first_failure: float | None = None
         while True:
             try:
@@ -251,7 +251,7 @@ class RigDriver:
             except ServoSilent:
                 now = time.perf_counter()
                 first_failure = now if first_failure is None else first_failure
-                if now - first_failure >= self.config.bus.reply_budget_s:
+                if now - first_failure >= self.config.bus.setup_retry_s:
                     raise
             yield
         yield

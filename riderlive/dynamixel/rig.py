@@ -73,6 +73,8 @@ class BusConfig(StrictModel):
     """Added to wire time + 2 x latency for a reply timeout (the SDK uses 2 ms)."""
     reply_budget_s: float = Field(0.1, gt=0.0, le=10.0)
     """How long a servo may stay silent, retried every tick, before the rig faults."""
+    setup_retry_s: float = Field(1.0, gt=0.0, le=60.0)
+    """How long the start-up steps retry a silent servo before refusing to start."""
     bus_watchdog_ms: int = Field(100, ge=0, le=2540)
     """The servos' Bus Watchdog (98): they stop by themselves after this silence (0 = off)."""
     return_delay_us: int = Field(0, ge=0, le=508)

@@ -14,6 +14,7 @@ servo costs a few milliseconds of a tick, not 34.
 from __future__ import annotations
 
 import os
+import termios
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -26,8 +27,9 @@ from riderlive.dynamixel.tables import ALERT_BIT, BROADCAST_ID, ItemSpec, Status
 
 T = TypeVar("T")
 
-_PORT_ERRORS = (OSError, serial.SerialException, AttributeError, TypeError)
-"""What pyserial raises when the device vanishes (AttributeError/TypeError: no handle)."""
+_PORT_ERRORS = (OSError, termios.error, serial.SerialException, AttributeError, TypeError)
+"""What pyserial raises when the device vanishes (termios.error from a flush on a dead
+tty; AttributeError/TypeError: no handle left)."""
 
 
 _ID, _ERR, _PARAMS = 4, 8, 9

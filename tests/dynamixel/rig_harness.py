@@ -7,10 +7,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
-
 from riderlive.channels import RIDER
 from riderlive.dynamixel.driver import RigDriver
+from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.status import RigStatus
@@ -31,7 +30,7 @@ def short_rig(name: str = "full_rider", **bus: Any) -> RigConfig:
         "soft_start_s": 0.3,
         "park_s": 0.3,
         # a loaded 2-core CI box: generous timeouts, budgets and watchdog unless a test sets them
-        "timeout_margin_ms": 20.0,
+        "timeout_margin_ms": 40.0,
         "reply_budget_s": 0.3,
         "bus_watchdog_ms": 600,
     } | bus
