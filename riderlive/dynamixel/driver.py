@@ -449,9 +449,9 @@ class RigDriver:
         self._go(RigState.PARKING, reason, now)
 
     def _torque_off_all(self) -> None:
-        """One SYNC_WRITE of Torque Enable = 0 to every servo (no replies to wait for)."""
-        spec = self._servos[0].spec.spec(Item.TORQUE_ENABLE)
-        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, 0))
+        """Torque Enable = 0 written to the broadcast ID: 13 bytes, every servo on the bus
+        (mapped or not) obeys, no reply to wait for."""
+        self._bus.broadcast_write(self._servos[0].spec.spec(Item.TORQUE_ENABLE), 0)
 
     def _do_estop(self, now: float, reason: str) -> None:
         self._estop_requested = False

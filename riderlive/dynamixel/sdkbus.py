@@ -49,16 +49,31 @@ def _instruction(servo_id: int, instruction: int, params: list[int]) -> list[int
 
 
 class RigPort(sdk.PortHandler):  # type: ignore[misc]
-    """A PortHandler whose reply timeout uses the configured adapter latency."""
+    """A PortHandler whose reply timeout uses the configured adapter latency and counts
+    the bytes still queued for the wire.
+
+    A SYNC_WRITE returns as soon as the adapter has the bytes; if the next instruction
+    follows at once, its reply can only start after the queued bytes have gone out at
+    the baud rate. The SDK's timeout starts at the write call and ignores that queue.
+    """
 
     def __init__(self, port_name: str, latency_ms: float, margin_ms: float) -> None:
         super().__init__(port_name)
         self.latency_ms = latency_ms
         self.margin_ms = margin_ms
+        self.wire_free_at = 0.0
+        """When the bytes written so far will have left the adapter (SDK clock, ms)."""
+
+    def writePort(self, packet: list[int]) -> int:
+        now = self.getCurrentTime()
+        self.wire_free_at = max(now, self.wire_free_at) + len(packet) * self.tx_time_per_byte
+        return int(super().writePort(packet))
 
     def setPacketTimeout(self, packet_length: int) -> None:
         self.packet_start_time = self.getCurrentTime()
-        self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms + self.margin_ms
+        queued = max(0.0, self.wire_free_at - self.packet_start_time)
+        wire = self.tx_time_per_byte * packet_length
+        self.packet_timeout = queued + wire + 2.0 * self.latency_ms + self.margin_ms
 
 
 def usb_latency_timer_ms(port: str) -> int | None:
@@ -177,6 +192,14 @@ class SdkBus:
 
     def reboot(self, servo_id: int) -> None:
         self._transact("reboot", servo_id, _instruction(servo_id, sdk.INST_REBOOT, []), 0)
+
+    def broadcast_write(self, spec: ItemSpec, value: int) -> None:
+        """One WRITE to the broadcast ID: every servo on the bus obeys, none replies."""
+        data = list(value.to_bytes(spec.size, "little", signed=value < 0))
+        packet = _instruction(BROADCAST_ID, sdk.INST_WRITE, [*_u16(spec.address), *data])
+        result = self._guard(f"broadcast write {spec.item}", lambda: self.packets.txPacket(self.port, packet))
+        if result != sdk.COMM_SUCCESS:
+            raise PortLost(f"{self.port_name}: could not send broadcast write {spec.item}")
 
     def sync_write(self, spec: ItemSpec, values: Mapping[int, int]) -> None:
         """One SYNC_WRITE of ``spec`` to every id in ``values`` (no replies: feeds no check)."""

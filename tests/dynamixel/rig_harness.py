@@ -13,7 +13,7 @@ from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.status import RigStatus
-from riderlive.dynamixel.tables import Instruction, Item
+from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item
 
 TORQUE_ENABLE_ADDRESS = 64
 
@@ -38,13 +38,14 @@ def short_rig(name: str = "full_rider", **bus: Any) -> RigConfig:
 
 
 def is_torque_off_write(raw: bytes) -> bool:
-    """A SYNC_WRITE of Torque Enable = 0 (the e-stop and park packet)."""
+    """Torque Enable = 0 for every servo: a broadcast WRITE, or a SYNC_WRITE of zeros."""
+    if len(raw) == 13 and raw[4] == BROADCAST_ID and raw[7] == Instruction.WRITE:
+        return (raw[8] | raw[9] << 8) == TORQUE_ENABLE_ADDRESS and raw[10] == 0
     if len(raw) < 14 or raw[7] != Instruction.SYNC_WRITE:
         return False
     address = raw[8] | raw[9] << 8
     length = raw[10] | raw[11] << 8
-    values = raw[13:-2:2] if length == 1 else b"\x01"
-    return address == TORQUE_ENABLE_ADDRESS and length == 1 and not any(values)
+    return address == TORQUE_ENABLE_ADDRESS and length == 1 and not any(raw[13:-2:2])
 
 
 class TimedBus(EmulatedBus):

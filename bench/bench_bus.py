@@ -1,0 +1,236 @@
+"""The rig driver on a 24-servo emulated bus with wire timing: loop rate and e-stop latency.
+
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py [--seconds 3] [--trials 8] [--bauds 1000000 4000000]
+
+The emulator runs in a child process (so the SDK's busy-polling reads do not share a
+GIL with it) and holds every packet on the wire for bytes x 10 / baud.
+
+Loop rate: the driver in RUNNING, unpaced, one goal SYNC_WRITE per tick and a Fast
+Sync Read of 15 bytes (present position .. temperature) every ``read_divider`` ticks.
+Reported against two baselines from the same run:
+
+- the rate the wire allows: baud / 10 / (bytes per tick, the divided read included);
+  target ratio >= 0.8 (issue 5);
+- the bare SDK doing the same transactions in a tight loop (the driver's overhead).
+
+E-stop: the driver paced at the rig's tick rate; another thread calls ``estop()`` at a
+random moment; latency = estop() call to the torque-off SYNC_WRITE having fully
+arrived at the emulator. Target <= one tick + 1 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import random
+import statistics
+import sys
+import threading
+import time
+from multiprocessing.connection import Connection
+from typing import Any
+
+import dynamixel_sdk as sdk
+
+from riderlive.channels import RIDER
+from riderlive.dynamixel.driver import RigDriver
+from riderlive.dynamixel.lifecycle import RigState
+from riderlive.dynamixel.rig import RigConfig, load_rig
+from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
+from riderlive.rules import RiderModel
+from tests.dynamixel.rig_harness import TimedBus, servo_setups
+
+READ_BYTES = 15
+"""Present Position (132) .. Present Temperature (146)."""
+
+
+def wire_bytes_per_tick(servos: int, divider: int) -> float:
+    """Protocol 2.0 bytes per tick: the goal SYNC_WRITE + 1/divider of a Fast Sync Read."""
+    write = 14 + 5 * servos  # header 7, INST, address 2, length 2, CRC 2; ID + 4 bytes each
+    read_request = 14 + servos
+    read_reply = 8 + (READ_BYTES + 4) * servos  # one packet: ERR, ID, data, CRC per servo
+    return write + (read_request + read_reply) / divider
+
+
+def _serve(conn: Connection, rig: RigConfig, baud: int) -> None:
+    """Child process: a timed emulator; answers 'port', 'torque_off_at', 'stop'."""
+    bus = TimedBus(servo_setups(rig), baud=baud, wire_timing=True).start()
+    conn.send(bus.port)
+    while True:
+        command = conn.recv()
+        if command == "settle":
+            bus.settle(timeout=30.0)
+            conn.send(dict(bus.stats.instructions))
+        elif command == "torque_off_at":
+            bus.settle()
+            conn.send(bus.torque_off_at)
+            bus.torque_off_at = None
+        elif command == "stop":
+            bus.stop()
+            conn.send(None)
+            return
+
+
+def trot_frames(count: int, hz: float) -> list[list[float]]:
+    horse, model = ProceduralHorse("trot"), RiderModel(scale=DEFAULT_SCALE)
+    return [model.evaluate(horse.sample(i / hz)) for i in range(count)]
+
+
+def start(driver: RigDriver, frames: list[list[float]], timeout: float = 60.0) -> None:
+    if driver.state is RigState.CLOSED:
+        driver.open()
+    else:
+        driver.reset()
+    deadline = time.perf_counter() + timeout
+    i = 0
+    while driver.state is not RigState.RUNNING and time.perf_counter() < deadline:
+        driver.tick(frames[i % len(frames)], time.perf_counter())
+        i += 1
+        time.sleep(driver.config.bus.tick_s)
+    if driver.state is not RigState.RUNNING:
+        raise SystemExit(f"the rig did not start: {driver.state.value}, {driver.fault}")
+    print(f"  (started in {time.perf_counter() - deadline + timeout:.1f} s, {i} ticks)")
+
+
+def driver_rate(driver: RigDriver, frames: list[list[float]], seconds: float) -> tuple[float, dict[str, int]]:
+    """Ticks per second, unpaced, while RUNNING."""
+    first = driver.counters.ticks
+    t0 = time.perf_counter()
+    i = 0
+    while (now := time.perf_counter()) - t0 < seconds:
+        status = driver.tick(frames[i % len(frames)], now)
+        i += 1
+        if status.state is not RigState.RUNNING:
+            raise SystemExit(f"rig left RUNNING: {status.state.value} {status.fault}")
+    return (driver.counters.ticks - first) / (time.perf_counter() - t0), status.counters
+
+
+def sdk_rate(port_name: str, rig: RigConfig, baud: int, seconds: float) -> float:
+    """The bare SDK: goal SYNC_WRITE every tick, FAST_SYNC_READ every divider ticks."""
+    port = sdk.PortHandler(port_name)
+    port.openPort()
+    port.setBaudRate(baud)
+    packets = sdk.PacketHandler(2.0)
+    writer = sdk.GroupSyncWrite(port, packets, 116, 4)
+    reader = sdk.GroupSyncRead(port, packets, 132, READ_BYTES)
+    for servo in rig.servos.values():
+        writer.addParam(servo.id, [0, 8, 0, 0])
+        reader.addParam(servo.id)
+    divider, ticks, failures = rig.bus.read_divider, 0, 0
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        writer.txPacket()
+        ticks += 1
+        if ticks % divider == 0 and reader.fastSyncRead() != sdk.COMM_SUCCESS:
+            failures += 1
+    rate = ticks / (time.perf_counter() - t0)
+    port.closePort()
+    if failures:
+        print(f"  (bare SDK: {failures} failed reads)")
+    return rate
+
+
+def _press(driver: RigDriver, pressed: list[float]) -> None:
+    """The e-stop button, pressed from another thread at a random moment."""
+    time.sleep(random.uniform(0.05, 0.15))
+    pressed.append(time.perf_counter())
+    driver.estop()
+
+
+def estop_latencies(driver: RigDriver, conn: Connection, frames: list[list[float]], trials: int) -> list[float]:
+    out = []
+    tick_s = driver.config.bus.tick_s
+    for _ in range(trials):
+        start(driver, frames)
+        conn.send("torque_off_at")
+        conn.recv()  # forget the start-up's own torque writes
+        pressed: list[float] = []
+        presser = threading.Thread(target=_press, args=(driver, pressed))
+        presser.start()
+        next_tick, i = time.perf_counter(), 0
+        while driver.state is RigState.RUNNING:
+            driver.tick(frames[i % len(frames)], time.perf_counter())
+            i += 1
+            next_tick += tick_s
+            time.sleep(max(0.0, next_tick - time.perf_counter()))
+        presser.join()
+        conn.send("torque_off_at")
+        arrived = conn.recv()
+        if arrived is None or not pressed:
+            raise SystemExit("no torque-off write reached the emulator")
+        out.append(arrived - pressed[0])
+    return out
+
+
+def bench(baud: int, seconds: float, trials: int) -> dict[str, Any]:
+    base = load_rig("full_rider")
+    bus = base.bus.model_copy(update={"baud": baud, "soft_start_s": 0.2, "timeout_margin_ms": 10.0})
+    rig = base.model_copy(update={"bus": bus})
+    parent, child = mp.Pipe()
+    server = mp.get_context("fork").Process(target=_serve, args=(child, rig, baud), daemon=True)
+    server.start()
+    port = parent.recv()
+    try:
+        frames = trot_frames(2000, rig.bus.tick_hz)
+        raw = sdk_rate(port, rig, baud, seconds)
+        parent.send("settle")  # let the emulator drain what the bare loop queued
+        parent.recv()
+        driver = RigDriver(rig, port=port)
+        start(driver, frames)
+        rate, counters = driver_rate(driver, frames, seconds)
+        driver.estop()
+        latencies = estop_latencies(driver, parent, frames, trials)
+        driver.close()
+    finally:
+        parent.send("stop")
+        parent.recv()
+        server.join(timeout=5)
+    n = len(rig.servos)
+    wire_bytes = wire_bytes_per_tick(n, rig.bus.read_divider)
+    wire_rate = baud / 10 / wire_bytes
+    return {
+        "baud": baud,
+        "servos": n,
+        "divider": rig.bus.read_divider,
+        "wire_bytes": wire_bytes,
+        "wire_hz": wire_rate,
+        "sdk_hz": raw,
+        "driver_hz": rate,
+        "read_failures": counters["read_failures"],
+        "estop_ms": [x * 1000 for x in latencies],
+        "tick_ms": rig.bus.tick_s * 1000,
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="length of each rate measurement")
+    parser.add_argument("--trials", type=int, default=8, help="e-stop trials per baud")
+    parser.add_argument("--bauds", type=int, nargs="+", default=[1_000_000, 4_000_000])
+    args = parser.parse_args()
+    sys.setswitchinterval(0.0005)
+    print(f"24 emulated servos (config/rigs/full_rider.toml), wire timing on, {len(RIDER)} rider channels")
+    ok = True
+    for baud in args.bauds:
+        r = bench(baud, args.seconds, args.trials)
+        ratio = r["driver_hz"] / r["wire_hz"]
+        estop = r["estop_ms"]
+        limit = r["tick_ms"] + 1.0
+        ok &= ratio >= 0.8 and max(estop) <= limit
+        print(f"\n{baud / 1e6:g} Mbps, read divider {r['divider']}: {r['wire_bytes']:.0f} wire bytes per tick")
+        print(f"  wire allows      {r['wire_hz']:7.0f} ticks/s")
+        print(f"  bare SDK         {r['sdk_hz']:7.0f} ticks/s   ({r['sdk_hz'] / r['wire_hz']:.2f} of the wire)")
+        print(
+            f"  driver           {r['driver_hz']:7.0f} ticks/s   ratio to the wire {ratio:.2f} (target >= 0.8), "
+            f"to the bare SDK {r['driver_hz'] / r['sdk_hz']:.2f}; {r['read_failures']} failed reads"
+        )
+        print(
+            f"  e-stop -> torque-off on the wire: median {statistics.median(estop):.2f} ms, "
+            f"max {max(estop):.2f} ms over {len(estop)} trials (target <= {limit:.1f} ms: one "
+            f"{r['tick_ms']:.1f} ms tick + 1 ms)"
+        )
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
