@@ -36,6 +36,7 @@ from riderlive.channels import RIDER
 from riderlive.dynamixel.driver import RigDriver
 from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import RigConfig, load_rig
+from riderlive.dynamixel.sdkbus import RigPort
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from tests.dynamixel.rig_harness import TimedBus, servo_setups
@@ -52,9 +53,9 @@ def wire_bytes_per_tick(servos: int, divider: int) -> float:
     return write + (read_request + read_reply) / divider
 
 
-def _serve(conn: Connection, rig: RigConfig, baud: int) -> None:
-    """Child process: a timed emulator; answers 'port', 'torque_off_at', 'stop'."""
-    bus = TimedBus(servo_setups(rig), baud=baud, wire_timing=True).start()
+def _serve(conn: Connection, rig: RigConfig, baud: int, wire_timing: bool) -> None:
+    """Child process: the emulator; answers 'settle', 'torque_off_at', 'stop'."""
+    bus = TimedBus(servo_setups(rig), baud=baud, wire_timing=wire_timing).start()
     conn.send(bus.port)
     while True:
         command = conn.recv()
@@ -92,22 +93,28 @@ def start(driver: RigDriver, frames: list[list[float]], timeout: float = 60.0) -
     print(f"  (started in {time.perf_counter() - deadline + timeout:.1f} s, {i} ticks)")
 
 
-def driver_rate(driver: RigDriver, frames: list[list[float]], seconds: float) -> tuple[float, dict[str, int]]:
-    """Ticks per second, unpaced, while RUNNING."""
+def driver_rate(driver: RigDriver, frames: list[list[float]], seconds: float) -> tuple[float, float, dict[str, int]]:
+    """Ticks per second, unpaced, while RUNNING; and the median host time of a tick
+    without a read (the driver's own cost: a goal SYNC_WRITE returns without waiting)."""
     first = driver.counters.ticks
+    write_only: list[float] = []
     t0 = time.perf_counter()
     i = 0
     while (now := time.perf_counter()) - t0 < seconds:
         status = driver.tick(frames[i % len(frames)], now)
+        if not status.read:
+            write_only.append(time.perf_counter() - now)
         i += 1
         if status.state is not RigState.RUNNING:
             raise SystemExit(f"rig left RUNNING: {status.state.value} {status.fault}")
-    return (driver.counters.ticks - first) / (time.perf_counter() - t0), status.counters
+    rate = (driver.counters.ticks - first) / (time.perf_counter() - t0)
+    return rate, statistics.median(write_only), status.counters
 
 
 def sdk_rate(port_name: str, rig: RigConfig, baud: int, seconds: float) -> float:
-    """The bare SDK: goal SYNC_WRITE every tick, FAST_SYNC_READ every divider ticks."""
-    port = sdk.PortHandler(port_name)
+    """The SDK alone: goal SYNC_WRITE every tick, FAST_SYNC_READ every divider ticks
+    (on a RigPort, so its reply timeouts count the queued bytes as the driver's do)."""
+    port = RigPort(port_name, rig.bus.latency_timer_ms, rig.bus.timeout_margin_ms)
     port.openPort()
     port.setBaudRate(baud)
     packets = sdk.PacketHandler(2.0)
@@ -137,13 +144,12 @@ def _press(driver: RigDriver, pressed: list[float]) -> None:
     driver.estop()
 
 
-def estop_latencies(driver: RigDriver, conn: Connection, frames: list[list[float]], trials: int) -> list[float]:
+def estop_latencies(driver: RigDriver, emu: Emulator, frames: list[list[float]], trials: int) -> list[float]:
     out = []
     tick_s = driver.config.bus.tick_s
     for _ in range(trials):
         start(driver, frames)
-        conn.send("torque_off_at")
-        conn.recv()  # forget the start-up's own torque writes
+        emu.ask("torque_off_at")  # forget the start-up's own torque writes
         pressed: list[float] = []
         presser = threading.Thread(target=_press, args=(driver, pressed))
         presser.start()
@@ -154,37 +160,61 @@ def estop_latencies(driver: RigDriver, conn: Connection, frames: list[list[float
             next_tick += tick_s
             time.sleep(max(0.0, next_tick - time.perf_counter()))
         presser.join()
-        conn.send("torque_off_at")
-        arrived = conn.recv()
+        arrived = emu.ask("torque_off_at")
         if arrived is None or not pressed:
             raise SystemExit("no torque-off write reached the emulator")
         out.append(arrived - pressed[0])
     return out
 
 
+class Emulator:
+    """The timed emulator in a child process."""
+
+    def __init__(self, rig: RigConfig, baud: int, wire_timing: bool) -> None:
+        self.conn, child = mp.Pipe()
+        context = mp.get_context("fork")
+        self.process = context.Process(target=_serve, args=(child, rig, baud, wire_timing), daemon=True)
+        self.process.start()
+        self.port: str = self.conn.recv()
+
+    def ask(self, command: str) -> Any:
+        self.conn.send(command)
+        return self.conn.recv()
+
+    def stop(self) -> None:
+        self.ask("stop")
+        self.process.join(timeout=5)
+
+
 def bench(baud: int, seconds: float, trials: int) -> dict[str, Any]:
     base = load_rig("full_rider")
-    bus = base.bus.model_copy(update={"baud": baud, "soft_start_s": 0.2, "timeout_margin_ms": 10.0})
-    rig = base.model_copy(update={"bus": bus})
-    parent, child = mp.Pipe()
-    server = mp.get_context("fork").Process(target=_serve, args=(child, rig, baud), daemon=True)
-    server.start()
-    port = parent.recv()
+    # generous reply timeouts: the loop waits for the emulator instead of counting false timeouts
+    changes = {
+        "baud": baud,
+        "soft_start_s": 0.2,
+        "timeout_margin_ms": 50.0,
+        "reply_budget_s": 1.0,
+        "bus_watchdog_ms": 500,
+    }
+    rig = base.model_copy(update={"bus": base.bus.model_copy(update=changes)})
+    frames = trot_frames(2000, rig.bus.tick_hz)
+    untimed = Emulator(rig, baud, wire_timing=False)
     try:
-        frames = trot_frames(2000, rig.bus.tick_hz)
-        raw = sdk_rate(port, rig, baud, seconds)
-        parent.send("settle")  # let the emulator drain what the bare loop queued
-        parent.recv()
-        driver = RigDriver(rig, port=port)
+        emulator_hz = sdk_rate(untimed.port, rig, baud, seconds)
+    finally:
+        untimed.stop()
+    emu = Emulator(rig, baud, wire_timing=True)
+    try:
+        raw = sdk_rate(emu.port, rig, baud, seconds)
+        emu.ask("settle")  # let the emulator drain what the bare loop queued
+        driver = RigDriver(rig, port=emu.port)
         start(driver, frames)
-        rate, counters = driver_rate(driver, frames, seconds)
+        rate, host_s, counters = driver_rate(driver, frames, seconds)
         driver.estop()
-        latencies = estop_latencies(driver, parent, frames, trials)
+        latencies = estop_latencies(driver, emu, frames, trials)
         driver.close()
     finally:
-        parent.send("stop")
-        parent.recv()
-        server.join(timeout=5)
+        emu.stop()
     n = len(rig.servos)
     wire_bytes = wire_bytes_per_tick(n, rig.bus.read_divider)
     wire_rate = baud / 10 / wire_bytes
@@ -195,7 +225,9 @@ def bench(baud: int, seconds: float, trials: int) -> dict[str, Any]:
         "wire_bytes": wire_bytes,
         "wire_hz": wire_rate,
         "sdk_hz": raw,
+        "emulator_hz": emulator_hz,
         "driver_hz": rate,
+        "host_write_ms": host_s * 1000,
         "read_failures": counters["read_failures"],
         "estop_ms": [x * 1000 for x in latencies],
         "tick_ms": rig.bus.tick_s * 1000,
@@ -217,13 +249,17 @@ def main() -> int:
         estop = r["estop_ms"]
         limit = r["tick_ms"] + 1.0
         ok &= ratio >= 0.8 and max(estop) <= limit
+        host_hz = 1000.0 / r["host_write_ms"]
+        sdk_hz, emu_hz, wire_hz = r["sdk_hz"], r["emulator_hz"], r["wire_hz"]
         print(f"\n{baud / 1e6:g} Mbps, read divider {r['divider']}: {r['wire_bytes']:.0f} wire bytes per tick")
-        print(f"  wire allows      {r['wire_hz']:7.0f} ticks/s")
-        print(f"  bare SDK         {r['sdk_hz']:7.0f} ticks/s   ({r['sdk_hz'] / r['wire_hz']:.2f} of the wire)")
+        print(f"  wire allows               {wire_hz:7.0f} ticks/s")
+        print(f"  SDK alone, no wire timing {emu_hz:7.0f} ticks/s   (the emulator's own ceiling here)")
+        print(f"  SDK alone, wire timing    {sdk_hz:7.0f} ticks/s   ({sdk_hz / wire_hz:.2f} of the wire)")
         print(
-            f"  driver           {r['driver_hz']:7.0f} ticks/s   ratio to the wire {ratio:.2f} (target >= 0.8), "
-            f"to the bare SDK {r['driver_hz'] / r['sdk_hz']:.2f}; {r['read_failures']} failed reads"
+            f"  driver, wire timing       {r['driver_hz']:7.0f} ticks/s   ratio to the wire {ratio:.2f} "
+            f"(target >= 0.8); to the SDK alone {r['driver_hz'] / sdk_hz:.2f}; {r['read_failures']} failed reads"
         )
+        print(f"  driver host time per write-only tick {r['host_write_ms']:.3f} ms (the driver alone: {host_hz:.0f}/s)")
         print(
             f"  e-stop -> torque-off on the wire: median {statistics.median(estop):.2f} ms, "
             f"max {max(estop):.2f} ms over {len(estop)} trials (target <= {limit:.1f} ms: one "

@@ -96,10 +96,12 @@ class RigDriver:
         self._ramp_from: list[float] = list(self._goals)
         self._ramp_t0: float | None = None
         self._last_now: float | None = None
-        self._last_write: float | None = None
+        self._armed = False
+        """The Bus Watchdog is armed (set at the end of configuring)."""
         self._since_read = 0
         self._retrying = False
-        self._silent_since: float | None = None
+        self._heard: list[float] = [0.0] * n
+        """perf_counter of each servo's last answer to a divided read."""
         self._plain_next = False
         self._fast_failures = 0
         self._use_fast = bus.fast_sync_read and self._fast_capable
@@ -221,11 +223,10 @@ class RigDriver:
         self._fault = None
         self._hw.clear()
         self._disabled.clear()
-        self._silent_since = None
         self._retrying = self._plain_next = False
         self._fast_failures = 0
         self._use_fast = self.config.bus.fast_sync_read and self._fast_capable
-        self._last_write = None
+        self._armed = False
         self._go(RigState.CONNECTING if connect else RigState.CHECKING, reason)
         self._setup = self._startup(connect)
 
@@ -271,6 +272,7 @@ class RigDriver:
         self._go(RigState.CONFIGURING, f"{len(self._servos)} servos answered, no hardware errors")
         yield from self._configure()
         self._ramp_t0 = None
+        self._heard = [time.perf_counter()] * len(self.map)
         self._go(RigState.SOFT_START, "configured, torque on")
 
     def _check_hardware(self, servo_id: int, status: ItemSpec) -> Steps[None]:
@@ -329,7 +331,7 @@ class RigDriver:
         spec = self._servos[0].spec.spec(Item.BUS_WATCHDOG)
         self._bus.sync_write(spec, dict.fromkeys(self.map.ids, 0))
         self._bus.sync_write(spec, dict.fromkeys(self.map.ids, watchdog_units(self.config.bus.bus_watchdog_ms)))
-        self._last_write = time.perf_counter()
+        self._armed = True
 
     def _check_latency(self) -> None:
         actual = usb_latency_timer_ms(self.config.bus.port)
@@ -352,8 +354,9 @@ class RigDriver:
         state = self.state
         dt = 0.0 if self._last_now is None else min(max(now - self._last_now, 0.0), 4.0 * bus.tick_s)
         watchdog_s = bus.bus_watchdog_ms / 1000.0
-        if watchdog_s and self._last_write is not None and now - self._last_write >= watchdog_s - bus.tick_s:
-            gap = now - self._last_write
+        last_packet = self._bus.port.last_write if self._armed else None
+        if watchdog_s and last_packet is not None and now - last_packet >= watchdog_s - bus.tick_s:
+            gap = now - last_packet
             self._arm_watchdog()  # the goals are read-only while it is tripped
             if state is not RigState.PARKING:
                 raise TickGap(gap, watchdog_s)
@@ -380,7 +383,6 @@ class RigDriver:
             del pulses[sid]
         self._bus.sync_write(goal_spec, pulses)
         self._goals, self._clamped = goals, clamped
-        self._last_write = now
         self.counters.goal_writes += 1
         self.counters.clamps += sum(clamped)
         if self._estop_requested:
@@ -402,28 +404,42 @@ class RigDriver:
         return True, False
 
     def _read(self, now: float) -> None:
+        """The divided read; a servo unheard for ``reply_budget_s`` raises ServoSilent."""
         bus = self.config.bus
         fast = self._use_fast and not self._plain_next
         ids = [sid for sid in self.map.ids if sid not in self._disabled]
+        failure: ServoSilent | None = None
         try:
             block = self._bus.read_block(self._read_addr, self._read_len, ids, fast)
         except ServoSilent as exc:
-            self.counters.read_failures += 1
-            if fast:
-                self.counters.fast_read_failures += 1
-                self._fast_failures += 1
-                self._plain_next = True  # the retry names the silent servo
-                if self._fast_failures >= bus.fast_read_fallback_after:
-                    self._use_fast = False
-                    log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
-            self._retrying = True
-            self._silent_since = now if self._silent_since is None else self._silent_since
-            if now - self._silent_since >= bus.reply_budget_s:
-                raise ServoSilent(exc.servo_id, f"no reply for {bus.reply_budget_s * 1000:.0f} ms ({exc})") from exc
+            block, failure = exc.partial, exc
+        alerts = self._decode(block, now)
+        for sid in alerts:  # a second transaction, only when a servo raised its Alert bit
+            raw = self._bus.read(sid, self._servos[0].spec.spec(Item.HARDWARE_ERROR_STATUS))
+            if raw:
+                raise ServoHardwareError(sid, hardware_bits(raw), raw)
+        if failure is None:
+            self.counters.reads += 1
+            self._retrying = self._plain_next = False
             return
-        self.counters.reads += 1
-        self._silent_since = None
-        self._retrying = self._plain_next = False
+        self.counters.read_failures += 1
+        self._retrying = True  # read again next tick, not in read_divider ticks
+        if fast:
+            self.counters.fast_read_failures += 1
+            self._fast_failures += 1
+            self._plain_next = True  # a plain Sync Read names the silent servo
+            if self._fast_failures >= bus.fast_read_fallback_after:
+                self._use_fast = False
+                log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
+        stale = {sid: heard for sid, heard in zip(self.map.ids, self._heard, strict=True) if sid in ids}
+        stale = {sid: heard for sid, heard in stale.items() if now - heard >= bus.reply_budget_s}
+        if stale:
+            sid = failure.servo_id if failure.servo_id in stale else min(stale, key=stale.__getitem__)
+            silent_ms = (now - stale[sid]) * 1000
+            raise ServoSilent(sid, f"no reply for {silent_ms:.0f} ms ({failure})") from failure
+
+    def _decode(self, block: dict[int, tuple[int, bytes]], now: float) -> list[int]:
+        """Store what a read brought; return the ids whose ERR byte has the Alert bit."""
         alerts = []
         spec = self._servos[0].spec
         volt_at = spec.spec(Item.PRESENT_INPUT_VOLTAGE).address - self._read_addr
@@ -433,16 +449,14 @@ class RigDriver:
                 continue
             error, data = block[sid]
             present = pulses_to_deg(int.from_bytes(data[0:4], "little", signed=True))
+            self._heard[i] = now
             self._present[i] = present
             self._tracking[i] = self._goals[i] - present
             self._volts[i] = int.from_bytes(data[volt_at : volt_at + 2], "little") / 10.0
             self._temps[i] = data[temp_at]
             if error & ALERT_BIT:
                 alerts.append(sid)
-        for sid in alerts:  # a second transaction, only when a servo raised its Alert bit
-            raw = self._bus.read(sid, spec.spec(Item.HARDWARE_ERROR_STATUS))
-            if raw:
-                raise ServoHardwareError(sid, hardware_bits(raw), raw)
+        return alerts
 
     def _start_park(self, now: float, reason: str) -> None:
         self._ramp_t0, self._ramp_from = now, list(self._goals)

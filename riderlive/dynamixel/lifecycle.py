@@ -83,8 +83,10 @@ class PortLost(RigError):
 class ServoSilent(RigError):
     """A servo did not answer (within the retry budget)."""
 
-    def __init__(self, servo_id: int | None, detail: str) -> None:
+    def __init__(self, servo_id: int | None, detail: str, partial: dict[int, tuple[int, bytes]] | None = None) -> None:
         self.servo_id = servo_id
+        self.partial = partial or {}
+        """What a group read did get before it stopped: id -> (ERR byte, data)."""
         super().__init__(f"servo {servo_id}: {detail}" if servo_id is not None else detail)
 
 

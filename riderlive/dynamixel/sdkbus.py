@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import termios
+import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -63,8 +64,11 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         self.margin_ms = margin_ms
         self.wire_free_at = 0.0
         """When the bytes written so far will have left the adapter (SDK clock, ms)."""
+        self.last_write: float | None = None
+        """perf_counter of the last instruction packet written (what feeds the Bus Watchdog)."""
 
     def writePort(self, packet: list[int]) -> int:
+        self.last_write = time.perf_counter()
         now = self.getCurrentTime()
         self.wire_free_at = max(now, self.wire_free_at) + len(packet) * self.tx_time_per_byte
         return int(super().writePort(packet))
@@ -223,8 +227,8 @@ class SdkBus:
         """SYNC_READ (or FAST_SYNC_READ) of ``length`` bytes at ``address`` from ``ids``.
 
         Returns id -> (status ERR byte, data). Plain Sync Read names the first servo
-        that did not answer (ServoSilent with its id); Fast Sync Read cannot, and
-        raises ServoSilent without an id (``servo_id`` None).
+        that did not answer (ServoSilent with its id and the answers before it in
+        ``partial``); Fast Sync Read cannot, and raises ServoSilent without an id.
         """
         key = (address, length, tuple(ids))
         if self._reader_key != key:
@@ -245,7 +249,7 @@ class SdkBus:
         for servo_id in ids:
             data, result, error = self.packets.readRx(self.port, servo_id, length)
             if result != sdk.COMM_SUCCESS:
-                raise ServoSilent(servo_id, f"sync read: {self.packets.getTxRxResult(result)}")
+                raise ServoSilent(servo_id, f"sync read: {self.packets.getTxRxResult(result)}", out)
             out[servo_id] = (int(error), bytes(data))
         return out
 
@@ -263,5 +267,5 @@ class SdkBus:
             out[raw[start + 1]] = (raw[start], raw[start + 2 : start + 2 + length])
         missing = [i for i in ids if i not in out]
         if missing:
-            raise ServoSilent(missing[0], "fast sync read: no data")
+            raise ServoSilent(missing[0], "fast sync read: no data", out)
         return out
