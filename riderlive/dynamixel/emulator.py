@@ -19,7 +19,6 @@ built in turn by each servo, so a servo missing from the chain truncates it.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import logging
 import os
@@ -87,6 +86,8 @@ class BusStats:
     dropped_replies: int = 0
     corrupted_replies: int = 0
     internal_errors: int = 0
+    handling_cpu_s: float = 0.0
+    """CPU time the bus thread spent handling packets (not waiting for the wire), s."""
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,8 @@ class EmulatedBus:
         self.stats = BusStats()
         self.received: deque[bytes] = deque(maxlen=1024)
         """The last instruction packets received, raw (for byte-exact assertions)."""
+        self.arrivals: deque[tuple[float, bytes]] = deque(maxlen=1024)
+        """(clock time its last byte arrived on the emulated wire, raw packet) of the same."""
         self.port = ""
         self._master = self._slave = -1
         self._reader = PacketReader()
@@ -230,9 +233,7 @@ class EmulatedBus:
                 elif fault.kind is FaultKind.REAPPEAR:
                     faults.vanished = False
                 elif fault.kind is FaultKind.OVERHEAT:
-                    hot = servo.get(Item.TEMPERATURE_LIMIT) + 1.0
-                    servo.state = dataclasses.replace(servo.state, temperature=hot)
-                    servo.raise_hardware_error(HardwareError.OVERHEATING)
+                    servo.heat_to(servo.get(Item.TEMPERATURE_LIMIT) + 1.0)
                 elif fault.kind is FaultKind.OVERLOAD:
                     servo.raise_hardware_error(HardwareError.OVERLOAD)
                 elif fault.kind is FaultKind.VOLTAGE:
@@ -275,11 +276,13 @@ class EmulatedBus:
             if isinstance(item, Garbage):
                 self.stats.garbage_bytes += len(item.data)
                 continue
+            started = time.thread_time()
             try:
                 self._handle(item, now)
             except Exception:  # an emulator bug must not kill the bus
                 self.stats.internal_errors += 1
                 log.exception("servo-emu: failed on packet %s", item.hex(" "))
+            self.stats.handling_cpu_s += time.thread_time() - started
 
     def _active(self, now: float) -> dict[int, EmulatedServo]:
         """Servos that hear the bus now: present, at the bus baud, not rebooting."""
@@ -294,9 +297,11 @@ class EmulatedBus:
             self.received.append(raw)
             self.stats.packets += 1
             now = arrived
-            if self.wire_timing:
+            if self.wire_timing:  # the instruction's last byte arrives after its wire time;
+                # the servos act at that moment, but only replies wait for the clock
                 now = max(arrived, self._bus_free_at) + len(raw) * 10 / self.baud
-                self._sleep_until(now)
+                self._bus_free_at = now
+            self.arrivals.append((now, raw))
             active = self._active(now)
             try:
                 packet = decode_instruction(raw)
@@ -345,7 +350,7 @@ class EmulatedBus:
                 return []
             address, length = le_int(params[0:2]), le_int(params[2:4])
             requests = [(servo_id, address, length) for servo_id in params[4:]]
-            return self._group_read(requests, active, fast=inst == Instruction.FAST_SYNC_READ)
+            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_SYNC_READ)
         if inst in (Instruction.BULK_READ, Instruction.FAST_BULK_READ):
             if len(params) % 5 or not params:
                 return []
@@ -353,7 +358,7 @@ class EmulatedBus:
                 (params[i], le_int(params[i + 1 : i + 3]), le_int(params[i + 3 : i + 5]))
                 for i in range(0, len(params), 5)
             ]
-            return self._group_read(requests, active, fast=inst == Instruction.FAST_BULK_READ)
+            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_BULK_READ)
         if inst == Instruction.SYNC_WRITE and len(params) >= 4:
             address, length = le_int(params[0:2]), le_int(params[2:4])
             body = params[4:]
@@ -388,7 +393,7 @@ class EmulatedBus:
             if len(params) != 4:
                 error = StatusError.DATA_LENGTH
             else:
-                error, data = servo.read(le_int(params[0:2]), le_int(params[2:4]))
+                error, data = servo.read(le_int(params[0:2]), le_int(params[2:4]), now)
         elif inst in (Instruction.WRITE, Instruction.REG_WRITE):
             if len(params) < 3:
                 error = StatusError.DATA_LENGTH
@@ -415,7 +420,7 @@ class EmulatedBus:
         return inst == Instruction.PING or level == 2 or (level == 1 and inst in READ_INSTRUCTIONS)
 
     def _group_read(
-        self, requests: Sequence[tuple[int, int, int]], active: dict[int, EmulatedServo], *, fast: bool
+        self, requests: Sequence[tuple[int, int, int]], active: dict[int, EmulatedServo], now: float, *, fast: bool
     ) -> list[_Chunk]:
         replies: list[tuple[EmulatedServo | None, int, bytes]] = []
         for servo_id, address, length in requests:
@@ -423,7 +428,7 @@ class EmulatedBus:
             if servo is None or not self._answers(servo, Instruction.SYNC_READ):
                 replies.append((None, servo_id, bytes(length)))
                 continue
-            error, data = servo.read(address, length)
+            error, data = servo.read(address, length, now)
             replies.append((servo, servo.status_error(error), data if not error else bytes(length) if fast else b""))
         if not fast:
             return [_Chunk(s, encode_status(s.id, err, data)) for s, err, data in replies if s is not None]
@@ -436,7 +441,11 @@ class EmulatedBus:
         return chunks
 
     def _transmit(self, chunks: Sequence[_Chunk], start: float) -> None:
+        """Send the replies, applying reply faults; with wire timing, each at the moment its
+        last byte would have left the servo. Bytes due together go out in one write (a
+        write per chunk would wake the host once per servo)."""
         t = start
+        batch = bytearray()
         for chunk in chunks:
             faults = self._faults[id(chunk.servo)]
             if faults.drop is not None and faults.drop.fires():
@@ -450,21 +459,30 @@ class EmulatedBus:
                 data = corrupt(data)
             if self.wire_timing:
                 t += (chunk.servo.return_delay_s if chunk.waits_return_delay else 0.0) + len(data) * 10 / self.baud
-                self._sleep_until(t)
-            try:
-                os.write(self._master, data)
-            except OSError:
-                self.stats.dropped_replies += 1
-                continue
+                if not chunk.chained:  # a fast-read chain is useless to the host until complete
+                    self._flush(batch)
+                    self._sleep_until(t)
+            batch += data
             self.stats.replies += 1
-            self.stats.bytes_out += len(data)
+        if self.wire_timing:
+            self._sleep_until(t)
+        self._flush(batch)
         self._bus_free_at = t
 
+    def _flush(self, batch: bytearray) -> None:
+        if not batch:
+            return
+        try:
+            os.write(self._master, batch)
+            self.stats.bytes_out += len(batch)
+        except OSError:
+            self.stats.dropped_replies += 1
+        batch.clear()
+
     def _sleep_until(self, deadline: float) -> None:
-        """Sleep, then spin the last 0.2 ms (OS sleeps overshoot by ~0.1 ms)."""
+        """Sleep, then yield-spin the last millisecond (OS sleeps overshoot, more so under load)."""
         while True:
             remaining = deadline - self.clock()
             if remaining <= 0:
                 return
-            if remaining > 0.0003:
-                time.sleep(remaining - 0.0002)
+            time.sleep(remaining - 0.001 if remaining > 0.0015 else 0)

@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
             Path(args.link).unlink()
     print(
         f"servo-emu: {stats.packets} packets, {stats.replies} replies, {stats.crc_errors} CRC errors, "
-        f"{stats.dropped_replies} dropped, {stats.corrupted_replies} corrupted; {dict(stats.instructions)}",
+        f"{stats.dropped_replies} dropped, {stats.corrupted_replies} corrupted, "
+        f"{stats.handling_cpu_s:.3f} s CPU handling; {dict(stats.instructions)}",
         flush=True,
     )
     return 0

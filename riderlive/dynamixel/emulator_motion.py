@@ -81,21 +81,22 @@ HOLDING_EFFORT = 0.02
 def _approach(  # noqa: PLR0917
     position: float, velocity: float, goal: float, vmax: float, amax: float, dt: float
 ) -> tuple[float, float]:
-    """One substep of a trapezoidal (velocity- and acceleration-capped) move to ``goal``."""
+    """One substep of a trapezoidal (velocity- and acceleration-capped) move to ``goal``.
+
+    Semi-implicit Euler; the braking speed ``a(sqrt(dt^2/4 + 2d/a) - dt/2)`` is the one
+    from which decelerating by ``a dt`` per substep stops exactly at the goal.
+    """
     distance = goal - position
-    if abs(distance) <= SETTLE_PULSES and abs(velocity) <= max(amax * dt, 1.0) * 2:
-        return goal, 0.0
     direction = math.copysign(1.0, distance)
     if math.isinf(amax):
         target = direction * min(vmax, abs(distance) / dt)
-        return position + target * dt, target
-    stop_speed = math.sqrt(2.0 * amax * abs(distance))
-    target = direction * min(vmax, stop_speed)
-    change = max(-amax * dt, min(amax * dt, target - velocity))
-    new_velocity = velocity + change
-    new_position = position + 0.5 * (velocity + new_velocity) * dt
-    if (goal - new_position) * direction < 0:  # would overshoot within this substep
-        return goal, 0.0
+        return (goal, 0.0) if abs(distance) <= vmax * dt else (position + target * dt, target)
+    brake = amax * (math.sqrt(dt * dt / 4.0 + 2.0 * abs(distance) / amax) - dt / 2.0)
+    target = direction * min(vmax, brake)
+    new_velocity = velocity + max(-amax * dt, min(amax * dt, target - velocity))
+    new_position = position + new_velocity * dt
+    if (goal - new_position) * direction <= 0 or abs(goal - new_position) < SETTLE_PULSES * 1e-3:
+        return goal, 0.0  # arrives within this substep
     return new_position, new_velocity
 
 
@@ -106,25 +107,25 @@ def _track_velocity(velocity: float, goal: float, amax: float, dt: float) -> flo
 
 
 def step(state: MotionState, profile: Profile, dt: float, thermal: ThermalParams = ThermalParams()) -> MotionState:
-    """Advance ``state`` by ``dt`` seconds under ``profile`` (fixed substeps of SUBSTEP_S)."""
+    """Advance ``state`` by ``dt`` seconds under ``profile`` (equal substeps of at most SUBSTEP_S)."""
     position, velocity = state.position, state.velocity
-    remaining = dt
     accel = 0.0
-    if profile.torque_on:
-        while remaining > 1e-12:
-            h = min(SUBSTEP_S, remaining)
+    if profile.torque_on and dt > 0:
+        substeps = math.ceil(dt / SUBSTEP_S - 1e-9)
+        h = dt / substeps
+        for _ in range(substeps):
             before = velocity
             if profile.goal_velocity is not None:
                 velocity = _track_velocity(velocity, profile.goal_velocity, profile.max_acceleration, h)
                 position += 0.5 * (before + velocity) * h
             else:
                 if position == profile.goal_position and velocity == 0.0:
-                    break
+                    accel = 0.0
+                    break  # settled: nothing moves until the goal changes
                 position, velocity = _approach(
                     position, velocity, profile.goal_position, profile.max_velocity, profile.max_acceleration, h
                 )
             accel = (velocity - before) / h
-            remaining -= h
     else:
         velocity = 0.0
     effort = 0.0

@@ -17,6 +17,7 @@ call. Register semantics follow the ROBOTIS e-manual:
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass, replace
 
 from riderlive.dynamixel import emulator_motion as motion
@@ -24,6 +25,7 @@ from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
     EXTENDED_POSITION_RANGE,
+    MODELS,
     POSITION_MODES,
     RETURN_DELAY_UNIT_S,
     VELOCITY_UNIT_RPM,
@@ -38,6 +40,20 @@ from riderlive.dynamixel.tables import (
     StatusError,
     model_spec,
 )
+
+
+def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
+    """(address, struct format to read, format to write, mask) of an item."""
+    code = {1: "b", 2: "h", 4: "i"}[spec.size]
+    return spec.address, "<" + (code if spec.signed else code.upper()), "<" + code.upper(), (1 << (8 * spec.size)) - 1
+
+
+_LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
+CONTROL_PERIOD_S = motion.SUBSTEP_S
+"""The emulated servo's control loop period: its state changes in whole cycles."""
+THERMAL_CHUNK_CYCLES = 10
+"""Longest stretch integrated at once (control cycles) before checking the temperature."""
+_WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
 """Items that become read-only while the Bus Watchdog has tripped."""
@@ -63,7 +79,10 @@ class EmulatedServo:
         self._last_instruction = now
         self.watchdog_tripped = False
         self.registered: tuple[int, bytes] | None = None
-        self.external_load = 0.0
+        self._external_load = 0.0
+        self._profile_cache: motion.Profile | None = None
+        self._synced: tuple[object, ...] = ()
+        self._output_limits = (0, 0, 0, 0)
         self.deaf_until = 0.0
         """The servo ignores the bus until this time (rebooting)."""
         self.thermal = motion.ThermalParams()
@@ -77,12 +96,29 @@ class EmulatedServo:
     # -- raw register access (no checks; for the bus, tests and fault injection) --------
 
     def get(self, item: Item) -> int:
-        spec = self.spec.items[item]
-        return int.from_bytes(self.memory[spec.address : spec.end], "little", signed=spec.signed)
+        address, read_format, _, _ = _LAYOUTS[self.spec.model][item]
+        value: int = struct.unpack_from(read_format, self.memory, address)[0]
+        return value
 
     def set(self, item: Item, value: int) -> None:
-        spec = self.spec.items[item]
-        self.memory[spec.address : spec.end] = (value % (1 << (8 * spec.size))).to_bytes(spec.size, "little")
+        self._put(item, value)
+        self._profile_cache = None
+        self._synced = ()
+
+    def _put(self, item: Item, value: int) -> None:
+        """Store without invalidating the cached profile (for the model's own outputs)."""
+        address, _, write_format, mask = _LAYOUTS[self.spec.model][item]
+        struct.pack_into(write_format, self.memory, address, value & mask)
+
+    @property
+    def external_load(self) -> float:
+        """Extra effort from outside (something pushing on the horn), 0..1; heats the servo."""
+        return self._external_load
+
+    @external_load.setter
+    def external_load(self, value: float) -> None:
+        self._external_load = value
+        self._profile_cache = None
 
     @property
     def id(self) -> int:
@@ -117,7 +153,9 @@ class EmulatedServo:
 
     def feed_watchdog(self, now: float) -> None:
         """An instruction packet for this servo (or broadcast) arrived at ``now``."""
-        self.advance(now)
+        watchdog = self.memory[_WATCHDOG_ADDRESS]
+        if 0 < watchdog < 0x80 and now > self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S:
+            self.advance(now)  # the deadline passed before this packet: trip first
         self._last_instruction = now
 
     def advance(self, now: float) -> None:
@@ -130,21 +168,32 @@ class EmulatedServo:
                 self.watchdog_tripped = True
                 self.set(Item.BUS_WATCHDOG, -1)
                 self.state = replace(self.state, velocity=0.0)
-                self.set(Item.GOAL_POSITION, round(self.state.position))
+                self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
                 self.set(Item.GOAL_VELOCITY, 0)
         self._integrate(now)
 
     def _integrate(self, now: float) -> None:
-        dt = now - self._last_advance
-        if dt <= 0:
+        """Run whole control cycles (1 kHz, like the servo's own loop) up to ``now``."""
+        cycles = int((now - self._last_advance) / CONTROL_PERIOD_S)
+        if cycles <= 0:
             return
-        self.state = motion.step(self.state, self._profile(), dt, self.thermal)
-        self._last_advance = now
-        if self.state.temperature >= self.get(Item.TEMPERATURE_LIMIT):
-            self.raise_hardware_error(HardwareError.OVERHEATING)
-        self._sync_outputs(now)
+        limit = self.get(Item.TEMPERATURE_LIMIT)
+        while cycles > 0:  # in chunks, so overheating shuts down near the crossing
+            chunk = min(cycles, THERMAL_CHUNK_CYCLES)
+            cycles -= chunk
+            dt = chunk * CONTROL_PERIOD_S
+            self._last_advance += dt
+            self.state = motion.step(self.state, self._profile(), dt, self.thermal)
+            if self.state.temperature >= limit and not self.hardware_error & HardwareError.OVERHEATING:
+                self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._sync_outputs(self._last_advance)
 
     def _profile(self) -> motion.Profile:
+        if self._profile_cache is None:
+            self._profile_cache = self._make_profile()
+        return self._profile_cache
+
+    def _make_profile(self) -> motion.Profile:
         cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
         profile_velocity = self.get(Item.PROFILE_VELOCITY)
         velocity_cap = motion.velocity_from_register(round(min(profile_velocity or cap, cap)))
@@ -155,6 +204,12 @@ class EmulatedServo:
             goal_velocity = motion.velocity_from_register(self.get(Item.GOAL_VELOCITY))
         elif mode not in POSITION_MODES:
             goal_velocity = 0.0
+        self._output_limits = (
+            self.get(Item.HOMING_OFFSET),
+            self.get(Item.MOVING_THRESHOLD),
+            self.get(Item.CURRENT_LIMIT) if self.spec.has(Item.CURRENT_LIMIT) else 0,
+            self.get(Item.PWM_LIMIT),
+        )
         return motion.Profile(
             torque_on=self.torque_on and not self.watchdog_tripped,
             goal_position=float(self.get(Item.GOAL_POSITION) - self.get(Item.HOMING_OFFSET)),
@@ -167,29 +222,40 @@ class EmulatedServo:
     def _sync_outputs(self, now: float) -> None:
         """Write the model state into the read-only present-value registers."""
         state = self.state
-        offset = self.get(Item.HOMING_OFFSET)
+        self._put(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
+        profile = self._profile()
+        key = (state, profile, self.voltage)
+        if key == self._synced:
+            return  # nothing the registers show has changed
+        self._synced = key
+        offset, threshold, current_limit, pwm_limit = self._output_limits
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
-        self.set(Item.PRESENT_POSITION, position)
-        self.set(Item.POSITION_TRAJECTORY, position)
-        self.set(Item.PRESENT_VELOCITY, velocity)
-        self.set(Item.VELOCITY_TRAJECTORY, velocity)
-        moving = abs(velocity) > self.get(Item.MOVING_THRESHOLD) or (
-            self.torque_on and abs(state.velocity) > 0 and not self.watchdog_tripped
-        )
-        self.set(Item.MOVING, int(moving))
-        self.set(Item.MOVING_STATUS, 0x01 if not moving and self.torque_on else 0x00)
+        self._put(Item.PRESENT_POSITION, position)
+        self._put(Item.POSITION_TRAJECTORY, position)
+        self._put(Item.PRESENT_VELOCITY, velocity)
+        self._put(Item.VELOCITY_TRAJECTORY, velocity)
+        moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
+        self._put(Item.MOVING, int(moving))
+        self._put(Item.MOVING_STATUS, 0x01 if not moving and profile.torque_on else 0x00)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
-        if self.spec.has(Item.PRESENT_CURRENT):
-            self.set(Item.PRESENT_CURRENT, round(signed_effort * self.get(Item.CURRENT_LIMIT)))
-        if self.spec.has(Item.PRESENT_LOAD):
-            self.set(Item.PRESENT_LOAD, round(signed_effort * 1000))
-        self.set(Item.PRESENT_PWM, round(signed_effort * self.get(Item.PWM_LIMIT)))
-        self.set(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
-        self.set(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
-        self.set(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
+        if current_limit:
+            self._put(Item.PRESENT_CURRENT, round(signed_effort * current_limit))
+        else:
+            self._put(Item.PRESENT_LOAD, round(signed_effort * 1000))
+        self._put(Item.PRESENT_PWM, round(signed_effort * pwm_limit))
+        self._put(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
+        self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
 
     # -- hardware errors -----------------------------------------------------------------
+
+    def heat_to(self, temperature_c: float) -> None:
+        """Set the winding temperature (fault injection); over the limit it overheats."""
+        self.state = replace(self.state, temperature=temperature_c)
+        if temperature_c >= self.get(Item.TEMPERATURE_LIMIT):
+            self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._synced = ()
+        self._sync_outputs(self._last_advance)
 
     def raise_hardware_error(self, bits: int) -> None:
         """Latch hardware error ``bits``; those enabled in Shutdown (63) turn torque off."""
@@ -203,10 +269,11 @@ class EmulatedServo:
 
     # -- instructions ----------------------------------------------------------------------
 
-    def read(self, address: int, length: int) -> tuple[StatusError, bytes]:
-        """READ: ``length`` bytes from ``address`` (gaps between items read as 0)."""
+    def read(self, address: int, length: int, now: float) -> tuple[StatusError, bytes]:
+        """READ at ``now``: ``length`` bytes from ``address`` (gaps between items read as 0)."""
         if length < 1 or address + length > len(self.memory):
             return StatusError.ACCESS, b""
+        self.advance(now)
         return StatusError.NONE, bytes(self.memory[address : address + length])
 
     def check_write(self, address: int, data: bytes) -> StatusError:
@@ -214,10 +281,17 @@ class EmulatedServo:
         end = address + len(data)
         if not data or end > len(self.memory):
             return StatusError.ACCESS
-        covered = [spec for spec in self.spec if spec.address < end and spec.end > address]
-        if sum(spec.size for spec in covered) != len(data):
-            partial = any(spec.address < address or spec.end > end for spec in covered)
-            return StatusError.DATA_LENGTH if partial else StatusError.ACCESS
+        owner = self.spec.byte_owner
+        covered: list[ItemSpec] = []
+        position = address
+        while position < end:
+            spec = owner[position]
+            if spec is None:
+                return StatusError.ACCESS
+            if spec.address != position or spec.end > end:
+                return StatusError.DATA_LENGTH
+            covered.append(spec)
+            position = spec.end
         for spec in covered:
             if spec.access is Access.R:
                 return StatusError.ACCESS
@@ -261,6 +335,8 @@ class EmulatedServo:
         torque_before = self.torque_on
         mode_before = self.get(Item.OPERATING_MODE)
         self.memory[address : address + len(data)] = data
+        self._profile_cache = None
+        self._synced = ()
         if self.torque_on and not torque_before:
             # Torque on holds where the horn is: the goal becomes the present position.
             self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
@@ -269,7 +345,6 @@ class EmulatedServo:
             self.set(Item.GOAL_VELOCITY, 0)
         if self.watchdog_tripped and self.get(Item.BUS_WATCHDOG) == 0:
             self.watchdog_tripped = False
-        self._sync_outputs(now)
         return StatusError.NONE
 
     def reg_write(self, address: int, data: bytes) -> StatusError:

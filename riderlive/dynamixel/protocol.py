@@ -140,10 +140,12 @@ def encode_fast_status(entries: Sequence[tuple[int, int, bytes]]) -> bytes:
     """
     length = 1 + sum(4 + len(data) for _, _, data in entries)
     out = bytearray(HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8, Instruction.STATUS)))
+    crc = crc16(out)
     for servo_id, error, data in entries:
-        out += bytes((error, servo_id)) + bytes(data)
-        crc = crc16(out)
-        out += bytes((crc & 0xFF, crc >> 8))
+        entry = bytes((error, servo_id)) + bytes(data)
+        crc = crc16(entry, crc)
+        out += entry + bytes((crc & 0xFF, crc >> 8))
+        crc = crc16(out[-2:], crc)
     return bytes(out)
 
 

@@ -10,6 +10,7 @@ voltages in 0.1 V, Bus Watchdog in 20 ms, Return Delay Time in 2 us).
 from __future__ import annotations
 
 import enum
+import functools
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
@@ -236,7 +237,20 @@ class ModelSpec:
     """Baud Rate (8) register value -> bits per second."""
 
     def __iter__(self) -> Iterator[ItemSpec]:
-        return iter(sorted(self.items.values(), key=lambda s: s.address))
+        return iter(self.ordered)
+
+    @functools.cached_property
+    def ordered(self) -> tuple[ItemSpec, ...]:
+        """Items by address."""
+        return tuple(sorted(self.items.values(), key=lambda s: s.address))
+
+    @functools.cached_property
+    def byte_owner(self) -> tuple[ItemSpec | None, ...]:
+        """For each control-table address, the item that byte belongs to (None in gaps)."""
+        owner: list[ItemSpec | None] = [None] * self.table_size
+        for spec in self.items.values():
+            owner[spec.address : spec.end] = [spec] * spec.size
+        return tuple(owner)
 
     def spec(self, item: Item) -> ItemSpec:
         return self.items[item]

@@ -9,7 +9,9 @@
 
 The emulator thread shares the GIL with the SDK's busy-polling reads, so the fixtures
 lower the interpreter's switch interval while a bus runs (otherwise each reply can wait
-one 5 ms switch interval).
+one 5 ms switch interval). They also raise the SDK's reply timeout from 34 ms to
+~200 ms (its module constant ``LATENCY_TIMER``, as for a slow USB adapter): on a loaded
+2-core machine a thread can stall for more than 34 ms (100 ms seen), which would fail a test at random.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from dynamixel_sdk import PacketHandler, PortHandler
+from dynamixel_sdk import PacketHandler, PortHandler, port_handler
 
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 
@@ -54,10 +56,15 @@ def open_sdk(bus: EmulatedBus) -> SdkLink:
     return SdkLink(port, PacketHandler(2.0))
 
 
+SDK_LATENCY_TIMER_MS = 100
+"""Patched into ``dynamixel_sdk.port_handler.LATENCY_TIMER``: reply timeout 2 x 100 + 2 ms."""
+
+
 @pytest.fixture
-def fast_switching() -> Iterator[None]:
+def fast_switching(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     previous = sys.getswitchinterval()
     sys.setswitchinterval(0.0002)
+    monkeypatch.setattr(port_handler, "LATENCY_TIMER", SDK_LATENCY_TIMER_MS)
     yield
     sys.setswitchinterval(previous)
 
