@@ -116,6 +116,11 @@ class RigDriver:
     def fault(self) -> Fault | None:
         return self._fault
 
+    @property
+    def last_packet_at(self) -> float | None:
+        """perf_counter when the last instruction packet was written (it fed the Bus Watchdog)."""
+        return self._bus.port.last_write
+
     def open(self) -> bool:
         """Start the lifecycle (connect, check, configure, soft start) over the next ticks."""
         with self._lock:
