@@ -282,10 +282,9 @@ def main() -> int:
             f"  e-stop at {1000 / r['tick_ms']:.0f} ticks/s, {len(estop)} trials (target <= {limit:.1f} ms: one "
             f"{r['tick_ms']:.1f} ms tick + 1 ms):"
         )
-        print(
-            f"    estop() -> torque-off written  median {statistics.median(written):6.2f} ms, max {max(written):6.2f} ms"
-        )
-        print(f"    estop() -> torque-off on wire  median {statistics.median(estop):6.2f} ms, max {max(estop):6.2f} ms")
+        for what, values in (("written by the host", written), ("arrived on the wire", estop)):
+            median, worst = statistics.median(values), max(values)
+            print(f"    estop() -> torque-off {what:20s} median {median:6.2f} ms, max {worst:6.2f} ms")
     return 0 if ok else 1
 
 

@@ -27,6 +27,7 @@ from typing import TypeVar
 from riderlive.channels import RIDER
 from riderlive.dynamixel.lifecycle import (
     Fault,
+    FaultKind,
     Lifecycle,
     ModelMismatch,
     PortLost,
@@ -81,6 +82,7 @@ class RigDriver:
         self._life = Lifecycle()
         self._lock = threading.Lock()
         self._estop_requested = False
+        self._estop_repeat = False
         self._setup: Steps[None] | None = None
         self._fault: Fault | None = None
         self.counters = BusCounters()
@@ -95,13 +97,15 @@ class RigDriver:
         self._disabled: set[int] = set()
         self._ramp_from: list[float] = list(self._goals)
         self._ramp_t0: float | None = None
+        self._park_goals_at: float | None = None
+        self._last_read: float | None = None
         self._last_now: float | None = None
         self._armed = False
         """The Bus Watchdog is armed (set at the end of configuring)."""
         self._since_read = 0
         self._retrying = False
-        self._heard: list[float] = [0.0] * n
-        """perf_counter of each servo's last answer to a divided read."""
+        self._missing_since: list[float | None] = [None] * n
+        """When each servo first failed to answer a divided read since its last answer."""
         self._plain_next = False
         self._fast_failures = 0
         self._use_fast = bus.fast_sync_read and self._fast_capable
@@ -139,6 +143,9 @@ class RigDriver:
             try:
                 if self._estop_requested:
                     self._do_estop(now, "estop()")
+                if self._estop_repeat and self._bus.is_open:
+                    self._estop_repeat = False
+                    self._torque_off_all()
                 if self.state in _SETUP:
                     self._run_setup()
                 elif self.state.torque_may_be_on:
@@ -149,8 +156,11 @@ class RigDriver:
             return self._status(now, wrote, read, self._bus.transactions - first_tx)
 
     def estop(self) -> None:
-        """Torque off every servo now (or right after the transaction in flight)."""
+        """Torque off every servo now. Callable from any thread: a reply the tick is
+        waiting for is given up, then the torque-off broadcast goes out (and once more
+        on the next tick, in case it met that reply on the half-duplex wire)."""
         self._estop_requested = True
+        self._bus.port.abort_wait = True
         if self._lock.acquire(timeout=self.config.bus.tick_s):
             try:
                 if self._estop_requested:
@@ -277,7 +287,7 @@ class RigDriver:
         self._go(RigState.CONFIGURING, f"{len(self._servos)} servos answered, no hardware errors")
         yield from self._configure()
         self._ramp_t0 = None
-        self._heard = [time.perf_counter()] * len(self.map)
+        self._missing_since = [None] * len(self.map)
         self._go(RigState.SOFT_START, "configured, torque on")
 
     def _check_hardware(self, servo_id: int, status: ItemSpec) -> Steps[None]:
@@ -393,8 +403,7 @@ class RigDriver:
         if self._estop_requested:
             self._do_estop(now, "estop()")
             return True, False
-        parked = state is RigState.PARKING and alpha >= 1.0
-        if parked and all(abs(g - p) < 1e-6 for g, p in zip(goals, self.map.park, strict=True)):
+        if state is RigState.PARKING and alpha >= 1.0 and self._parked(goals, now):
             self._torque_off_all()
             target = RigState.FAULT if self._fault is not None else RigState.TORQUE_OFF
             self._go(target, "parked, torque off", now)
@@ -402,11 +411,30 @@ class RigDriver:
         if state is RigState.SOFT_START and alpha >= 1.0:
             self._go(RigState.RUNNING, "soft start done", now)
         self._since_read += 1
-        if self._fault is None and (self._retrying or self._since_read >= bus.read_divider):
+        reads_ok = self._fault is None or self._fault.kind in (FaultKind.HARDWARE_ERROR, FaultKind.TICK_GAP)
+        if reads_ok and (self._retrying or self._since_read >= bus.read_divider):
             self._since_read = 0
             self._read(now)
+            self._last_read = now
             return True, True
         return True, False
+
+    def _parked(self, goals: Sequence[float], now: float) -> bool:
+        """The park goals are out and every servo has arrived (as read after that), or
+        ``park_settle_s`` has passed (a servo that cannot be read, or cannot get there)."""
+        if any(abs(g - p) > 1e-6 for g, p in zip(goals, self.map.park, strict=True)):
+            return False
+        if self._park_goals_at is None:
+            self._park_goals_at = now
+        if now - self._park_goals_at >= self.config.bus.park_settle_s:
+            return True
+        if self._last_read is None or self._last_read <= self._park_goals_at:
+            return False
+        tolerance = self.config.bus.park_tolerance_deg
+        return all(
+            sid in self._disabled or (present is not None and abs(present - park) <= tolerance)
+            for sid, present, park in zip(self.map.ids, self._present, self.map.park, strict=True)
+        )
 
     def _read(self, now: float) -> None:
         """The divided read; a servo unheard for ``reply_budget_s`` raises ServoSilent."""
@@ -418,11 +446,13 @@ class RigDriver:
             block = self._bus.read_block(self._read_addr, self._read_len, ids, fast)
         except ServoSilent as exc:
             block, failure = exc.partial, exc
-        alerts = self._decode(block, now)
-        for sid in alerts:  # a second transaction, only when a servo raised its Alert bit
-            raw = self._bus.read(sid, self._servos[0].spec.spec(Item.HARDWARE_ERROR_STATUS))
-            if raw:
-                raise ServoHardwareError(sid, hardware_bits(raw), raw)
+        for i, sid in enumerate(self.map.ids):
+            if sid in block:
+                self._missing_since[i] = None
+            elif sid in ids and self._missing_since[i] is None:
+                self._missing_since[i] = now
+        for sid in self._decode(block):
+            self._raise_hardware_error(sid)
         if failure is None:
             self.counters.reads += 1
             self._retrying = self._plain_next = False
@@ -436,14 +466,34 @@ class RigDriver:
             if self._fast_failures >= bus.fast_read_fallback_after:
                 self._use_fast = False
                 log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
-        stale = {sid: heard for sid, heard in zip(self.map.ids, self._heard, strict=True) if sid in ids}
-        stale = {sid: heard for sid, heard in stale.items() if now - heard >= bus.reply_budget_s}
+        stale = {
+            sid: since
+            for sid, since in zip(self.map.ids, self._missing_since, strict=True)
+            if since is not None and now - since >= bus.reply_budget_s
+        }
         if stale:
             sid = failure.servo_id if failure.servo_id in stale else min(stale, key=stale.__getitem__)
             silent_ms = (now - stale[sid]) * 1000
-            raise ServoSilent(sid, f"no reply for {silent_ms:.0f} ms ({failure})") from failure
+            raise ServoSilent(sid, f"no reply for {silent_ms:.0f} ms of retries ({failure})") from failure
 
-    def _decode(self, block: dict[int, tuple[int, bytes]], now: float) -> list[int]:
+    def _raise_hardware_error(self, servo_id: int) -> None:
+        """A servo set the Alert bit: read its Hardware Error Status (retried once) and raise.
+
+        If it cannot be read, the Alert bit alone is proof enough: the bits are ("alert",).
+        """
+        status = self._servos[0].spec.spec(Item.HARDWARE_ERROR_STATUS)
+        for attempt in range(2):
+            try:
+                raw = self._bus.read(servo_id, status)
+            except ServoSilent:
+                if attempt:
+                    raise ServoHardwareError(servo_id, ("alert",), 0) from None
+                continue
+            if raw:
+                raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
+            return
+
+    def _decode(self, block: dict[int, tuple[int, bytes]]) -> list[int]:
         """Store what a read brought; return the ids whose ERR byte has the Alert bit."""
         alerts = []
         spec = self._servos[0].spec
@@ -454,7 +504,6 @@ class RigDriver:
                 continue
             error, data = block[sid]
             present = pulses_to_deg(int.from_bytes(data[0:4], "little", signed=True))
-            self._heard[i] = now
             self._present[i] = present
             self._tracking[i] = self._goals[i] - present
             self._volts[i] = int.from_bytes(data[volt_at : volt_at + 2], "little") / 10.0
@@ -465,6 +514,7 @@ class RigDriver:
 
     def _start_park(self, now: float, reason: str) -> None:
         self._ramp_t0, self._ramp_from = now, list(self._goals)
+        self._park_goals_at = None
         self._go(RigState.PARKING, reason, now)
 
     def _torque_off_all(self) -> None:
@@ -474,11 +524,13 @@ class RigDriver:
 
     def _do_estop(self, now: float, reason: str) -> None:
         self._estop_requested = False
+        self._bus.port.abort_wait = False
         self._setup = None
         self.counters.estops += 1
         try:
             if self._bus.is_open:
                 self._torque_off_all()
+                self._estop_repeat = True
         finally:
             self._go(RigState.ESTOP, reason, now)
 

@@ -80,6 +80,10 @@ class BusConfig(StrictModel):
     return_delay_us: int = Field(0, ge=0, le=508)
     soft_start_s: float = Field(2.0, ge=0.0, le=60.0)
     park_s: float = Field(2.0, ge=0.0, le=60.0)
+    park_settle_s: float = Field(1.0, ge=0.0, le=10.0)
+    """After the park ramp, wait at most this long for the servos to arrive, then torque off."""
+    park_tolerance_deg: float = Field(1.0, gt=0.0, le=10.0)
+    """A servo has arrived at its park position within this."""
     close_timeout_s: float = Field(5.0, gt=0.0, le=120.0)
     """``close()`` gives parking this long past ``park_s``, then torques off regardless."""
     setup_share: float = Field(0.5, gt=0.0, le=1.0)

@@ -66,6 +66,14 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         """When the bytes written so far will have left the adapter (SDK clock, ms)."""
         self.last_write: float | None = None
         """perf_counter of the last instruction packet written (what feeds the Bus Watchdog)."""
+        self.abort_wait = False
+        """Set from another thread (e-stop): a reply being waited for is given up at once."""
+
+    def isPacketTimeout(self) -> bool:
+        if self.abort_wait:
+            self.packet_timeout = 0
+            return True
+        return bool(super().isPacketTimeout())
 
     def writePort(self, packet: list[int]) -> int:
         self.last_write = time.perf_counter()

@@ -25,12 +25,18 @@ from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from tests.dynamixel.rig_harness import drive, servo_setups, short_rig, start_running, torque
 
-TRACKING_MAX_DEG = 6.0
-"""Goal sent minus present position at any read while trotting: the goal has just moved
-by up to one tick of motion (seat and wrists: ~2.5 deg at 50 Hz) and the servo lags
-behind its 6000 deg/s^2 profile through the kinks of the rule outputs."""
+TRACKING_LAG_DEG = 4.0
+"""At every read while trotting, |goal sent - present position| may exceed the goal's
+own step since the previous tick (the servo cannot have moved toward a goal sent a
+moment ago; up to ~2.5 deg a tick for the seat and wrists at 50 Hz, more when the host
+is late) by at most this: the servo's lag behind its 6000 deg/s^2 profile through the
+kinks of the rule outputs."""
+TRACKING_WITHIN_LAG = 0.95
+"""Share of (read, servo) samples that must keep that bound (the 2-core CI box stalls)."""
+TRACKING_MAX_DEG = 10.0
+"""No sample beyond this, stalls or not."""
 TRACKING_MEAN_DEG = 1.5
-"""The same, averaged over servos and reads."""
+"""Mean |goal sent - present position| over servos and reads."""
 FINAL_TOLERANCE_DEG = 0.5
 """Present position vs the last goal once the servos have settled."""
 
@@ -69,9 +75,10 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
     t0 = setup.statuses[-1].at - setup.statuses[0].at
     run = drive(driver, 1.5, lambda t: horse(t0 + t))  # the same trot, continued
     running = [(s, r) for s, r in zip(run.statuses, run.riders, strict=True) if s.state is RigState.RUNNING]
-    assert len(running) > 40
-    reads = 0
+    assert len(running) > 40, [s.fault for s in run.statuses if s.fault][:1]
+    reads = lagging = 0
     errors: list[float] = []
+    previous = running[0][0].goal_deg
     for status, rider in running:
         expected = smap.targets(rider, smap.park)
         assert status.goal_deg == pytest.approx(expected, abs=1e-9)  # the rules, mapped, unclamped
@@ -79,11 +86,14 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
         assert status.transactions == (2 if status.read else 1)
         if status.read:
             reads += 1
-            for err in status.tracking_error_deg:
+            for err, goal, before in zip(status.tracking_error_deg, status.goal_deg, previous, strict=True):
                 assert err is not None and abs(err) < TRACKING_MAX_DEG
                 errors.append(abs(err))
+                lagging += abs(err) > abs(goal - before) + TRACKING_LAG_DEG
+        previous = status.goal_deg
     assert reads >= len(running) // rig.bus.read_divider - 1
     assert sum(errors) / len(errors) < TRACKING_MEAN_DEG
+    assert lagging <= (1.0 - TRACKING_WITHIN_LAG) * len(errors)
     last = running[-1][0]
     assert last.fault is None  # read failures (a loaded CI box) are retried within the budget
     assert last.counters["reads"] > last.counters["read_failures"]
