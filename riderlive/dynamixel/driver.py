@@ -20,16 +20,14 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Generator, Sequence
-from functools import partial
-from typing import TypeVar
+from collections.abc import Callable, Sequence
 
 from riderlive.channels import RIDER
+from riderlive.dynamixel.bringup import Steps, arm_watchdog, bring_up, hardware_bits
 from riderlive.dynamixel.lifecycle import (
     Fault,
     FaultKind,
     Lifecycle,
-    ModelMismatch,
     PortLost,
     RigError,
     RigState,
@@ -41,29 +39,16 @@ from riderlive.dynamixel.rig import (
     RigConfig,
     ServoMap,
     deg_to_pulses,
-    profile_acceleration,
-    profile_velocity,
     pulses_to_deg,
-    return_delay_units,
     smoothstep,
-    watchdog_units,
 )
-from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
+from riderlive.dynamixel.sdkbus import SdkBus
 from riderlive.dynamixel.status import BusCounters, RigStatus
-from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, OperatingMode, decode_hardware_error
+from riderlive.dynamixel.tables import ALERT_BIT, Item
 
 log = logging.getLogger("riderlive.dynamixel")
-T = TypeVar("T")
-Steps = Generator[None, None, T]
 
 _SETUP = frozenset({RigState.CONNECTING, RigState.CHECKING, RigState.CONFIGURING})
-_EEPROM_FIRST, _EEPROM_END = 9, 64
-"""The EEPROM span the driver configures (Return Delay Time .. Shutdown), read in one go."""
-
-
-def hardware_bits(raw: int) -> tuple[str, ...]:
-    """Hardware Error Status (70) -> bit names, e.g. ``("overheating", "overload")``."""
-    return tuple(str(bit.name).lower() for bit in decode_hardware_error(raw))
 
 
 class RigDriver:
@@ -256,110 +241,14 @@ class RigDriver:
             if time.perf_counter() >= budget_end:
                 break
 
-    def _retry(self, call: Callable[[], T]) -> Steps[T]:
-        """One setup transaction, retried on later ticks while the servo stays silent
-        (up to ``setup_retry_s``), then a yield."""
-        first_failure: float | None = None
-        while True:
-            try:
-                value = call()
-                break
-            except ServoSilent:
-                now = time.perf_counter()
-                first_failure = now if first_failure is None else first_failure
-                if now - first_failure >= self.config.bus.setup_retry_s:
-                    raise
-            yield
-        yield
-        return value
-
     def _startup(self, connect: bool) -> Steps[None]:
-        if connect:
-            self._bus.open()
-            self._check_latency()
-            yield
-            self._go(RigState.CHECKING, f"{self.config.bus.port} open at {self.config.bus.baud} baud")
-        for servo in self._servos:
-            found = yield from self._retry(partial(self._bus.ping, servo.id))
-            if found != servo.spec.model_number:
-                raise ModelMismatch(servo.id, servo.spec.model_number, found)
-            yield from self._check_hardware(servo.id, servo.spec.spec(Item.HARDWARE_ERROR_STATUS))
-        self._go(RigState.CONFIGURING, f"{len(self._servos)} servos answered, no hardware errors")
-        yield from self._configure()
+        present = yield from bring_up(self._bus, self.config, connect, self._go)
+        self._present = list[float | None](present)
+        self._goals = self.map.within_limits(present)  # what configuring wrote as goals
+        self._armed = bool(self.config.bus.bus_watchdog_ms)
         self._ramp_t0 = None
         self._missing_since = [None] * len(self.map)
         self._go(RigState.SOFT_START, "configured, torque on")
-
-    def _check_hardware(self, servo_id: int, status: ItemSpec) -> Steps[None]:
-        raw = yield from self._retry(partial(self._bus.read, servo_id, status))
-        if raw and self.config.bus.reboot_on_error:
-            log.warning("servo %d reports %s: rebooting it", servo_id, hardware_bits(raw))
-            yield from self._retry(partial(self._bus.reboot, servo_id))
-            yield from self._retry(partial(self._bus.ping, servo_id))
-            raw = yield from self._retry(partial(self._bus.read, servo_id, status))
-        if raw:
-            raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
-
-    def _configure(self) -> Steps[None]:
-        bus = self.config.bus
-        for i, servo in enumerate(self._servos):
-            sid, spec = servo.id, servo.spec
-            write, read = partial(self._bus.write, sid), partial(self._bus.read, sid)
-            yield from self._retry(partial(write, spec.spec(Item.TORQUE_ENABLE), 0))
-            # Bus Watchdog 0 also clears a Bus Watchdog Error left by a previous run
-            yield from self._retry(partial(write, spec.spec(Item.BUS_WATCHDOG), 0))
-            wanted = {
-                Item.RETURN_DELAY_TIME: return_delay_units(bus.return_delay_us),
-                Item.DRIVE_MODE: 0,  # velocity-based profile, normal direction (direction is ours)
-                Item.OPERATING_MODE: int(OperatingMode.POSITION),
-                Item.HOMING_OFFSET: 0,  # zero_deg in the rig map is the only trim
-                Item.MAX_POSITION_LIMIT: deg_to_pulses(servo.max_deg),
-                Item.MIN_POSITION_LIMIT: deg_to_pulses(servo.min_deg),
-                Item.SHUTDOWN: bus.shutdown_mask,
-            }
-            eeprom = yield from self._retry(
-                partial(self._bus.read_raw, sid, _EEPROM_FIRST, _EEPROM_END - _EEPROM_FIRST)
-            )
-            for item, value in wanted.items():  # EEPROM: write only what differs
-                item_spec = spec.spec(item)
-                at = item_spec.address - _EEPROM_FIRST
-                current = int.from_bytes(eeprom[at : at + item_spec.size], "little", signed=item_spec.signed)
-                if current != value:
-                    yield from self._retry(partial(write, item_spec, value))
-            accel = profile_acceleration(servo.max_accel_dps2)
-            yield from self._retry(partial(write, spec.spec(Item.PROFILE_ACCELERATION), accel))
-            velocity = profile_velocity(servo.max_speed_dps)
-            yield from self._retry(partial(write, spec.spec(Item.PROFILE_VELOCITY), velocity))
-            present = pulses_to_deg((yield from self._retry(partial(read, spec.spec(Item.PRESENT_POSITION)))))
-            start = min(max(present, servo.min_deg), servo.max_deg)
-            self._present[i], self._goals[i] = present, start
-            yield from self._retry(partial(write, spec.spec(Item.GOAL_POSITION), deg_to_pulses(start)))
-        spec = self._servos[0].spec
-        self._bus.sync_write(spec.spec(Item.TORQUE_ENABLE), dict.fromkeys(self.map.ids, 1))
-        yield
-        if bus.bus_watchdog_ms:
-            self._arm_watchdog()
-            yield
-
-    def _arm_watchdog(self) -> None:
-        """Clear a tripped Bus Watchdog (write 0), then arm it: two SYNC_WRITEs."""
-        spec = self._servos[0].spec.spec(Item.BUS_WATCHDOG)
-        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, 0))
-        self._bus.sync_write(spec, dict.fromkeys(self.map.ids, watchdog_units(self.config.bus.bus_watchdog_ms)))
-        self._armed = True
-
-    def _check_latency(self) -> None:
-        actual = usb_latency_timer_ms(self.config.bus.port)
-        if actual is not None and actual > self.config.bus.latency_timer_ms:
-            log.warning(
-                "%s: the adapter's latency timer is %d ms (rig map says %g): replies will be late; "
-                "set it to 1 ms (docs/hardware.md). Using %d ms for reply timeouts.",
-                self.config.bus.port,
-                actual,
-                self.config.bus.latency_timer_ms,
-                actual,
-            )
-            self._bus.port.latency_ms = float(actual)
 
     # --- running ---------------------------------------------------------------------
 
@@ -372,7 +261,7 @@ class RigDriver:
         last_packet = self._bus.port.last_write if self._armed else None
         if watchdog_s and last_packet is not None and now - last_packet >= watchdog_s - bus.tick_s:
             gap = now - last_packet
-            self._arm_watchdog()  # the goals are read-only while it is tripped
+            arm_watchdog(self._bus, self.config)  # the goals are read-only while it is tripped
             if state is not RigState.PARKING:
                 raise TickGap(gap, watchdog_s)
         if self._ramp_t0 is None:
