@@ -35,22 +35,11 @@ import dynamixel_sdk as sdk
 from riderlive.channels import RIDER
 from riderlive.dynamixel.driver import RigDriver
 from riderlive.dynamixel.lifecycle import RigState
-from riderlive.dynamixel.rig import RigConfig, load_rig
+from riderlive.dynamixel.rig import READ_BYTES, RigConfig, load_rig, wire_bytes_per_tick
 from riderlive.dynamixel.sdkbus import RigPort
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from tests.dynamixel.rig_harness import TimedBus, servo_setups
-
-READ_BYTES = 15
-"""Present Position (132) .. Present Temperature (146)."""
-
-
-def wire_bytes_per_tick(servos: int, divider: int) -> float:
-    """Protocol 2.0 bytes per tick: the goal SYNC_WRITE + 1/divider of a Fast Sync Read."""
-    write = 14 + 5 * servos  # header 7, INST, address 2, length 2, CRC 2; ID + 4 bytes each
-    read_request = 14 + servos
-    read_reply = 8 + (READ_BYTES + 4) * servos  # one packet: ERR, ID, data, CRC per servo
-    return write + (read_request + read_reply) / divider
 
 
 def _serve(conn: Connection, rig: RigConfig, baud: int, wire_timing: bool) -> None:

@@ -190,6 +190,18 @@ def rig_problems(rig: RigConfig) -> list[tuple[str, str]]:
         problems.append(("bus.bus_watchdog_ms", f"must be 0 (off) or >= {min_watchdog:.0f} (3 ticks, at least 40 ms)"))
     if bus.return_delay_us % 2:
         problems.append(("bus.return_delay_us", "must be even (the register's unit is 2 us)"))
+    known_models = {m.value for m in Model}
+    if rig.servos and bus.baud in SDK_BAUDS and all(s.model in known_models for s in rig.servos.values()):
+        wire = wire_seconds_per_tick(rig)
+        if wire > MAX_WIRE_SHARE * bus.tick_s:
+            problems.append(
+                (
+                    "bus.tick_hz",
+                    f"{len(rig.servos)} servos at {bus.baud} baud need {wire * 1000:.2f} ms of wire per tick "
+                    f"(read every {bus.read_divider} ticks): at most {MAX_WIRE_SHARE / wire:.0f} ticks/s; "
+                    "lower tick_hz, raise read_divider or the baud",
+                )
+            )
     seen: dict[int, str] = {}
     for name, servo in rig.servos.items():
         key = f"servos.{name}"
@@ -225,6 +237,27 @@ def rig_problems(rig: RigConfig) -> list[tuple[str, str]]:
         if servo.gain == 0.0:
             problems.append((f"{key}.gain", "0 would never move the servo"))
     return problems
+
+
+READ_BYTES = 15
+"""The divided read: Present Position (132) .. Present Temperature (146)."""
+MAX_WIRE_SHARE = 0.8
+"""The share of a tick the bus may be busy: the rest absorbs USB latency and jitter."""
+
+
+def wire_bytes_per_tick(servos: int, read_divider: int, fast: bool = True) -> float:
+    """Protocol 2.0 bytes on the wire per tick: the goal SYNC_WRITE, plus 1/read_divider
+    of a (Fast) Sync Read of ``READ_BYTES`` (request and replies; Return Delay Time 0)."""
+    write = 14 + 5 * servos  # header 7, INST, address 2, length 2, CRC 2; then ID + 4 bytes each
+    request = 14 + servos
+    replies = 8 + (READ_BYTES + 4) * servos if fast else (11 + READ_BYTES) * servos
+    return write + (request + replies) / read_divider
+
+
+def wire_seconds_per_tick(rig: RigConfig) -> float:
+    """Wire time of one tick at the rig's baud (10 bits per byte)."""
+    fast = rig.bus.fast_sync_read and all(s.spec.fast_sync_read for s in rig.servos.values())
+    return wire_bytes_per_tick(len(rig.servos), rig.bus.read_divider, fast) * 10.0 / rig.bus.baud
 
 
 def load_rig(path: str | Path) -> RigConfig:

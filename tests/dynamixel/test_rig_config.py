@@ -25,6 +25,8 @@ from riderlive.dynamixel.rig import (
     pulses_to_deg,
     rig_from_dict,
     smoothstep,
+    wire_bytes_per_tick,
+    wire_seconds_per_tick,
 )
 from riderlive.dynamixel.tables import HardwareError
 
@@ -91,6 +93,7 @@ def test_full_rider_covers_body_regions() -> None:
         (lambda d: d["bus"].update(protocol=1.0), "bus.protocol", "Protocol 2.0"),
         (lambda d: d["bus"].update(read_divider=0), "bus.read_divider", "greater than or equal to 1"),
         (lambda d: d.update(servos={}), "servos", "at least one servo"),
+        (lambda d: d["bus"].update(tick_hz=400.0), "bus.tick_hz", "at most 308 ticks/s"),
     ],
 )
 def test_bad_rig_names_file_and_key(mutate: Any, key: str, fragment: str) -> None:
@@ -106,6 +109,7 @@ def test_bad_rig_names_file_and_key(mutate: Any, key: str, fragment: str) -> Non
 def test_baud_the_model_cannot_do() -> None:
     data = read_toml(RIG_DIR / "bench3.toml")
     data["bus"]["baud"] = 57600
+    data["bus"]["tick_hz"] = 20.0  # 12 ms of wire per tick at 57600
     load = rig_from_dict(data)  # XL330 has 57600
     assert load.bus.baud == 57600
     data["bus"]["baud"] = 2_500_000  # the SDK can set it, no X-series servo runs at it
@@ -138,6 +142,14 @@ def test_degrees_round_trip_within_half_a_pulse(deg: float) -> None:
 @given(st.floats(-1e6, 1e6))
 def test_pulses_stay_in_register_range(deg: float) -> None:
     assert 0 <= deg_to_pulses(deg) <= 4095
+
+
+def test_wire_budget_matches_the_protocol() -> None:
+    # facts.md: 20 servos, 4-byte goals: sync write 14 + 5N bytes; fast reply 8 + (data + 4) N
+    assert wire_bytes_per_tick(20, 1) == (14 + 100) + (14 + 20) + (8 + 19 * 20)
+    assert wire_bytes_per_tick(20, 4, fast=False) == 114 + (34 + 26 * 20) / 4
+    full = load_rig(FULL)  # 24 servos, 1 Mbps, read every 4 ticks: 134 + 502 / 4 bytes
+    assert wire_seconds_per_tick(full) == pytest.approx(259.5e-5)
 
 
 def test_profile_units() -> None:
