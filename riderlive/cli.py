@@ -12,6 +12,7 @@ from riderlive import __version__
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
     "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
+    "rig": ("riderlive.dynamixel.rig_cli", "check a servo map; drive it with a procedural horse"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
 
