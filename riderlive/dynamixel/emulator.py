@@ -19,7 +19,6 @@ built in turn by each servo, so a servo missing from the chain truncates it.
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import os
 import select
@@ -32,17 +31,15 @@ from dataclasses import dataclass, field
 from types import TracebackType
 
 from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec, ServoFaults, corrupt
+from riderlive.dynamixel.emulator_instructions import Reply, dispatch
 from riderlive.dynamixel.emulator_servo import EmulatedServo, ServoSetup
 from riderlive.dynamixel.protocol import (
     CrcError,
     Garbage,
-    InstructionPacket,
     PacketReader,
     ProtocolError,
     decode_instruction,
     encode_status,
-    fast_status_chunks,
-    le_int,
 )
 from riderlive.dynamixel.tables import BROADCAST_ID, HardwareError, Instruction, Item, StatusError
 
@@ -54,16 +51,6 @@ POLL_S = 0.005
 PACKET_GAP_S = 0.010
 """A partial packet older than this is discarded (the e-manual's 1.5 ms gap, relaxed
 for a loaded OS scheduler)."""
-READ_INSTRUCTIONS = frozenset(
-    {
-        Instruction.READ,
-        Instruction.SYNC_READ,
-        Instruction.BULK_READ,
-        Instruction.FAST_SYNC_READ,
-        Instruction.FAST_BULK_READ,
-    }
-)
-
 __all__ = ["DEFAULT_BAUD", "BusStats", "EmulatedBus", "EmulatedServo", "PortClosedError", "ServoSetup"]
 
 
@@ -88,14 +75,6 @@ class BusStats:
     internal_errors: int = 0
     handling_cpu_s: float = 0.0
     """CPU time the bus thread spent handling packets (not waiting for the wire), s."""
-
-
-@dataclass(frozen=True)
-class _Chunk:
-    servo: EmulatedServo
-    data: bytes
-    waits_return_delay: bool = True
-    chained: bool = False
 
 
 class EmulatedBus:
@@ -309,7 +288,7 @@ class EmulatedBus:
                 self.stats.crc_errors += 1
                 servo = active.get(exc.packet_id)
                 if servo is not None and servo.get(Item.STATUS_RETURN_LEVEL) == 2:
-                    self._transmit([_Chunk(servo, encode_status(servo.id, servo.status_error(StatusError.CRC)))], now)
+                    self._transmit([Reply(servo, encode_status(servo.id, servo.status_error(StatusError.CRC)))], now)
                 return
             except ProtocolError:
                 self.stats.malformed += 1
@@ -326,121 +305,10 @@ class EmulatedBus:
             )
             for servo in listeners:
                 servo.feed_watchdog(now)
-            chunks = self._dispatch(packet, active, now) if listeners else []
+            chunks = dispatch(packet, active, now, self.reboot_time_s) if listeners else []
             self._transmit(chunks, now)
 
-    def _dispatch(self, packet: InstructionPacket, active: dict[int, EmulatedServo], now: float) -> list[_Chunk]:
-        inst, params = packet.instruction, packet.params
-        if packet.id != BROADCAST_ID:
-            servo = active[packet.id]
-            answers = self._answers(servo, inst)  # the level in force when the packet arrived
-            error, data, after = self._unicast(servo, inst, params, now)
-            chunks = []
-            if answers:
-                chunks.append(_Chunk(servo, encode_status(packet.id, error, data)))
-            if after is not None:
-                after()
-            return chunks
-        if inst == Instruction.PING:
-            return [
-                _Chunk(s, encode_status(s.id, s.status_error(), s.ping_params())) for _, s in sorted(active.items())
-            ]
-        if inst in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
-            if len(params) < 5:
-                return []
-            address, length = le_int(params[0:2]), le_int(params[2:4])
-            requests = [(servo_id, address, length) for servo_id in params[4:]]
-            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_SYNC_READ)
-        if inst in (Instruction.BULK_READ, Instruction.FAST_BULK_READ):
-            if len(params) % 5 or not params:
-                return []
-            requests = [
-                (params[i], le_int(params[i + 1 : i + 3]), le_int(params[i + 3 : i + 5]))
-                for i in range(0, len(params), 5)
-            ]
-            return self._group_read(requests, active, now, fast=inst == Instruction.FAST_BULK_READ)
-        if inst == Instruction.SYNC_WRITE and len(params) >= 4:
-            address, length = le_int(params[0:2]), le_int(params[2:4])
-            body = params[4:]
-            for i in range(0, len(body) - length, length + 1):
-                target = active.get(body[i])
-                if target is not None:
-                    target.write(address, body[i + 1 : i + 1 + length], now)
-        elif inst == Instruction.BULK_WRITE:
-            i = 0
-            while i + 5 <= len(params):
-                length = le_int(params[i + 3 : i + 5])
-                target = active.get(params[i])
-                if target is not None:
-                    target.write(le_int(params[i + 1 : i + 3]), params[i + 5 : i + 5 + length], now)
-                i += 5 + length
-        else:
-            for servo in active.values():
-                _, _, after = self._unicast(servo, inst, params, now)
-                if after is not None:
-                    after()
-        return []
-
-    def _unicast(
-        self, servo: EmulatedServo, inst: int, params: bytes, now: float
-    ) -> tuple[int, bytes, Callable[[], object] | None]:
-        """Run one instruction on one servo: (ERR byte, reply params, what to do after replying)."""
-        error, data = StatusError.NONE, b""
-        after: Callable[[], object] | None = None
-        if inst == Instruction.PING:
-            data = servo.ping_params()
-        elif inst == Instruction.READ:
-            if len(params) != 4:
-                error = StatusError.DATA_LENGTH
-            else:
-                error, data = servo.read(le_int(params[0:2]), le_int(params[2:4]), now)
-        elif inst in (Instruction.WRITE, Instruction.REG_WRITE):
-            if len(params) < 3:
-                error = StatusError.DATA_LENGTH
-            elif inst == Instruction.WRITE:
-                error = servo.write(le_int(params[0:2]), params[2:], now)
-            else:
-                error = servo.reg_write(le_int(params[0:2]), params[2:])
-        elif inst == Instruction.ACTION:
-            error = servo.action(now)
-        elif inst == Instruction.REBOOT:
-            after = functools.partial(servo.reboot, now, self.reboot_time_s)
-        elif inst == Instruction.FACTORY_RESET:
-            if len(params) != 1:
-                error = StatusError.DATA_LENGTH
-            else:
-                after = functools.partial(servo.factory_reset, params[0], now)
-        else:
-            error = StatusError.INSTRUCTION
-        return servo.status_error(error), data, after
-
-    @staticmethod
-    def _answers(servo: EmulatedServo, inst: int) -> bool:
-        level = servo.get(Item.STATUS_RETURN_LEVEL)
-        return inst == Instruction.PING or level == 2 or (level == 1 and inst in READ_INSTRUCTIONS)
-
-    def _group_read(
-        self, requests: Sequence[tuple[int, int, int]], active: dict[int, EmulatedServo], now: float, *, fast: bool
-    ) -> list[_Chunk]:
-        replies: list[tuple[EmulatedServo | None, int, bytes]] = []
-        for servo_id, address, length in requests:
-            servo = active.get(servo_id)
-            if servo is None or not self._answers(servo, Instruction.SYNC_READ):
-                replies.append((None, servo_id, bytes(length)))
-                continue
-            error, data = servo.read(address, length, now)
-            replies.append((servo, servo.status_error(error), data if not error else bytes(length) if fast else b""))
-        if not fast:
-            return [_Chunk(s, encode_status(s.id, err, data)) for s, err, data in replies if s is not None]
-        entries = [(servo_id, err, data) for (_, err, data), (servo_id, _, _) in zip(replies, requests, strict=True)]
-        chunks = []
-        for index, ((servo, _, _), data) in enumerate(zip(replies, fast_status_chunks(entries), strict=True)):
-            if servo is None:
-                break  # the chain breaks: nobody continues the packet
-            chunks.append(_Chunk(servo, data, waits_return_delay=index == 0, chained=True))
-        return chunks
-
-    def _transmit(self, chunks: Sequence[_Chunk], start: float) -> None:
+    def _transmit(self, chunks: Sequence[Reply], start: float) -> None:
         """Send the replies, applying reply faults; with wire timing, each at the moment its
         last byte would have left the servo. Bytes due together go out in one write (a
         write per chunk would wake the host once per servo)."""
@@ -480,9 +348,13 @@ class EmulatedBus:
         batch.clear()
 
     def _sleep_until(self, deadline: float) -> None:
-        """Sleep, then yield-spin the last millisecond (OS sleeps overshoot, more so under load)."""
-        while True:
-            remaining = deadline - self.clock()
-            if remaining <= 0:
-                return
-            time.sleep(remaining - 0.001 if remaining > 0.0015 else 0)
+        """Sleep, then spin the last millisecond: OS sleeps overshoot, and a yield on a busy
+        machine can give the core away for a whole time slice."""
+        remaining = deadline - self.clock()
+        if remaining <= 0:
+            return
+        end = time.perf_counter() + remaining  # real time, whatever clock the bus runs on
+        if remaining > 0.0015:
+            time.sleep(remaining - 0.001)
+        while time.perf_counter() < end:
+            pass

@@ -9,7 +9,7 @@ only from the profile limits, as on a well-tuned, lightly loaded servo.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from riderlive.dynamixel.tables import ACCELERATION_UNIT_RPM2, PULSES_PER_TURN, VELOCITY_UNIT_RPM
 
@@ -133,6 +133,21 @@ def step(state: MotionState, profile: Profile, dt: float, thermal: ThermalParams
         effort = min(1.0, HOLDING_EFFORT + abs(accel) / ACCEL_FOR_FULL_EFFORT + profile.external_load)
     steady = thermal.ambient_c + thermal.full_effort_rise_c * effort * effort
     temperature = steady + (state.temperature - steady) * math.exp(-dt / thermal.time_constant_s)
-    return replace(
-        state, position=position, velocity=velocity, acceleration=accel, temperature=temperature, effort=effort
-    )
+    return MotionState(position, velocity, accel, temperature, effort)
+
+
+def holding_effort(profile: Profile) -> float:
+    """Effort of a servo that is not accelerating under ``profile``."""
+    return min(1.0, HOLDING_EFFORT + profile.external_load) if profile.torque_on else 0.0
+
+
+def seconds_until_temperature(
+    state: MotionState, effort: float, limit_c: float, thermal: ThermalParams
+) -> float | None:
+    """When the temperature reaches ``limit_c`` at constant ``effort`` (None: never)."""
+    steady = thermal.ambient_c + thermal.full_effort_rise_c * effort * effort
+    if state.temperature >= limit_c:
+        return 0.0
+    if steady <= limit_c:
+        return None
+    return thermal.time_constant_s * math.log((steady - state.temperature) / (steady - limit_c))

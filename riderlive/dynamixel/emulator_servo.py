@@ -21,6 +21,7 @@ import struct
 from dataclasses import dataclass, replace
 
 from riderlive.dynamixel import emulator_motion as motion
+from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS
 from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
@@ -41,18 +42,11 @@ from riderlive.dynamixel.tables import (
     model_spec,
 )
 
-
-def _layout(spec: ItemSpec) -> tuple[int, str, str, int]:
-    """(address, struct format to read, format to write, mask) of an item."""
-    code = {1: "b", 2: "h", 4: "i"}[spec.size]
-    return spec.address, "<" + (code if spec.signed else code.upper()), "<" + code.upper(), (1 << (8 * spec.size)) - 1
-
-
-_LAYOUTS = {model: {item: _layout(spec) for item, spec in MODELS[model].items.items()} for model in MODELS}
 CONTROL_PERIOD_S = motion.SUBSTEP_S
 """The emulated servo's control loop period: its state changes in whole cycles."""
 THERMAL_CHUNK_CYCLES = 10
 """Longest stretch integrated at once (control cycles) before checking the temperature."""
+_OVERHEATING = int(HardwareError.OVERHEATING)
 _WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
@@ -66,6 +60,9 @@ class ServoSetup:
     id: int
     model: str
     position: int = 2048
+    fast_read: bool | None = None
+    """Whether it answers FAST_SYNC/BULK_READ; None: as the model's firmware does.
+    False emulates an older firmware, which ignores those instructions."""
 
 
 class EmulatedServo:
@@ -73,7 +70,11 @@ class EmulatedServo:
 
     def __init__(self, setup: ServoSetup, baud: int, now: float = 0.0) -> None:
         self.spec: ModelSpec = model_spec(setup.model)
+        self.fast_read = self.spec.fast_sync_read if setup.fast_read is None else setup.fast_read
         self.memory = bytearray(self.spec.table_size)
+        self._layout = LAYOUTS[self.spec.model]
+        self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
+        self._goal_address = self.spec.items[Item.GOAL_POSITION].address
         self._boot_time = now
         self._last_advance = now
         self._last_instruction = now
@@ -82,6 +83,7 @@ class EmulatedServo:
         self._external_load = 0.0
         self._profile_cache: motion.Profile | None = None
         self._synced: tuple[object, ...] = ()
+        self._outputs_stale = True
         self._output_limits = (0, 0, 0, 0)
         self.deaf_until = 0.0
         """The servo ignores the bus until this time (rebooting)."""
@@ -96,7 +98,7 @@ class EmulatedServo:
     # -- raw register access (no checks; for the bus, tests and fault injection) --------
 
     def get(self, item: Item) -> int:
-        address, read_format, _, _ = _LAYOUTS[self.spec.model][item]
+        address, read_format, _, _ = self._layout[item]
         value: int = struct.unpack_from(read_format, self.memory, address)[0]
         return value
 
@@ -104,10 +106,11 @@ class EmulatedServo:
         self._put(item, value)
         self._profile_cache = None
         self._synced = ()
+        self._outputs_stale = True
 
     def _put(self, item: Item, value: int) -> None:
         """Store without invalidating the cached profile (for the model's own outputs)."""
-        address, _, write_format, mask = _LAYOUTS[self.spec.model][item]
+        address, _, write_format, mask = self._layout[item]
         struct.pack_into(write_format, self.memory, address, value & mask)
 
     @property
@@ -126,7 +129,7 @@ class EmulatedServo:
 
     @property
     def torque_on(self) -> bool:
-        return self.get(Item.TORQUE_ENABLE) == 1
+        return self.memory[self._torque_address] == 1
 
     @property
     def hardware_error(self) -> int:
@@ -158,8 +161,12 @@ class EmulatedServo:
             self.advance(now)  # the deadline passed before this packet: trip first
         self._last_instruction = now
 
-    def advance(self, now: float) -> None:
-        """Run the motion and thermal model up to ``now``; trip the watchdog on time."""
+    def advance(self, now: float, *, outputs: bool = True) -> None:
+        """Run the motion and thermal model up to ``now``; trip the watchdog on time.
+
+        ``outputs=False`` leaves the present-value registers stale (a write needs only the
+        model state); anything that reads registers advances with outputs.
+        """
         watchdog = self.get(Item.BUS_WATCHDOG)
         if self.torque_on and watchdog > 0 and not self.watchdog_tripped:
             deadline = self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S
@@ -171,6 +178,8 @@ class EmulatedServo:
                 self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
                 self.set(Item.GOAL_VELOCITY, 0)
         self._integrate(now)
+        if outputs and self._outputs_stale:
+            self._sync_outputs(self._last_advance)
 
     def _integrate(self, now: float) -> None:
         """Run whole control cycles (1 kHz, like the servo's own loop) up to ``now``."""
@@ -178,15 +187,22 @@ class EmulatedServo:
         if cycles <= 0:
             return
         limit = self.get(Item.TEMPERATURE_LIMIT)
-        while cycles > 0:  # in chunks, so overheating shuts down near the crossing
-            chunk = min(cycles, THERMAL_CHUNK_CYCLES)
+        while cycles > 0:  # in pieces, so overheating shuts the servo down when it happens
+            chunk = cycles
+            if not self.hardware_error & _OVERHEATING:
+                effort = motion.holding_effort(self._profile())
+                crossing = motion.seconds_until_temperature(self.state, effort, limit, self.thermal)
+                if crossing is not None:
+                    chunk = min(cycles, max(1, math.ceil(crossing / CONTROL_PERIOD_S)))
+                if self.state.moving:  # acceleration adds heat the estimate does not see
+                    chunk = min(chunk, THERMAL_CHUNK_CYCLES)
             cycles -= chunk
             dt = chunk * CONTROL_PERIOD_S
             self._last_advance += dt
             self.state = motion.step(self.state, self._profile(), dt, self.thermal)
-            if self.state.temperature >= limit and not self.hardware_error & HardwareError.OVERHEATING:
+            if self.state.temperature >= limit and not self.hardware_error & _OVERHEATING:
                 self.raise_hardware_error(HardwareError.OVERHEATING)
-        self._sync_outputs(self._last_advance)
+        self._outputs_stale = True
 
     def _profile(self) -> motion.Profile:
         if self._profile_cache is None:
@@ -194,25 +210,27 @@ class EmulatedServo:
         return self._profile_cache
 
     def _make_profile(self) -> motion.Profile:
+        goals_block, limits_block, _ = BLOCKS[self.spec.model]
+        goals = goals_block.read(self.memory)
+        limits = limits_block.read(self.memory)
         cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
-        profile_velocity = self.get(Item.PROFILE_VELOCITY)
-        velocity_cap = motion.velocity_from_register(round(min(profile_velocity or cap, cap)))
-        accel = self.get(Item.PROFILE_ACCELERATION)
+        velocity_cap = motion.velocity_from_register(round(min(goals[Item.PROFILE_VELOCITY] or cap, cap)))
+        accel = goals[Item.PROFILE_ACCELERATION]
         mode = self.get(Item.OPERATING_MODE)
         goal_velocity = None
         if mode == OperatingMode.VELOCITY:
-            goal_velocity = motion.velocity_from_register(self.get(Item.GOAL_VELOCITY))
+            goal_velocity = motion.velocity_from_register(goals[Item.GOAL_VELOCITY])
         elif mode not in POSITION_MODES:
             goal_velocity = 0.0
         self._output_limits = (
-            self.get(Item.HOMING_OFFSET),
-            self.get(Item.MOVING_THRESHOLD),
-            self.get(Item.CURRENT_LIMIT) if self.spec.has(Item.CURRENT_LIMIT) else 0,
-            self.get(Item.PWM_LIMIT),
+            limits[Item.HOMING_OFFSET],
+            limits[Item.MOVING_THRESHOLD],
+            limits.get(Item.CURRENT_LIMIT, 0),
+            limits[Item.PWM_LIMIT],
         )
         return motion.Profile(
-            torque_on=self.torque_on and not self.watchdog_tripped,
-            goal_position=float(self.get(Item.GOAL_POSITION) - self.get(Item.HOMING_OFFSET)),
+            torque_on=self.memory[self._torque_address] == 1 and not self.watchdog_tripped,
+            goal_position=float(goals[Item.GOAL_POSITION] - limits[Item.HOMING_OFFSET]),
             max_velocity=velocity_cap,
             max_acceleration=motion.acceleration_from_register(accel) if accel else math.inf,
             goal_velocity=goal_velocity,
@@ -226,26 +244,32 @@ class EmulatedServo:
         profile = self._profile()
         key = (state, profile, self.voltage)
         if key == self._synced:
+            self._outputs_stale = False
             return  # nothing the registers show has changed
         self._synced = key
+        self._outputs_stale = False
         offset, threshold, current_limit, pwm_limit = self._output_limits
         position = round(state.position) + offset
         velocity = motion.velocity_to_register(state.velocity)
-        self._put(Item.PRESENT_POSITION, position)
-        self._put(Item.POSITION_TRAJECTORY, position)
-        self._put(Item.PRESENT_VELOCITY, velocity)
-        self._put(Item.VELOCITY_TRAJECTORY, velocity)
         moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
-        self._put(Item.MOVING, int(moving))
-        self._put(Item.MOVING_STATUS, 0x01 if not moving and profile.torque_on else 0x00)
         signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
-        if current_limit:
-            self._put(Item.PRESENT_CURRENT, round(signed_effort * current_limit))
-        else:
-            self._put(Item.PRESENT_LOAD, round(signed_effort * 1000))
-        self._put(Item.PRESENT_PWM, round(signed_effort * pwm_limit))
-        self._put(Item.PRESENT_TEMPERATURE, min(255, max(0, round(state.temperature))))
-        self._put(Item.PRESENT_INPUT_VOLTAGE, round(self.voltage * 10))
+        _, _, outputs = BLOCKS[self.spec.model]
+        outputs.write(
+            self.memory,
+            {
+                Item.MOVING: int(moving),
+                Item.MOVING_STATUS: 0x01 if not moving and profile.torque_on else 0x00,
+                Item.PRESENT_PWM: round(signed_effort * pwm_limit),
+                Item.PRESENT_CURRENT: round(signed_effort * current_limit),
+                Item.PRESENT_LOAD: round(signed_effort * 1000),
+                Item.PRESENT_VELOCITY: velocity,
+                Item.PRESENT_POSITION: position,
+                Item.VELOCITY_TRAJECTORY: velocity,
+                Item.POSITION_TRAJECTORY: position,
+                Item.PRESENT_INPUT_VOLTAGE: round(self.voltage * 10),
+                Item.PRESENT_TEMPERATURE: min(255, max(0, round(state.temperature))),
+            },
+        )
 
     # -- hardware errors -----------------------------------------------------------------
 
@@ -331,12 +355,21 @@ class EmulatedServo:
         error = self.check_write(address, data)
         if error is not StatusError.NONE:
             return error
-        self.advance(now)
+        self.advance(now, outputs=False)
+        cache = self._profile_cache
+        if address == self._goal_address and len(data) == 4 and cache is not None:
+            # The common case, a new goal position: patch the cached profile.
+            self.memory[address : address + 4] = data
+            goal = int.from_bytes(data, "little", signed=True) - self._output_limits[0]
+            self._profile_cache = replace(cache, goal_position=float(goal))
+            self._outputs_stale = True
+            return StatusError.NONE
         torque_before = self.torque_on
         mode_before = self.get(Item.OPERATING_MODE)
         self.memory[address : address + len(data)] = data
         self._profile_cache = None
         self._synced = ()
+        self._outputs_stale = True
         if self.torque_on and not torque_before:
             # Torque on holds where the horn is: the goal becomes the present position.
             self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))

@@ -37,6 +37,20 @@ def rider_servos(count: int = 24) -> list[ServoSetup]:
     return [ServoSetup(i, MODELS_CYCLE[(i - 1) % len(MODELS_CYCLE)]) for i in range(1, count + 1)]
 
 
+class ManualClock:
+    """A clock for the emulator that moves only when the test says: watchdog, motion and
+    thermal timing become exact, whatever the machine's load. Starts at 1000 s."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        self.now += seconds
+
+
 @dataclass
 class SdkLink:
     """The unmodified SDK's port and Protocol 2.0 packet handler, open on a bus."""
@@ -89,6 +103,24 @@ def bus_factory(fast_switching: None) -> Iterator[Callable[..., EmulatedBus]]:
 def bus(bus_factory: Callable[..., EmulatedBus]) -> EmulatedBus:
     """Servos 1 (XL430-W250), 2 (XM430-W350), 3 (XL330-M288) at 4 Mbps, no wire timing."""
     return bus_factory()
+
+
+@pytest.fixture
+def clock() -> ManualClock:
+    return ManualClock()
+
+
+@pytest.fixture
+def timed_bus(bus_factory: Callable[..., EmulatedBus], clock: ManualClock) -> EmulatedBus:
+    """Like ``bus``, but on the test's :class:`ManualClock` (the ``clock`` fixture)."""
+    return bus_factory(clock=clock)
+
+
+@pytest.fixture
+def timed_sdk(timed_bus: EmulatedBus) -> Iterator[SdkLink]:
+    link = open_sdk(timed_bus)
+    yield link
+    link.close()
 
 
 @pytest.fixture

@@ -273,3 +273,19 @@ def test_reboot_time_keeps_the_servo_deaf(bus_factory: object) -> None:
         assert link.ph.ping(link.port, 5) == (1020, COMM_SUCCESS, 0)
     finally:
         link.close()
+
+
+def test_a_servo_without_fast_read_breaks_the_chain(bus_factory: object) -> None:
+    make = bus_factory  # type: ignore[assignment]
+    servos = [ServoSetup(1, "XL430-W250"), ServoSetup(2, "XM430-W350", fast_read=False), ServoSetup(3, "XL330-M288")]
+    bus = make(servos)  # type: ignore[operator]
+    link = open_sdk(bus)
+    try:
+        reader = GroupSyncRead(link.port, link.ph, PRESENT, 4)
+        for i in (1, 2, 3):
+            reader.addParam(i)
+        assert reader.fastSyncRead() != COMM_SUCCESS  # servo 1 starts the packet, nobody continues it
+        assert reader.txRxPacket() == COMM_SUCCESS  # plain Sync Read works
+        assert [reader.getData(i, PRESENT, 4) for i in (1, 2, 3)] == [2048, 2048, 2048]
+    finally:
+        link.close()

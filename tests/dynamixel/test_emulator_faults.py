@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import random
 import termios
-import time
 from collections.abc import Callable
 
 import pytest
@@ -15,7 +14,7 @@ from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec, parse_fault
 from riderlive.dynamixel.tables import ALERT_BIT, HardwareError, Item, StatusError
 
-from .conftest import SdkLink
+from .conftest import ManualClock, SdkLink
 
 PRESENT = 132
 
@@ -93,17 +92,21 @@ def test_overheating_and_overload_shut_the_servo_down(bus: EmulatedBus, sdk: Sdk
     assert [sdk.ph.readRx(sdk.port, i, 4)[2] for i in (1, 2, 3)] == [ALERT_BIT, 0, ALERT_BIT]
 
 
-def test_sustained_effort_heats_the_servo_until_it_shuts_down(bus: EmulatedBus, sdk: SdkLink) -> None:
-    assert sdk.ph.write1ByteTxRx(sdk.port, 2, 64, 1) == (COMM_SUCCESS, 0)
-    with bus.lock:
-        servo = bus.servo(2)
+def test_sustained_effort_heats_the_servo_until_it_shuts_down(
+    timed_bus: EmulatedBus, timed_sdk: SdkLink, clock: ManualClock
+) -> None:
+    ph, port = timed_sdk.ph, timed_sdk.port
+    assert ph.write1ByteTxRx(port, 2, 64, 1) == (COMM_SUCCESS, 0)
+    with timed_bus.lock:
+        servo = timed_bus.servo(2)
         servo.external_load = 1.0  # something blocks the horn: full effort
-        servo.thermal = type(servo.thermal)(time_constant_s=0.05)  # minutes of heating in 50 ms
-    time.sleep(0.1)
-    # It crossed the XM430's 80 deg C limit: Overheating, torque off, and now it cools down.
-    assert sdk.ph.read1ByteTxRx(sdk.port, 2, 70) == (HardwareError.OVERHEATING, COMM_SUCCESS, ALERT_BIT)
-    assert sdk.ph.read1ByteTxRx(sdk.port, 2, 64)[0] == 0
-    assert 30 < sdk.ph.read1ByteTxRx(sdk.port, 2, 146)[0] < 80
+    clock.advance(60.0)  # half the 120 s time constant: 25 + 80 (1 - e^-0.5) = 56.5 deg C
+    assert ph.read1ByteTxRx(port, 2, 146) == (56, COMM_SUCCESS, 0)
+    clock.advance(120.0)  # it crosses the XM430's 80 deg C limit: Overheating, torque off
+    assert ph.read1ByteTxRx(port, 2, 70) == (HardwareError.OVERHEATING, COMM_SUCCESS, ALERT_BIT)
+    assert ph.read1ByteTxRx(port, 2, 64)[0] == 0
+    clock.advance(600.0)  # and cools back toward 25 deg C
+    assert ph.read1ByteTxRx(port, 2, 146)[0] < 30
 
 
 def test_the_port_vanishing(bus: EmulatedBus, sdk: SdkLink) -> None:
@@ -117,50 +120,58 @@ def test_the_port_vanishing(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert sdk.ph.ping(sdk.port, 1)[1] == COMM_PORT_BUSY
 
 
-def test_bus_watchdog_stops_the_servo_and_locks_goals(bus: EmulatedBus, sdk: SdkLink) -> None:
-    ph, port = sdk.ph, sdk.port
-    assert ph.write4ByteTxRx(port, 1, 112, 30) == (COMM_SUCCESS, 0)  # slow profile: ~0.47 turn/s
+def test_bus_watchdog_stops_the_servo_and_locks_goals(
+    timed_bus: EmulatedBus, timed_sdk: SdkLink, clock: ManualClock
+) -> None:
+    bus, ph, port = timed_bus, timed_sdk.ph, timed_sdk.port
+    assert ph.write4ByteTxRx(port, 1, 112, 30) == (COMM_SUCCESS, 0)  # 468.9 pulse/s
     assert ph.write1ByteTxRx(port, 1, 64, 1) == (COMM_SUCCESS, 0)
-    assert ph.write1ByteTxRx(port, 1, 98, 8) == (COMM_SUCCESS, 0)  # 160 ms
+    assert ph.write1ByteTxRx(port, 1, 98, 2) == (COMM_SUCCESS, 0)  # 40 ms
     assert ph.write4ByteTxRx(port, 1, 116, 4000) == (COMM_SUCCESS, 0)
-    # Fed every 10 ms, the watchdog holds and the servo keeps moving.
-    for _ in range(20):
-        time.sleep(0.01)
-        assert ph.read1ByteTxRx(port, 1, 98) == (8, COMM_SUCCESS, 0)
-    time.sleep(0.3)  # silence: the watchdog expires after 160 ms
+    # Fed every 30 ms, the watchdog holds and the servo keeps moving.
+    for _ in range(10):
+        clock.advance(0.030)
+        assert ph.read1ByteTxRx(port, 1, 98) == (2, COMM_SUCCESS, 0)
+    assert bus.position(1) == pytest.approx(2048 + 468.9 * 0.300, abs=1.0)
+    clock.advance(0.100)  # silence: the watchdog expires 40 ms after the last packet
     value, result, error = ph.read1ByteTxRx(port, 1, 98)
     assert (value, result, error) == (0xFF, COMM_SUCCESS, 0)  # -1: Bus Watchdog Error
     stopped = bus.position(1)
-    assert 2048 < stopped < 4000
+    assert stopped == pytest.approx(2048 + 468.9 * 0.340, abs=1.0)
     assert ph.read1ByteTxRx(port, 1, 64)[0] == 1  # torque stays on, holding
     assert ph.write4ByteTxRx(port, 1, 116, 3000) == (COMM_SUCCESS, StatusError.DATA_RANGE)
     assert ph.write1ByteTxRx(port, 1, 98, 5) == (COMM_SUCCESS, StatusError.DATA_RANGE)
-    time.sleep(0.03)
+    clock.advance(0.100)
     assert bus.position(1) == stopped
     assert ph.write1ByteTxRx(port, 1, 98, 0) == (COMM_SUCCESS, 0)  # clears the error
     assert ph.write4ByteTxRx(port, 1, 116, 3000) == (COMM_SUCCESS, 0)
+    clock.advance(0.100)
+    assert bus.position(1) == pytest.approx(stopped + 468.9 * 0.100, abs=1.0)  # moving again, toward 3000
 
 
-def test_the_watchdog_trips_at_its_deadline_not_at_the_next_packet(bus: EmulatedBus, sdk: SdkLink) -> None:
-    assert sdk.ph.write1ByteTxRx(sdk.port, 3, 64, 1) == (COMM_SUCCESS, 0)
-    assert sdk.ph.write4ByteTxRx(sdk.port, 3, 112, 20) == (COMM_SUCCESS, 0)
-    assert sdk.ph.write4ByteTxRx(sdk.port, 3, 116, 3000) == (COMM_SUCCESS, 0)
-    assert sdk.ph.write1ByteTxRx(sdk.port, 3, 98, 1) == (COMM_SUCCESS, 0)  # 20 ms
-    time.sleep(0.15)
-    (goal_at, _), (watchdog_at, _) = list(bus.arrivals)[-2:]
-    # Moving at 20 x 0.229 rev/min = 312.6 pulse/s until 20 ms after the last packet, not 150 ms.
-    expected = 312.6 * (watchdog_at - goal_at + 0.020)
-    assert bus.position(3) - 2048 == pytest.approx(expected, abs=2.0)
+def test_the_watchdog_trips_at_its_deadline_not_at_the_next_packet(
+    timed_bus: EmulatedBus, timed_sdk: SdkLink, clock: ManualClock
+) -> None:
+    ph, port = timed_sdk.ph, timed_sdk.port
+    assert ph.write1ByteTxRx(port, 3, 64, 1) == (COMM_SUCCESS, 0)
+    assert ph.write4ByteTxRx(port, 3, 112, 20) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 3, 98, 1) == (COMM_SUCCESS, 0)  # 20 ms
+    assert ph.write4ByteTxRx(port, 3, 116, 3000) == (COMM_SUCCESS, 0)
+    clock.advance(0.150)
+    # 20 x 0.229 rev/min = 312.6 pulse/s, for the 20 ms before the trip, not the 150 ms of silence.
+    assert timed_bus.position(3) - 2048 == pytest.approx(312.6 * 0.020, abs=1.0)
 
 
-def test_a_vanished_servo_stops_by_its_watchdog(bus: EmulatedBus, sdk: SdkLink) -> None:
-    assert sdk.ph.write1ByteTxRx(sdk.port, 2, 64, 1) == (COMM_SUCCESS, 0)
-    assert sdk.ph.write1ByteTxRx(sdk.port, 2, 98, 1) == (COMM_SUCCESS, 0)
-    bus.apply(parse_fault("vanish:2"))  # the cable to servo 2 is cut
+def test_a_vanished_servo_stops_by_its_watchdog(timed_bus: EmulatedBus, timed_sdk: SdkLink, clock: ManualClock) -> None:
+    ph, port = timed_sdk.ph, timed_sdk.port
+    assert ph.write1ByteTxRx(port, 2, 64, 1) == (COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 2, 98, 1) == (COMM_SUCCESS, 0)
+    timed_bus.apply(parse_fault("vanish:2"))  # the cable to servo 2 is cut
     for _ in range(5):
-        sdk.ph.ping(sdk.port, 1)  # traffic for others does not reach servo 2
-        time.sleep(0.01)
-    assert bus.read_item(2, Item.BUS_WATCHDOG) == -1
+        clock.advance(0.010)
+        assert ph.ping(port, 1)[1] == COMM_SUCCESS  # traffic for others does not reach servo 2
+    assert timed_bus.read_item(2, Item.BUS_WATCHDOG) == -1
+    assert timed_bus.read_item(1, Item.BUS_WATCHDOG) == 0
 
 
 @pytest.mark.parametrize(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 from dataclasses import replace
 
 import pytest
@@ -16,7 +15,7 @@ from riderlive.dynamixel import emulator_motion as motion
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.tables import Item
 
-from .conftest import SdkLink
+from .conftest import ManualClock, SdkLink
 
 
 def run(
@@ -106,23 +105,23 @@ def test_temperature_rises_with_effort_and_cools_without() -> None:
     assert cooled.temperature == pytest.approx(25.0 + (hot.temperature - 25.0) * math.exp(-1.0))
 
 
-def test_a_profiled_move_through_the_sdk(bus: EmulatedBus, sdk: SdkLink) -> None:
-    ph, port = sdk.ph, sdk.port
+def test_a_profiled_move_through_the_sdk(timed_bus: EmulatedBus, timed_sdk: SdkLink, clock: ManualClock) -> None:
+    ph, port = timed_sdk.ph, timed_sdk.port
     assert ph.write4ByteTxRx(port, 1, 108, 100) == (COMM_SUCCESS, 0)  # 24,414 pulse/s^2
     assert ph.write4ByteTxRx(port, 1, 112, 200) == (COMM_SUCCESS, 0)  # 3,126 pulse/s
     assert ph.write1ByteTxRx(port, 1, 64, 1) == (COMM_SUCCESS, 0)
-    start = time.monotonic()
-    assert ph.write4ByteTxRx(port, 1, 116, 2348) == (COMM_SUCCESS, 0)  # +300 pulses: ~0.22 s
-    time.sleep(0.08)
+    assert ph.write4ByteTxRx(port, 1, 116, 2348) == (COMM_SUCCESS, 0)  # +300 pulses
+    # A triangle: peak sqrt(a d) = 2,706 pulse/s after 111 ms, arrival after 222 ms.
+    clock.advance(0.080)
     assert ph.read1ByteTxRx(port, 1, 122)[0] == 1  # Moving
     velocity = ph.read4ByteTxRx(port, 1, 128)[0]
-    assert 0 < velocity <= 200
+    assert velocity == round(24_414 * 0.080 / (0.229 * 4096 / 60))
     present = ph.read4ByteTxRx(port, 1, 132)[0]
-    assert 2048 < present < 2348
-    while ph.read1ByteTxRx(port, 1, 122)[0] == 1 and time.monotonic() - start < 1.0:
-        time.sleep(0.01)
-    elapsed = time.monotonic() - start
-    assert 0.18 < elapsed < 0.4
+    assert present == pytest.approx(2048 + 0.5 * 24_414 * 0.080**2, abs=2)
+    clock.advance(0.130)
+    assert ph.read1ByteTxRx(port, 1, 122)[0] == 1  # still moving at 210 ms
+    clock.advance(0.020)
+    assert ph.read1ByteTxRx(port, 1, 122)[0] == 0  # arrived by 230 ms
     assert ph.read4ByteTxRx(port, 1, 132)[0] == 2348
     assert ph.read4ByteTxRx(port, 1, 128)[0] == 0
-    assert bus.read_item(1, Item.PRESENT_TEMPERATURE) < 30
+    assert timed_bus.read_item(1, Item.PRESENT_TEMPERATURE) == 25
