@@ -11,6 +11,8 @@ from riderlive import __version__
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+    "horse": ("riderlive.horse.cli", "write a procedural horse take (gait or shot script)"),
+    "plot": ("riderlive.plot", "plot channels of a frame file over time"),
     "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
     "rig": ("riderlive.dynamixel.rig_cli", "check a servo map; drive it with a procedural horse"),
 }
