@@ -172,7 +172,7 @@ def test_targets_follow_gain_direction_zero() -> None:
     head = list(rig.servos).index("head_pitch")
     seat = list(rig.servos).index("seat_lift")
     assert targets[head] == pytest.approx(180.0 - 10.0)  # direction -1
-    assert targets[seat] == pytest.approx(180.0 + 1000.0 * 0.005)
+    assert targets[seat] == pytest.approx(175.0 + 500.0 * 0.005)  # zero_deg 175, 500 deg/m
     rider[RIDER_INDEX["head.rz"]] = math.nan
     held = smap.targets(rider, [123.0] * len(smap))
     assert held[head] == 123.0
