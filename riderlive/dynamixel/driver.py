@@ -34,6 +34,7 @@ from riderlive.dynamixel.lifecycle import (
     ServoHardwareError,
     ServoSilent,
     TickGap,
+    Transition,
 )
 from riderlive.dynamixel.rig import (
     RigConfig,
@@ -104,6 +105,11 @@ class RigDriver:
     @property
     def fault(self) -> Fault | None:
         return self._fault
+
+    @property
+    def history(self) -> tuple[Transition, ...]:
+        """The last 256 transitions (each status carries only those since the previous tick)."""
+        return tuple(self._life.history)
 
     @property
     def last_packet_at(self) -> float | None:

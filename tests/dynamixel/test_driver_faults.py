@@ -227,6 +227,23 @@ def test_transient_drops_are_retried_without_fault(timed_buses: Callable[..., Ti
     assert any(s.read for s in run.statuses[-10:])
 
 
+def test_old_firmware_without_fast_read_falls_back(timed_buses: Callable[..., TimedBus]) -> None:
+    rig = short_rig("bench3", fast_read_fallback_after=3)
+    setups = servo_setups(rig)
+    setups[1] = ServoSetup(setups[1].id, setups[1].model, fast_read=False)  # ignores FAST_SYNC_READ
+    emu = timed_buses(setups, baud=rig.bus.baud)
+    driver = RigDriver(rig, port=emu.port)
+    start_running(driver)
+    last = drive(driver, 3.0, until=lambda s: not s.fast_sync_read).statuses[-1]
+    assert not last.fast_sync_read
+    assert last.state is RigState.RUNNING and last.fault is None
+    assert last.counters["fast_read_failures"] == 3
+    reads = last.counters["reads"]
+    last = drive(driver, 0.3).statuses[-1]
+    assert last.counters["reads"] > reads and last.counters["fast_read_failures"] == 3
+    assert all(p is not None for p in last.present_deg)
+
+
 # --- the port and the ticks -------------------------------------------------------------
 
 
