@@ -5,7 +5,10 @@ scene units of the thesis rig) or ``rx ry rz`` (rotate, degrees).
 
 Axis convention of both rigs (thesis section 7): rotate Z bends front/back, rotate X
 twists, rotate Y is side to side; translate X is forward/back, translate Y is up/down,
-translate Z is side to side. A positive ``lower_back.rz`` leans the rider forward.
+translate Z is side to side. The frame is right-handed like the thesis' Maya scene:
++X forward, +Y up, +Z to the horse's (and rider's) right; rotations follow the right
+hand (+rz nose up, +rx rolls to the right, +ry turns left). A positive
+``lower_back.rz`` leans the rider forward.
 """
 
 from __future__ import annotations
