@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from riderlive.channels import RIDER
-from riderlive.dynamixel.bringup import Steps, arm_watchdog, bring_up, hardware_bits
+from riderlive.dynamixel.bringup import Steps, arm_watchdog, bring_up
 from riderlive.dynamixel.lifecycle import (
     Fault,
     FaultKind,
@@ -32,20 +32,19 @@ from riderlive.dynamixel.lifecycle import (
     RigError,
     RigState,
     ServoHardwareError,
-    ServoSilent,
     TickGap,
     Transition,
 )
+from riderlive.dynamixel.readback import Readback
 from riderlive.dynamixel.rig import (
     RigConfig,
     ServoMap,
     deg_to_pulses,
-    pulses_to_deg,
     smoothstep,
 )
 from riderlive.dynamixel.sdkbus import SdkBus
 from riderlive.dynamixel.status import BusCounters, RigStatus
-from riderlive.dynamixel.tables import ALERT_BIT, Item
+from riderlive.dynamixel.tables import Item
 
 log = logging.getLogger("riderlive.dynamixel")
 
@@ -60,10 +59,7 @@ class RigDriver:
         bus = self.config.bus
         self.map = ServoMap(self.config)
         self._servos = list(self.config.servos.values())
-        spec = self._servos[0].spec
-        self._read_addr = spec.spec(Item.PRESENT_POSITION).address
-        self._read_len = spec.spec(Item.PRESENT_TEMPERATURE).end - self._read_addr
-        self._fast_capable = all(s.spec.fast_sync_read for s in self._servos)
+        self._readback = Readback(self.config)
         self._bus = SdkBus(bus.port, bus.baud, bus.latency_timer_ms, bus.timeout_margin_ms)
         self._life = Lifecycle()
         self._lock = threading.Lock()
@@ -75,10 +71,7 @@ class RigDriver:
         n = len(self.map)
         self._goals: list[float] = list(self.map.park)
         self._clamped: list[bool] = [False] * n
-        self._present: list[float | None] = [None] * n
         self._tracking: list[float | None] = [None] * n
-        self._temps: list[int | None] = [None] * n
-        self._volts: list[float | None] = [None] * n
         self._hw: dict[int, tuple[str, ...]] = {}
         self._disabled: set[int] = set()
         self._ramp_from: list[float] = list(self._goals)
@@ -89,12 +82,6 @@ class RigDriver:
         self._armed = False
         """The Bus Watchdog is armed (set at the end of configuring)."""
         self._since_read = 0
-        self._retrying = False
-        self._missing_since: list[float | None] = [None] * n
-        """When each servo first failed to answer a divided read since its last answer."""
-        self._plain_next = False
-        self._fast_failures = 0
-        self._use_fast = bus.fast_sync_read and self._fast_capable
 
     # --- the interface the service calls -------------------------------------------
 
@@ -229,9 +216,7 @@ class RigDriver:
         self._fault = None
         self._hw.clear()
         self._disabled.clear()
-        self._retrying = self._plain_next = False
-        self._fast_failures = 0
-        self._use_fast = self.config.bus.fast_sync_read and self._fast_capable
+        self._readback.restart()
         self._armed = False
         self._go(RigState.CONNECTING if connect else RigState.CHECKING, reason)
         self._setup = self._startup(connect)
@@ -249,11 +234,11 @@ class RigDriver:
 
     def _startup(self, connect: bool) -> Steps[None]:
         present = yield from bring_up(self._bus, self.config, connect, self._go)
-        self._present = list[float | None](present)
+        self._readback.present_deg[:] = present
         self._goals = self.map.within_limits(present)  # what configuring wrote as goals
         self._armed = bool(self.config.bus.bus_watchdog_ms)
         self._ramp_t0 = None
-        self._missing_since = [None] * len(self.map)
+        self._readback.restart()
         self._go(RigState.SOFT_START, "configured, torque on")
 
     # --- running ---------------------------------------------------------------------
@@ -307,9 +292,12 @@ class RigDriver:
             self._go(RigState.RUNNING, "soft start done", now)
         self._since_read += 1
         reads_ok = self._fault is None or self._fault.kind in (FaultKind.HARDWARE_ERROR, FaultKind.TICK_GAP)
-        if reads_ok and (self._retrying or self._since_read >= bus.read_divider):
+        if reads_ok and (self._readback.retrying or self._since_read >= bus.read_divider):
             self._since_read = 0
-            self._read(now)
+            try:
+                self._readback.read(self._bus, self._disabled, now, self.counters)
+            finally:
+                self._tracking = self._readback.tracking_error(self._goals)
             self._last_read = now
             return True, True
         return True, False
@@ -328,84 +316,8 @@ class RigDriver:
         tolerance = self.config.bus.park_tolerance_deg
         return all(
             sid in self._disabled or (present is not None and abs(present - park) <= tolerance)
-            for sid, present, park in zip(self.map.ids, self._present, self.map.park, strict=True)
+            for sid, present, park in zip(self.map.ids, self._readback.present_deg, self.map.park, strict=True)
         )
-
-    def _read(self, now: float) -> None:
-        """The divided read; a servo unheard for ``reply_budget_s`` raises ServoSilent."""
-        bus = self.config.bus
-        fast = self._use_fast and not self._plain_next
-        ids = [sid for sid in self.map.ids if sid not in self._disabled]
-        failure: ServoSilent | None = None
-        try:
-            block = self._bus.read_block(self._read_addr, self._read_len, ids, fast)
-        except ServoSilent as exc:
-            block, failure = exc.partial, exc
-        for i, sid in enumerate(self.map.ids):
-            if sid in block:
-                self._missing_since[i] = None
-            elif sid in ids and self._missing_since[i] is None:
-                self._missing_since[i] = now
-        for sid in self._decode(block):
-            self._raise_hardware_error(sid)
-        if failure is None:
-            self.counters.reads += 1
-            self._retrying = self._plain_next = False
-            return
-        self.counters.read_failures += 1
-        self._retrying = True  # read again next tick, not in read_divider ticks
-        if fast:
-            self.counters.fast_read_failures += 1
-            self._fast_failures += 1
-            self._plain_next = True  # a plain Sync Read names the silent servo
-            if self._fast_failures >= bus.fast_read_fallback_after:
-                self._use_fast = False
-                log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
-        stale = {
-            sid: since
-            for sid, since in zip(self.map.ids, self._missing_since, strict=True)
-            if since is not None and now - since >= bus.reply_budget_s
-        }
-        if stale:
-            sid = failure.servo_id if failure.servo_id in stale else min(stale, key=stale.__getitem__)
-            silent_ms = (now - stale[sid]) * 1000
-            raise ServoSilent(sid, f"no reply for {silent_ms:.0f} ms of retries ({failure})") from failure
-
-    def _raise_hardware_error(self, servo_id: int) -> None:
-        """A servo set the Alert bit: read its Hardware Error Status (retried once) and raise.
-
-        If it cannot be read, the Alert bit alone is proof enough: the bits are ("alert",).
-        """
-        status = self._servos[0].spec.spec(Item.HARDWARE_ERROR_STATUS)
-        for attempt in range(2):
-            try:
-                raw = self._bus.read(servo_id, status)
-            except ServoSilent:
-                if attempt:
-                    raise ServoHardwareError(servo_id, ("alert",), 0) from None
-                continue
-            if raw:
-                raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
-            return
-
-    def _decode(self, block: dict[int, tuple[int, bytes]]) -> list[int]:
-        """Store what a read brought; return the ids whose ERR byte has the Alert bit."""
-        alerts = []
-        spec = self._servos[0].spec
-        volt_at = spec.spec(Item.PRESENT_INPUT_VOLTAGE).address - self._read_addr
-        temp_at = spec.spec(Item.PRESENT_TEMPERATURE).address - self._read_addr
-        for i, sid in enumerate(self.map.ids):
-            if sid not in block:
-                continue
-            error, data = block[sid]
-            present = pulses_to_deg(int.from_bytes(data[0:4], "little", signed=True))
-            self._present[i] = present
-            self._tracking[i] = self._goals[i] - present
-            self._volts[i] = int.from_bytes(data[volt_at : volt_at + 2], "little") / 10.0
-            self._temps[i] = data[temp_at]
-            if error & ALERT_BIT:
-                alerts.append(sid)
-        return alerts
 
     def _start_park(self, now: float, reason: str) -> None:
         self._ramp_t0, self._ramp_from = now, list(self._goals)
@@ -476,15 +388,15 @@ class RigDriver:
             ids=self.map.ids,
             goal_deg=tuple(self._goals),
             clamped=tuple(self._clamped),
-            present_deg=tuple(self._present),
+            present_deg=tuple(self._readback.present_deg),
             tracking_error_deg=tuple(self._tracking),
-            temperature_c=tuple(self._temps),
-            voltage_v=tuple(self._volts),
+            temperature_c=tuple(self._readback.temperature_c),
+            voltage_v=tuple(self._readback.voltage_v),
             hardware_errors=dict(self._hw),
             fault=self._fault,
             wrote=wrote,
             read=read,
-            fast_sync_read=self._use_fast,
+            fast_sync_read=self._readback.use_fast,
             transactions=transactions,
             transitions=tuple(self._life.drain()),
             counters=self.counters.to_dict(),
