@@ -11,7 +11,9 @@ by themselves when the service dies or the cable is pulled.
 
 ``tick()`` never raises: a failure becomes a :class:`Fault` and a state (park, then
 torque off; or straight to torque off when the bus is gone). ``estop()`` may be
-called from another thread; it takes the bus between two transactions.
+called from any thread: it gives up a reply the tick is waiting for, then sends the
+torque-off broadcast. The start-up sequence is :mod:`riderlive.dynamixel.bringup`, the
+divided read :mod:`riderlive.dynamixel.readback`, the bus :mod:`riderlive.dynamixel.sdkbus`.
 """
 
 from __future__ import annotations
