@@ -8,6 +8,7 @@ write (+ the divided read), and park / close end with torque off.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import time
 from collections.abc import Callable
@@ -100,7 +101,9 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
     assert last.counters["reads"] > last.counters["read_failures"]
     assert all(t is not None and 20 <= t < 80 for t in last.temperature_c)
     assert all(v is not None and v > 4.0 for v in last.voltage_v)
-    assert last.to_dict()["servos"][0]["name"] == "lower_back_pitch"
+    published = json.loads(json.dumps(last.to_dict()))  # JSON-ready as it is
+    assert published["state"] == "running" and published["servos"][0]["name"] == "lower_back_pitch"
+    assert published["servos"][6]["goal_deg"] == pytest.approx(last.goal_deg[6])
 
     # the servos hold the last goal once the horse stops
     hold = run.riders[-1]
