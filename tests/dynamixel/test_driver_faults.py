@@ -222,9 +222,12 @@ def test_transient_drops_are_retried_without_fault(timed_buses: Callable[..., Ti
     run = drive(driver, 0.3, run=run)
     last = run.statuses[-1]
     assert last.state is RigState.RUNNING and last.fault is None
-    assert last.counters["fast_read_failures"] == 2
+    # each drop failed one Fast Sync Read (a loaded box may time out one more)
+    assert last.counters["fast_read_failures"] >= 2
     assert not last.fast_sync_read  # fell back to plain Sync Read after 2 fast failures
-    assert any(s.read for s in run.statuses[-10:])
+    more = drive(driver, 0.3).statuses[-1]
+    assert more.counters["fast_read_failures"] == last.counters["fast_read_failures"]  # no fast read since
+    assert more.counters["reads"] > last.counters["reads"]
 
 
 def test_old_firmware_without_fast_read_falls_back(timed_buses: Callable[..., TimedBus]) -> None:
