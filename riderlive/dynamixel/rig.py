@@ -202,6 +202,16 @@ def rig_problems(rig: RigConfig) -> list[tuple[str, str]]:
                     "lower tick_hz, raise read_divider or the baud",
                 )
             )
+        read_tick = read_tick_seconds(rig)
+        if read_tick > bus.tick_s:
+            problems.append(
+                (
+                    "bus.tick_hz",
+                    f"a tick with a read takes {read_tick * 1000:.2f} ms ({len(rig.servos)} servos at {bus.baud} "
+                    f"baud, latency timer {bus.latency_timer_ms:g} ms): at most {1 / read_tick:.0f} ticks/s; "
+                    "lower tick_hz or raise the baud",
+                )
+            )
     seen: dict[int, str] = {}
     for name, servo in rig.servos.items():
         key = f"servos.{name}"
@@ -254,10 +264,20 @@ def wire_bytes_per_tick(servos: int, read_divider: int, fast: bool = True) -> fl
     return write + (request + replies) / read_divider
 
 
+def _fast(rig: RigConfig) -> bool:
+    return rig.bus.fast_sync_read and all(s.spec.fast_sync_read for s in rig.servos.values())
+
+
 def wire_seconds_per_tick(rig: RigConfig) -> float:
-    """Wire time of one tick at the rig's baud (10 bits per byte)."""
-    fast = rig.bus.fast_sync_read and all(s.spec.fast_sync_read for s in rig.servos.values())
-    return wire_bytes_per_tick(len(rig.servos), rig.bus.read_divider, fast) * 10.0 / rig.bus.baud
+    """Average wire time of one tick at the rig's baud (10 bits per byte)."""
+    return wire_bytes_per_tick(len(rig.servos), rig.bus.read_divider, _fast(rig)) * 10.0 / rig.bus.baud
+
+
+def read_tick_seconds(rig: RigConfig) -> float:
+    """A tick with a read, start to end: the goal write and the whole read on the wire,
+    plus the adapter's latency timer twice (the read's request and its reply)."""
+    wire = wire_bytes_per_tick(len(rig.servos), 1, _fast(rig)) * 10.0 / rig.bus.baud
+    return wire + 2.0 * rig.bus.latency_timer_ms / 1000.0
 
 
 def load_rig(path: str | Path) -> RigConfig:

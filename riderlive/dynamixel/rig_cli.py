@@ -15,7 +15,7 @@ import logging
 import time
 
 from riderlive.configfile import ConfigError
-from riderlive.dynamixel.rig import MAX_WIRE_SHARE, RigConfig, load_rig, wire_seconds_per_tick
+from riderlive.dynamixel.rig import MAX_WIRE_SHARE, RigConfig, load_rig, read_tick_seconds, wire_seconds_per_tick
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,6 +33,8 @@ def describe(rig: RigConfig) -> str:
         f"read every {bus.read_divider} ticks",
         f"wire per tick {wire * 1000:.2f} ms = {wire * bus.tick_hz:.0%} of a tick "
         f"(at most {MAX_WIRE_SHARE:.0%}; the wire allows {1 / wire:.0f} ticks/s)",
+        f"a tick with a read takes {read_tick_seconds(rig) * 1000:.2f} ms (at most one tick, "
+        f"{bus.tick_s * 1000:.2f} ms)",
         f"{'servo':18s} {'id':>3s} {'model':11s} {'channel':14s} {'gain':>7s} {'dir':>3s} "
         f"{'zero':>6s} {'min':>6s} {'max':>6s} {'park':>6s} {'deg/s':>6s}",
     ]

@@ -23,6 +23,7 @@ from riderlive.dynamixel.rig import (
     profile_acceleration,
     profile_velocity,
     pulses_to_deg,
+    read_tick_seconds,
     rig_from_dict,
     smoothstep,
     wire_bytes_per_tick,
@@ -94,6 +95,7 @@ def test_full_rider_covers_body_regions() -> None:
         (lambda d: d["bus"].update(read_divider=0), "bus.read_divider", "greater than or equal to 1"),
         (lambda d: d.update(servos={}), "servos", "at least one servo"),
         (lambda d: d["bus"].update(tick_hz=400.0), "bus.tick_hz", "at most 308 ticks/s"),
+        (lambda d: d["bus"].update(tick_hz=150.0), "bus.tick_hz", "a tick with a read takes 8.36 ms"),
     ],
 )
 def test_bad_rig_names_file_and_key(mutate: Any, key: str, fragment: str) -> None:
@@ -152,6 +154,7 @@ def test_wire_budget_matches_the_protocol() -> None:
     assert wire_bytes_per_tick(20, 4, fast=False) == 114 + (34 + 26 * 20) / 4
     full = load_rig(FULL)  # 24 servos, 1 Mbps, read every 4 ticks: 134 + 502 / 4 bytes
     assert wire_seconds_per_tick(full) == pytest.approx(259.5e-5)
+    assert read_tick_seconds(full) == pytest.approx(636e-5 + 2e-3)  # all 636 bytes + 2 x 1 ms latency
 
 
 def test_profile_units() -> None:
