@@ -11,6 +11,7 @@ from riderlive import __version__
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+    "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
 

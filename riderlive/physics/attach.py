@@ -56,52 +56,54 @@ def heading(frame: FloatArray) -> FloatArray:
 def hindquarters(frame: FloatArray) -> Frame:
     """The rear pivot's world frame for one horse frame."""
     yaw = heading(frame)
-    root = np.array([_h(frame, "root.tx"), _h(frame, "root.ty"), _h(frame, "root.tz")])
-    pivot = np.array([_h(frame, "rearPivot.tx"), _h(frame, "rearPivot.ty"), _h(frame, "rearPivot.tz")])
+    root = frame[_ROOT]
     rot = (
         rotation_y(_h(frame, "root.ry") + _h(frame, "rearPivot.ry"))
         @ rotation_z(_h(frame, "rearPivot.rz"))
         @ rotation_x(_h(frame, "rearPivot.rx"))
     )
-    return Frame(root + yaw @ pivot, rot)
+    return Frame(root + yaw @ frame[_PIVOT], rot)
 
 
-def horse_colliders(frame: FloatArray, body: HorseBody) -> Capsules:
-    """The hindquarters sphere and the two hind-leg capsules for one horse frame."""
-    hq = hindquarters(frame)
-    yaw = heading(frame)
-    root = np.array([_h(frame, "root.tx"), _h(frame, "root.ty"), _h(frame, "root.tz")])
-    centre = hq.point(np.array(body.hindquarters_centre))
-    a_rows = [centre]
-    b_rows = [centre]
-    radii = [body.hindquarters_radius]
-    for hoof, side in (("lbHoof", -1.0), ("rbHoof", 1.0)):
-        hip = hq.point(np.array(body.hip_offset) * np.array([1.0, 1.0, side]))
-        hoof_local = np.array(
-            [_h(frame, f"{hoof}.tx"), _h(frame, f"{hoof}.ty") + body.leg_radius, _h(frame, f"{hoof}.tz")]
-        )
-        hoof_local[2] += side * abs(body.hip_offset[2])
-        a_rows.append(hip)
-        b_rows.append(root + yaw @ hoof_local)
-        radii.append(body.leg_radius)
-    return Capsules(np.array(a_rows), np.array(b_rows), np.array(radii))
+_ROOT = [HORSE_INDEX[f"root.{a}"] for a in ("tx", "ty", "tz")]
+_PIVOT = [HORSE_INDEX[f"rearPivot.{a}"] for a in ("tx", "ty", "tz")]
+_HOOVES = [[HORSE_INDEX[f"{h}.{a}"] for a in ("tx", "ty", "tz")] for h in ("lbHoof", "rbHoof")]
 
 
-def dock(frame: FloatArray, body: HorseBody) -> Frame:
-    """The tail's dock: origin at the tail root, x along the dock (pointing away from the horse)."""
-    hq = hindquarters(frame)
-    return Frame(hq.point(np.array(body.dock_offset)), hq.rotation @ _aim(np.array(body.dock_direction)))
-
-
-def _aim(direction: FloatArray) -> FloatArray:
+def aim(direction: FloatArray) -> FloatArray:
     """A rotation whose x axis is ``direction`` and whose z axis stays horizontal (the side)."""
-    x = direction / np.linalg.norm(direction)
+    x = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
     z = np.cross(x, np.array([0.0, 1.0, 0.0]))
     if np.linalg.norm(z) < 1e-9:
         z = np.array([0.0, 0.0, 1.0])
     z /= np.linalg.norm(z)
     y = np.cross(z, x)
     return np.column_stack((x, y, z))
+
+
+class HorseAttachment:
+    """The tail's dock and the horse's collision shapes, from :class:`HorseBody` (arrays precomputed)."""
+
+    def __init__(self, body: HorseBody) -> None:
+        self.dock_offset = np.array(body.dock_offset)
+        self.dock_rest = aim(np.array(body.dock_direction))
+        self.centre = np.array(body.hindquarters_centre)
+        self.hips = np.array([body.hip_offset, body.hip_offset]) * np.array([[1.0, 1.0, -1.0], [1.0, 1.0, 1.0]])
+        self.hoof_shift = np.array(
+            [[0.0, body.leg_radius, -abs(body.hip_offset[2])], [0.0, body.leg_radius, abs(body.hip_offset[2])]]
+        )
+        self.radius = np.array([body.hindquarters_radius, body.leg_radius, body.leg_radius])
+
+    def dock(self, hq: Frame) -> Frame:
+        """The dock for hindquarters ``hq``: origin at the tail root, x along the dock, z to the side."""
+        return Frame(hq.origin + hq.rotation @ self.dock_offset, hq.rotation @ self.dock_rest)
+
+    def colliders(self, frame: FloatArray, hq: Frame) -> Capsules:
+        """The hindquarters sphere and the two hind-leg capsules (hip to back hoof) for a horse frame."""
+        centre = hq.origin + hq.rotation @ self.centre
+        hips = hq.origin + self.hips @ hq.rotation.T
+        hooves = frame[_ROOT] + (frame[_HOOVES] + self.hoof_shift) @ heading(frame).T
+        return Capsules(np.vstack((centre, hips)), np.vstack((centre, hooves)), self.radius)
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,29 +118,34 @@ def _r(rider: FloatArray | None, name: str) -> float:
     return 0.0 if rider is None else float(rider[RIDER_INDEX[name]])
 
 
-def rider_pose(frame: FloatArray, rider: FloatArray | None, body: RiderBody) -> RiderPose:
-    """The rider's head frame and back capsule for a horse frame and the rules' rider frame."""
-    hq = hindquarters(frame)
-    lift = float(np.clip(_r(rider, "cog.ty"), -body.lift_limit, body.lift_limit))
-    seat = hq.point(np.array(body.seat_offset) + np.array([0.0, lift, 0.0]))
-    spine = (
-        hq.rotation
-        @ rotation_x(_r(rider, "lower_back.rx"))
-        @ rotation_y(_r(rider, "lower_back.ry"))
-        @ rotation_z(-_r(rider, "lower_back.rz"))
-    )
-    head_rot = spine @ rotation_y(_r(rider, "head.ry")) @ rotation_z(-_r(rider, "head.rz"))
-    head = Frame(seat + spine @ np.array([0.0, body.head_height, 0.0]), head_rot)
-    back = Capsules(
-        (seat + spine @ np.array(body.back_bottom))[None, :],
-        (seat + spine @ np.array(body.back_top))[None, :],
-        np.array([body.back_radius]),
-    )
-    return RiderPose(head, back)
+class RiderAttachment:
+    """A simple rider pose and the braid's root, from :class:`RiderBody` (arrays precomputed)."""
 
+    def __init__(self, body: RiderBody) -> None:
+        self.lift_limit = body.lift_limit
+        self.seat = np.array(body.seat_offset)
+        self.head_offset = np.array([0.0, body.head_height, 0.0])
+        self.back_ends = np.array([body.back_bottom, body.back_top])
+        self.back_radius = np.array([body.back_radius])
+        self.braid_offset = np.array(body.braid_offset)
+        self.braid_rest = aim(np.array(body.braid_direction))
 
-def braid_frame(pose: RiderPose, body: RiderBody) -> Frame:
-    """The braid's root: at the back of the head, x along the braid's first segment."""
-    return Frame(
-        pose.head.point(np.array(body.braid_offset)), pose.head.rotation @ _aim(np.array(body.braid_direction))
-    )
+    def pose(self, hq: Frame, rider: FloatArray | None) -> RiderPose:
+        """The head frame and back capsule on hindquarters ``hq`` for the rules' rider frame (None: upright)."""
+        lift = min(max(_r(rider, "cog.ty"), -self.lift_limit), self.lift_limit)
+        seat = hq.origin + hq.rotation @ (self.seat + np.array([0.0, lift, 0.0]))
+        spine = (
+            hq.rotation
+            @ rotation_x(_r(rider, "lower_back.rx"))
+            @ rotation_y(_r(rider, "lower_back.ry"))
+            @ rotation_z(-_r(rider, "lower_back.rz"))
+        )
+        head_rot = spine @ rotation_y(_r(rider, "head.ry")) @ rotation_z(-_r(rider, "head.rz"))
+        back = seat + self.back_ends @ spine.T
+        return RiderPose(
+            Frame(seat + spine @ self.head_offset, head_rot), Capsules(back[:1], back[1:], self.back_radius)
+        )
+
+    def braid(self, pose: RiderPose) -> Frame:
+        """The braid's root at the back of the head, x along its first segment."""
+        return Frame(pose.head.point(self.braid_offset), pose.head.rotation @ self.braid_rest)

@@ -87,38 +87,38 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def carry(a: FloatArray, b: FloatArray, v: FloatArray) -> FloatArray:
-    """Rotate ``v`` by the shortest arc taking unit ``a`` to unit ``b`` (all (B, 3, C)).
+    """Rotate ``v`` (perpendicular to ``a``) by the shortest arc taking unit ``a`` to unit ``b`` (all (B, 3, C)).
 
-    Rodrigues with ``k = a x b``: ``v + k x v + k x (k x v) / (1 + a.b)``; ``a`` and ``b``
-    must not be opposite (one step never turns a bone by 180 degrees).
+    For ``v`` perpendicular to ``a`` that rotation reduces to
+    ``v - (v.b) / (1 + a.b) (a + b)`` (two reflections: across the plane normal to
+    ``a + b``, then across the one normal to ``b``). ``a`` and ``b`` must not be
+    opposite (one step never turns a bone by 180 degrees).
     """
-    k = _cross(a, b)
-    c = np.maximum(1.0 + _dot(a, b), 1e-12)
-    kv = _cross(k, v)
-    out: FloatArray = v + kv
-    out += _cross(k, kv) / c[:, None, :]
+    scale = _dot(v, b) / np.maximum(1.0 + _dot(a, b), 1e-12)
+    out: FloatArray = v - scale[:, None, :] * (a + b)
     return out
 
 
 def directions(x: FloatArray) -> FloatArray:
     """Unit segment directions (B, 3, C) of strand vertices (B+1, 3, C)."""
     d = x[1:] - x[:-1]
-    return np.asarray(d / np.sqrt(np.maximum(_dot(d, d), 1e-24))[:, None, :], dtype=np.float64)
+    d /= np.sqrt(np.maximum(_dot(d, d), 1e-24))[:, None, :]
+    return d
 
 
-def _signed_angle(ref: FloatArray, v: FloatArray, axis: FloatArray) -> FloatArray:
-    """Angle from ``ref`` to ``v`` about ``axis`` (all perpendicular to it), radians."""
-    return np.arctan2(_dot(_cross(ref, v), axis), _dot(ref, v))
+def _perpendicular_unit(up: FloatArray, axis: FloatArray) -> FloatArray:
+    up = up - _dot(up, axis)[:, None, :] * axis
+    up /= np.sqrt(_dot(up, up))[:, None, :]
+    return up
 
 
 def rest_state(x: FloatArray, anchor_up: FloatArray) -> ChainState:
     """Bone frames for strand vertices ``x``: bone 0's up is ``anchor_up`` (3, C), carried down the chain."""
     axis = directions(x)
     up = np.empty_like(axis)
-    up[0] = anchor_up - _dot(anchor_up[None], axis[:1])[0] * axis[0]
-    up[0] /= np.linalg.norm(up[0], axis=0)
+    up[0] = _perpendicular_unit(anchor_up[None], axis[:1])[0]
     for j in range(1, axis.shape[0]):
-        up[j] = carry(axis[j - 1 : j], axis[j : j + 1], up[j - 1 : j])[0]
+        up[j] = _perpendicular_unit(carry(axis[j - 1 : j], axis[j : j + 1], up[j - 1 : j]), axis[j : j + 1])[0]
     zeros = np.zeros(axis[:, 0].shape)
     return ChainState(axis, up, zeros, zeros.copy())
 
@@ -126,23 +126,23 @@ def rest_state(x: FloatArray, anchor_up: FloatArray) -> ChainState:
 def step(model: ChainModel, state: ChainState, x: FloatArray, anchor_up: FloatArray) -> ChainState:
     """Follow the strands' new vertices ``x`` (B+1, 3, C); ``anchor_up`` (3, C) is bone 0's up now."""
     axis = directions(x)
-    up = carry(state.axis, axis, state.up)
+    carried = carry(state.axis, axis, state.up)
+    up = carried.copy()
     up[0] = anchor_up
-    up -= _dot(up, axis)[:, None, :] * axis
-    up /= np.sqrt(_dot(up, up))[:, None, :]
-    # Bone 0 turns with its anchor: its twist this step, about its axis.
+    up = _perpendicular_unit(up, axis)
+    side = _cross(axis, up)
     turned = np.zeros(axis[:, 0].shape)
-    turned[0] = _signed_angle(carry(state.axis[:1], axis[:1], state.up[:1])[0:1], up[:1], axis[:1])[0]
-    # Torsion springs between neighbours (Jacobi: every joint from the same frames).
+    # Bone 0 turns with its anchor: the angle from its carried frame to the anchor's.
+    turned[0] = np.arctan2(-_dot(carried[:1], side[:1]), _dot(carried[:1], up[:1]))[0]
     if axis.shape[0] > 1:
+        # Torsion springs between neighbours (Jacobi: every joint from the same frames).
         ref = carry(axis[:-1], axis[1:], up[:-1])
-        share = model.twist_share * _signed_angle(ref, up[1:], axis[1:])
-        child = np.full(share.shape, 0.5)
-        child[0] = 1.0  # bone 0 is rigid with the anchor: bone 1 takes the whole correction
+        share = np.arctan2(-_dot(ref, side[1:]), _dot(ref, up[1:]))
+        share *= model.twist_share
         turn = np.zeros(turned.shape)
-        turn[1:] -= child * share
-        turn[1:-1] += 0.5 * share[1:]
-        side = _cross(axis, up)
+        turn[1:] -= 0.5 * share  # each child turns back by half its joint's correction...
+        turn[1] -= 0.5 * share[0]  # ...bone 1 by all of it, as bone 0 is rigid with the anchor
+        turn[1:-1] += 0.5 * share[1:]  # each parent turns forward by the other half
         up = up * np.cos(turn)[:, None, :] + side * np.sin(turn)[:, None, :]
         turned += turn
     velocity = turned / model.dt

@@ -30,7 +30,7 @@ class StrandParams(StrictModel):
     vertices: Annotated[int, pydantic.Field(ge=3, le=64)] = 12
     bend: Fraction = 0.25
     """Fraction of the way to the neighbours' line per step (0 = a chain, 1 = stiff)."""
-    damping: NonNegative = 0.6
+    damping: NonNegative = 0.3
     """Velocity damping, 1/s."""
     iterations: Annotated[int, pydantic.Field(ge=1, le=64)] = 4
 
@@ -52,7 +52,7 @@ class ReferenceTail(StrictModel):
 class SkinnedTail(StrictModel):
     """The one-strand tail and its 11-bone chain with three fan-out sub-chains."""
 
-    strand: StrandParams = StrandParams(iterations=6)
+    strand: StrandParams = StrandParams(iterations=2)
     twist_rate: Positive = 60.0
     """Torsion spring: relative twist between neighbour bones decays at this rate, 1/s."""
     fan_gain: NonNegative = 0.04
@@ -88,14 +88,14 @@ class RiderBody(StrictModel):
     braid_offset: Vec3 = (-0.1, 0.02, 0.0)
     """Root of the braid in the head frame (the back of the head)."""
     braid_direction: Vec3 = (-0.3, -1.0, 0.0)
-    braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.8, iterations=6)
+    braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.5, iterations=2)
 
 
 class PhysicsConfig(StrictModel):
     """Everything the tail and braid need; ``rate`` is the fixed internal step rate, Hz."""
 
     rate: Annotated[float, pydantic.Field(ge=30.0, le=2000.0)] = 240.0
-    collision_passes: Annotated[int, pydantic.Field(ge=1, le=8)] = 2
+    collision_passes: Annotated[int, pydantic.Field(ge=1, le=16)] = 4
     reference: ReferenceTail = ReferenceTail()
     skinned: SkinnedTail = SkinnedTail()
     horse: HorseBody = HorseBody()

@@ -8,6 +8,8 @@ as Maya's default): ``R = Rz(rz) Ry(ry) Rx(rx)``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -149,17 +151,17 @@ def twist_angle(q: FloatArray, axis: FloatArray) -> FloatArray:
 
 def rotation_y(deg: float) -> FloatArray:
     """3x3 rotation about +y by ``deg`` degrees (heading)."""
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def rotation_z(deg: float) -> FloatArray:
     """3x3 rotation about +z by ``deg`` degrees (x turns toward y: nose up)."""
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def rotation_x(deg: float) -> FloatArray:
     """3x3 rotation about +x by ``deg`` degrees (roll)."""
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import strands
-from riderlive.physics.attach import Frame, dock, horse_colliders
+from riderlive.physics.attach import Frame, HorseAttachment, hindquarters
 from riderlive.physics.config import PhysicsConfig, StrandParams
 from riderlive.physics.drive import Drive
 from riderlive.physics.strands import StrandModel, StrandState
@@ -46,6 +46,7 @@ class ReferenceModel:
     strands: StrandModel
     root_offsets: FloatArray
     config: PhysicsConfig
+    horse: HorseAttachment
 
     @staticmethod
     def build(config: PhysicsConfig) -> ReferenceModel:
@@ -67,20 +68,20 @@ class ReferenceModel:
             damping=ref.strand.damping,
             collision_passes=config.collision_passes,
         )
-        return ReferenceModel(model, offsets, config)
+        return ReferenceModel(model, offsets, config, HorseAttachment(config.horse))
 
     def initial(self, drive: Drive) -> StrandState:
         """Straight strands along the dock, at rest, for the first frame."""
-        frame = dock(drive.horse, self.config.horse)
+        frame = self.horse.dock(hindquarters(drive.horse))
         pins = pinned_vertices(frame, self.root_offsets, self.config.reference.strand.root_length)
         direction = np.broadcast_to(frame.rotation[:, :1], (3, self.strands.n_strands))
         return strands.rest_state(self.strands, pins[0], np.ascontiguousarray(direction))
 
     def step(self, state: StrandState, drive: Drive) -> StrandState:
         """One fixed step toward the horse pose of ``drive``."""
-        frame = dock(drive.horse, self.config.horse)
-        pins = pinned_vertices(frame, self.root_offsets, self.config.reference.strand.root_length)
-        return strands.step(self.strands, state, pins, horse_colliders(drive.horse, self.config.horse))
+        hq = hindquarters(drive.horse)
+        pins = pinned_vertices(self.horse.dock(hq), self.root_offsets, self.config.reference.strand.root_length)
+        return strands.step(self.strands, state, pins, self.horse.colliders(drive.horse, hq))
 
 
 def mean_tip(state: StrandState) -> FloatArray:

@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import chain, strands
-from riderlive.physics.attach import Frame, braid_frame, dock, hindquarters, horse_colliders, rider_pose
+from riderlive.physics.attach import Frame, HorseAttachment, RiderAttachment, hindquarters
 from riderlive.physics.chain import ChainModel, ChainState
 from riderlive.physics.collision import Capsules
 from riderlive.physics.config import PhysicsConfig
@@ -56,6 +56,8 @@ class SkinnedModel:
     strands: StrandModel
     bones: ChainModel
     config: PhysicsConfig
+    horse: HorseAttachment
+    rider: RiderAttachment
 
     @staticmethod
     def build(config: PhysicsConfig) -> SkinnedModel:
@@ -84,14 +86,15 @@ class SkinnedModel:
             fan_time=sk.fan_time,
             fan_profile=chain.fan_profile(tail.vertices - 1, [sk.subchains > 0, False]),
         )
-        return SkinnedModel(model, bones, config)
+        return SkinnedModel(model, bones, config, HorseAttachment(config.horse), RiderAttachment(config.rider))
 
     def anchors(self, drive: Drive) -> Anchors:
         """Where the tail's dock and the braid's tie are, and what they collide with, for ``drive``."""
         cfg = self.config
-        tail_frame = dock(drive.horse, cfg.horse)
-        pose = rider_pose(drive.horse, drive.rider, cfg.rider)
-        head_frame = braid_frame(pose, cfg.rider)
+        hq = hindquarters(drive.horse)
+        tail_frame = self.horse.dock(hq)
+        pose = self.rider.pose(hq, drive.rider)
+        head_frame = self.rider.braid(pose)
         base = np.stack((tail_frame.origin, head_frame.origin), axis=1)
         along = np.stack(
             (
@@ -101,8 +104,8 @@ class SkinnedModel:
             axis=1,
         )
         up = np.stack((tail_frame.rotation[:, 1], head_frame.rotation[:, 1]), axis=1)
-        colliders = Capsules.concat(horse_colliders(drive.horse, cfg.horse), pose.back)
-        return Anchors(np.stack((base, base + along)), up, colliders, (hindquarters(drive.horse), pose.head))
+        colliders = Capsules.concat(self.horse.colliders(drive.horse, hq), pose.back)
+        return Anchors(np.stack((base, base + along)), up, colliders, (hq, pose.head))
 
     def initial(self, drive: Drive) -> SkinnedState:
         """Bones in their rest pose along the anchors; the strands are derived from the bone joints."""
