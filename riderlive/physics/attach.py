@@ -27,7 +27,7 @@ import numpy.typing as npt
 from riderlive.channels import HORSE_INDEX, RIDER_INDEX
 from riderlive.physics.collision import Capsules
 from riderlive.physics.config import HorseBody, RiderBody
-from riderlive.physics.quaternion import rotation_x, rotation_y, rotation_z
+from riderlive.physics.quaternion import rotation_x, rotation_y, rotation_z, shortest_arc, to_matrix
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -71,14 +71,9 @@ _HOOVES = [[HORSE_INDEX[f"{h}.{a}"] for a in ("tx", "ty", "tz")] for h in ("lbHo
 
 
 def aim(direction: FloatArray) -> FloatArray:
-    """A rotation whose x axis is ``direction`` and whose z axis stays horizontal (the side)."""
-    x = np.asarray(direction, dtype=np.float64) / np.linalg.norm(direction)
-    z = np.cross(x, np.array([0.0, 1.0, 0.0]))
-    if np.linalg.norm(z) < 1e-9:
-        z = np.array([0.0, 0.0, 1.0])
-    z /= np.linalg.norm(z)
-    y = np.cross(z, x)
-    return np.column_stack((x, y, z))
+    """The shortest-arc rotation taking +x to ``direction`` (so a direction in the x-y plane keeps z as the side)."""
+    d = np.asarray(direction, dtype=np.float64)
+    return to_matrix(shortest_arc(np.array([1.0, 0.0, 0.0]), d / np.linalg.norm(d)))
 
 
 class HorseAttachment:

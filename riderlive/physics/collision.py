@@ -16,6 +16,8 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 SKIN = 1e-9
 """Metres beyond the surface a pushed vertex is placed, so it tests as outside."""
+WEDGE_SKIN = 1e-5
+"""A wider margin for a vertex wedged where two shapes overlap, so the pushes converge."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,8 +77,11 @@ def depth(x: FloatArray, caps: Capsules) -> FloatArray:
     return np.asarray(caps.radius[:, None, None] - np.sqrt(np.sum(d * d, axis=2)), dtype=np.float64)
 
 
-def push_out(x: FloatArray, caps: Capsules) -> bool:
-    """Project the (V, 3, N) points ``x`` out of every capsule, in place; True if any moved."""
+def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> bool:
+    """Project the (V, 3, N) points ``x`` out of every capsule to ``skin`` beyond its surface, in place.
+
+    Returns True if any point moved.
+    """
     d = _offsets(x, caps)
     dist = np.sqrt(np.sum(d * d, axis=2))
     radius = caps.radius[:, None, None]
@@ -88,7 +93,7 @@ def push_out(x: FloatArray, caps: Capsules) -> bool:
         k, v, n = np.nonzero(on_axis)
         d[k, v, :, n] = _perpendicular(caps.b[k] - caps.a[k])
         dist[k, v, n] = 1.0
-    scale = np.where(inside, (radius + SKIN) / np.maximum(dist, 1e-12) - 1.0, 0.0)
+    scale = np.where(inside, (radius + skin) / np.maximum(dist, 1e-12) - 1.0, 0.0)
     x += np.sum(d * scale[:, :, None, :], axis=0)
     return True
 

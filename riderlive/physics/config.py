@@ -28,8 +28,8 @@ class StrandParams(StrictModel):
     root_length: Positive = 0.12
     """The pinned first segment (the dock / the braid's tie), rigid with its parent."""
     vertices: Annotated[int, pydantic.Field(ge=3, le=64)] = 12
-    bend: Fraction = 0.25
-    """Fraction of the way to the neighbours' line per step (0 = a chain, 1 = stiff)."""
+    bend: Annotated[float, pydantic.Field(ge=0.0, le=0.5)] = 0.25
+    """Fraction of the way to the neighbours' line per step (0 = a chain, 0.5 = stiffest stable)."""
     damping: NonNegative = 0.3
     """Velocity damping, 1/s."""
     iterations: Annotated[int, pydantic.Field(ge=1, le=64)] = 4
@@ -43,7 +43,7 @@ class ReferenceTail(StrictModel):
     length_jitter: Fraction = 0.12
     """Each strand's length is ``length * (1 - U(0, jitter))``."""
     bend_jitter: Fraction = 0.3
-    """Each strand's bend is ``bend * (1 + U(-jitter, jitter))`` (clipped to [0, 1])."""
+    """Each strand's bend is ``bend * (1 + U(-jitter, jitter))`` (clipped to [0, 0.5])."""
     dock_radius: NonNegative = 0.035
     """Strand roots are spread over a disc of this radius across the dock."""
     seed: int = 7
@@ -53,7 +53,7 @@ class SkinnedTail(StrictModel):
     """The one-strand tail and its 11-bone chain with three fan-out sub-chains."""
 
     strand: StrandParams = StrandParams(iterations=2)
-    twist_rate: Positive = 60.0
+    twist_rate: Positive = 200.0
     """Torsion spring: relative twist between neighbour bones decays at this rate, 1/s."""
     fan_gain: NonNegative = 0.04
     """Sub-chain distance per rad/s of the centre bone's torsional velocity, metres, at the tip."""

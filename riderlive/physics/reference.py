@@ -18,7 +18,7 @@ from riderlive.physics import strands
 from riderlive.physics.attach import Frame, HorseAttachment, hindquarters
 from riderlive.physics.config import PhysicsConfig, StrandParams
 from riderlive.physics.drive import Drive
-from riderlive.physics.strands import StrandModel, StrandState
+from riderlive.physics.strands import MAX_BEND, StrandModel, StrandState
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -54,7 +54,7 @@ class ReferenceModel:
         rng = np.random.default_rng(ref.seed)
         n = ref.strands
         total = ref.strand.length * (1.0 - rng.uniform(0.0, ref.length_jitter, n))
-        bend = np.clip(ref.strand.bend * (1.0 + rng.uniform(-ref.bend_jitter, ref.bend_jitter, n)), 0.0, 1.0)
+        bend = np.clip(ref.strand.bend * (1.0 + rng.uniform(-ref.bend_jitter, ref.bend_jitter, n)), 0.0, MAX_BEND)
         radius = ref.dock_radius * np.sqrt(rng.uniform(0.0, 1.0, n))
         angle = rng.uniform(0.0, 2.0 * np.pi, n)
         offsets = np.stack((np.zeros(n), radius * np.cos(angle), radius * np.sin(angle)))

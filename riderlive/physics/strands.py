@@ -37,9 +37,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.physics.collision import Capsules, push_out
+from riderlive.physics.collision import WEDGE_SKIN, Capsules, push_out
 
 FloatArray = npt.NDArray[np.float64]
+EXTRA_PASSES = 32
+"""Further collision passes, only while a vertex wedged between two shapes keeps moving."""
+MAX_BEND = 0.5
+"""Above this the all-at-once bending pass overshoots (each vertex gets three corrections)."""
 GRAVITY = 9.81
 """Standard gravity, m/s^2 (along -y)."""
 
@@ -50,7 +54,7 @@ class StrandModel:
 
     ``rest`` is (V-1, N) segment lengths in metres; ``inv_mass`` is (V, N) in 1/kg (the
     pinned vertices' entries are ignored: they are kinematic); ``bend`` is (N,) in
-    [0, 1], the fraction of the way to the neighbours' line per step; ``damping`` (N,)
+    [0, 0.5], the fraction of the way to the neighbours' line per step; ``damping`` (N,)
     in 1/s; ``dt`` the fixed step in seconds. Scalars broadcast to every strand.
     """
 
@@ -77,8 +81,8 @@ class StrandModel:
         damping = np.array(np.broadcast_to(self.damping, (n_strands,)), dtype=np.float64)
         if not (1 <= self.pinned <= n_vert):
             raise ValueError(f"pinned must be in [1, {n_vert}], got {self.pinned}")
-        if np.any(rest <= 0.0) or np.any(w < 0.0) or np.any((bend < 0.0) | (bend > 1.0)):
-            raise ValueError("rest lengths must be > 0, inverse masses >= 0 and bend in [0, 1]")
+        if np.any(rest <= 0.0) or np.any(w < 0.0) or np.any((bend < 0.0) | (bend > MAX_BEND)):
+            raise ValueError(f"rest lengths must be > 0, inverse masses >= 0 and bend in [0, {MAX_BEND}]")
         if not (self.dt > 0.0 and self.iterations >= 1 and np.all(damping >= 0.0)):
             raise ValueError("dt must be > 0, iterations >= 1 and damping >= 0")
         w[: self.pinned] = 0.0
@@ -218,6 +222,10 @@ def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Ca
         for _ in range(model.collision_passes):
             if not push_out(free, colliders):  # type: ignore[arg-type]
                 break
+        else:  # still moving after the usual passes: a vertex wedged between shapes
+            for _ in range(EXTRA_PASSES):
+                if not push_out(free, colliders, WEDGE_SKIN):  # type: ignore[arg-type]
+                    break
     # Each vertex's velocity loses the part of its child's move that was not its own
     # (Mueller 2012's velocity correction), so the one-sided projection does not add a
     # drag toward the root.
@@ -235,13 +243,12 @@ def stretch(model: StrandModel, x: FloatArray) -> FloatArray:
 def energy(model: StrandModel, state: StrandState) -> float:
     """Kinetic plus gravitational energy of the free vertices, joules.
 
-    Kinetic from the Verlet velocity (x - x_prev)/dt, potential at the mid-step
-    height (x + x_prev)/2: for free fall under Verlet this sum is exactly constant.
+    Kinetic from the Verlet velocity (x - x_prev)/dt, potential at the current
+    positions: the measure under which position projection only ever removes energy.
     """
     free = slice(model.pinned, None)
     w = np.asarray(model.inv_mass)[free]
     mass = np.where(w > 0.0, 1.0 / np.where(w > 0.0, w, 1.0), 0.0)
     v = (state.x[free] - state.x_prev[free]) / model.dt
     kinetic = 0.5 * float(np.sum(mass * _dot3(v, v)))
-    height = 0.5 * (state.x[free, 1] + state.x_prev[free, 1])
-    return kinetic + model.gravity * float(np.sum(mass * height))
+    return kinetic + model.gravity * float(np.sum(mass * state.x[free, 1]))
