@@ -11,6 +11,8 @@ from riderlive import __version__
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+    "horse": ("riderlive.horse.cli", "write a procedural horse take (gait or shot script)"),
+    "plot": ("riderlive.plot", "plot channels of a frame file over time"),
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
