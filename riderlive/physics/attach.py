@@ -7,7 +7,8 @@ and a positive ``ry`` turns the heading toward -z. Horse frames are in
 as :class:`riderlive.rules.RiderModel` returns them (metres with a metre scale,
 degrees).
 
-The hindquarters frame: origin at ``root.t* + Ry(root.ry) rearPivot.t*``, rotation
+The hindquarters frame: origin at ``root.t* + Ry(root.ry) (pivot_rest + rearPivot.t*)``
+(the horse's pivot and hoof channels are displacements from standing), rotation
 ``Ry(root.ry + rearPivot.ry) Rz(rearPivot.rz) Rx(rearPivot.rx)``. The tail's dock,
 the hindquarters sphere and the hip ends of the hind-leg capsules are fixed in it;
 the legs' lower ends follow the back hooves. The rider is a simple pose, not a
@@ -44,6 +45,9 @@ class Frame:
         return np.asarray(self.origin + self.rotation @ np.asarray(local, dtype=np.float64), dtype=np.float64)
 
 
+_NO_OFFSET = np.zeros(3)
+
+
 def _h(frame: FloatArray, name: str) -> float:
     return float(frame[HORSE_INDEX[name]])
 
@@ -53,8 +57,8 @@ def heading(frame: FloatArray) -> FloatArray:
     return rotation_y(_h(frame, "root.ry"))
 
 
-def hindquarters(frame: FloatArray) -> Frame:
-    """The rear pivot's world frame for one horse frame."""
+def hindquarters(frame: FloatArray, pivot_rest: FloatArray = _NO_OFFSET) -> Frame:
+    """The rear pivot's world frame for one horse frame (``pivot_rest``: the pivot at rest, root frame)."""
     yaw = heading(frame)
     root = frame[_ROOT]
     rot = (
@@ -62,7 +66,7 @@ def hindquarters(frame: FloatArray) -> Frame:
         @ rotation_z(_h(frame, "rearPivot.rz"))
         @ rotation_x(_h(frame, "rearPivot.rx"))
     )
-    return Frame(root + yaw @ frame[_PIVOT], rot)
+    return Frame(root + yaw @ (frame[_PIVOT] + pivot_rest), rot)
 
 
 _ROOT = [HORSE_INDEX[f"root.{a}"] for a in ("tx", "ty", "tz")]
@@ -79,14 +83,18 @@ def aim(direction: FloatArray) -> FloatArray:
 class HorseAttachment:
     """The tail's dock and the horse's collision shapes, from :class:`HorseBody` (arrays precomputed)."""
 
+    def hindquarters(self, frame: FloatArray) -> Frame:
+        """The rear pivot's world frame for a horse frame."""
+        return hindquarters(frame, self.pivot_rest)
+
     def __init__(self, body: HorseBody) -> None:
+        self.pivot_rest = np.array(body.pivot_rest)
         self.dock_offset = np.array(body.dock_offset)
         self.dock_rest = aim(np.array(body.dock_direction))
         self.centre = np.array(body.hindquarters_centre)
         self.hips = np.array([body.hip_offset, body.hip_offset]) * np.array([[1.0, 1.0, -1.0], [1.0, 1.0, 1.0]])
-        self.hoof_shift = np.array(
-            [[0.0, body.leg_radius, -abs(body.hip_offset[2])], [0.0, body.leg_radius, abs(body.hip_offset[2])]]
-        )
+        rest = np.array(body.hind_hoof_rest) + np.array([0.0, body.leg_radius, 0.0])
+        self.hoof_shift = np.array([rest * np.array([1.0, 1.0, -1.0]), rest])
         self.radius = np.array([body.hindquarters_radius, body.leg_radius, body.leg_radius])
 
     def dock(self, hq: Frame) -> Frame:

@@ -52,7 +52,8 @@ class ReferenceTail(StrictModel):
 class SkinnedTail(StrictModel):
     """The one-strand tail and its 11-bone chain with three fan-out sub-chains."""
 
-    strand: StrandParams = StrandParams(iterations=2)
+    strand: StrandParams = StrandParams(length=0.865, iterations=2)
+    """Length 0.865 m: the reference strands' mean (0.92 m less half the 12 % jitter), which it is to match."""
     twist_rate: Positive = 200.0
     """Torsion spring: relative twist between neighbour bones decays at this rate, 1/s."""
     fan_gain: NonNegative = 0.04
@@ -64,14 +65,22 @@ class SkinnedTail(StrictModel):
 
 
 class HorseBody(StrictModel):
-    """Tail dock and collision shapes, in the hindquarters (rear pivot) frame."""
+    """Where the rear pivot and hind hooves stand (root frame), the dock and the shapes (hindquarters frame).
 
+    The horse's ``rearPivot.t*`` and hoof ``t*`` channels are displacements from
+    standing; these rest positions turn them into places on the body.
+    """
+
+    pivot_rest: Vec3 = (-0.55, 1.05, 0.0)
+    """The rear pivot (hips) when ``rearPivot.t*`` are 0, in the root frame."""
+    hind_hoof_rest: Vec3 = (-0.65, 0.0, 0.17)
+    """The hind hooves' square-standing spot in the root frame (z mirrored for the left hoof)."""
     dock_offset: Vec3 = (-0.5, 0.42, 0.0)
     dock_direction: Vec3 = (-0.8, -0.6, 0.0)
     """Direction of the dock (the pinned first segment), away from the horse."""
     hindquarters_centre: Vec3 = (-0.2, 0.2, 0.0)
     hindquarters_radius: Positive = 0.32
-    hip_offset: Vec3 = (-0.2, 0.0, 0.17)
+    hip_offset: Vec3 = (-0.15, -0.05, 0.17)
     """Hip end of each hind-leg capsule (z mirrored for the left leg)."""
     leg_radius: Positive = 0.07
 

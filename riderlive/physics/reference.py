@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import strands
-from riderlive.physics.attach import Frame, HorseAttachment, hindquarters
+from riderlive.physics.attach import Frame, HorseAttachment
 from riderlive.physics.config import PhysicsConfig, StrandParams
 from riderlive.physics.drive import Drive
 from riderlive.physics.strands import MAX_BEND, StrandModel, StrandState
@@ -72,14 +72,14 @@ class ReferenceModel:
 
     def initial(self, drive: Drive) -> StrandState:
         """Straight strands along the dock, at rest, for the first frame."""
-        frame = self.horse.dock(hindquarters(drive.horse))
+        frame = self.horse.dock(self.horse.hindquarters(drive.horse))
         pins = pinned_vertices(frame, self.root_offsets, self.config.reference.strand.root_length)
         direction = np.broadcast_to(frame.rotation[:, :1], (3, self.strands.n_strands))
         return strands.rest_state(self.strands, pins[0], np.ascontiguousarray(direction))
 
     def step(self, state: StrandState, drive: Drive) -> StrandState:
         """One fixed step toward the horse pose of ``drive``."""
-        hq = hindquarters(drive.horse)
+        hq = self.horse.hindquarters(drive.horse)
         pins = pinned_vertices(self.horse.dock(hq), self.root_offsets, self.config.reference.strand.root_length)
         return strands.step(self.strands, state, pins, self.horse.colliders(drive.horse, hq))
 

@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import chain, strands
-from riderlive.physics.attach import Frame, HorseAttachment, RiderAttachment, hindquarters
+from riderlive.physics.attach import Frame, HorseAttachment, RiderAttachment
 from riderlive.physics.chain import ChainModel, ChainState
 from riderlive.physics.collision import Capsules
 from riderlive.physics.config import PhysicsConfig
@@ -91,7 +91,7 @@ class SkinnedModel:
     def anchors(self, drive: Drive) -> Anchors:
         """Where the tail's dock and the braid's tie are, and what they collide with, for ``drive``."""
         cfg = self.config
-        hq = hindquarters(drive.horse)
+        hq = self.horse.hindquarters(drive.horse)
         tail_frame = self.horse.dock(hq)
         pose = self.rider.pose(hq, drive.rider)
         head_frame = self.rider.braid(pose)

@@ -222,7 +222,10 @@ def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Ca
         for _ in range(model.collision_passes):
             if not push_out(free, colliders):  # type: ignore[arg-type]
                 break
-        else:  # still moving after the usual passes: a vertex wedged between shapes
+            _distance_pass(new, pre, "even", 0)  # repair the lengths a push broke...
+            if model.n_vertices >= 3:
+                _distance_pass(new, pre, "odd", 1)
+        else:  # ...and end outside every shape (wedged vertices get a wider margin)
             for _ in range(EXTRA_PASSES):
                 if not push_out(free, colliders, WEDGE_SKIN):  # type: ignore[arg-type]
                     break

@@ -9,10 +9,10 @@ import numpy as np
 from riderlive.physics import chain, quaternion
 from riderlive.physics.chain import ChainModel
 from riderlive.physics.config import PhysicsConfig
-from riderlive.physics.drive import Drive, FixedStepper
+from riderlive.physics.drive import FixedStepper
 from riderlive.physics.outputs import local_rotations
 from riderlive.physics.skinned import SkinnedModel
-from tests.physics.motion import frame
+from tests.physics.motion import planar
 
 DT = 1.0 / 240.0
 BONES = 11
@@ -67,23 +67,11 @@ def test_twist_propagates_until_uniform() -> None:
     assert np.all(state.fan == 0.0) or state.fan.max() < 1e-3
 
 
-def planar_drive(t: float) -> Drive:
-    """Horse motion in the vertical x-y plane only: forward, up, pitch."""
-    f = np.zeros(len(frame("rest", 0.0)))
-    f[:] = frame("rest", 0.0)
-    from riderlive.channels import HORSE_INDEX as ix
-
-    f[ix["root.tx"]] = 4.0 * t + 0.3 * math.sin(5.0 * t)
-    f[ix["rearPivot.ty"]] = 1.05 + 0.1 * math.sin(9.0 * t)
-    f[ix["rearPivot.rz"]] = 25.0 * math.sin(3.0 * t)
-    return Drive(f, None)
-
-
 def test_zero_torsional_input_keeps_twist_zero_and_subchains_on_the_centre() -> None:
     sk = SkinnedModel.build(PhysicsConfig())
-    stepper = FixedStepper(sk.step, sk.initial(planar_drive(0.0)), 240.0)
+    stepper = FixedStepper(sk.step, sk.initial(planar(0.0)), 240.0)
     for k in range(1, 61):
-        stepper.advance_to(k / 30.0, planar_drive)
+        stepper.advance_to(k / 30.0, planar)
         state = stepper.state
         assert np.abs(state.bones.twist_velocity).max() < 1e-9
         assert np.abs(state.bones.fan).max() < 1e-12
