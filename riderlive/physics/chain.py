@@ -13,7 +13,8 @@ Per step (:func:`step`):
 2. Torsion springs: at each joint the child's twist relative to its parent (the
    parent's frame carried onto the child's axis by the shortest arc) decays at
    ``twist_rate``; the correction is shared half and half between the two bones,
-   so a twist spreads up and down the chain until it is uniform. Bone 0 is rigid
+   so a twist spreads up and down the chain until it is uniform (a joint folded back
+   beyond ~148 degrees has no well-defined relative twist and rests). Bone 0 is rigid
    with the anchor (the dock, the head), which gives the chain its twist input.
 3. Torsional velocity: the twist each bone turned by this step, over ``dt``.
 4. Fan-out: for chains that have them, sub-chains on the lower half sit at a distance
@@ -30,6 +31,8 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+FOLDED = -0.85
+"""Cosine of the joint angle (about 148 degrees) beyond which a torsion spring rests."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +142,7 @@ def step(model: ChainModel, state: ChainState, x: FloatArray, anchor_up: FloatAr
         ref = carry(axis[:-1], axis[1:], up[:-1])
         share = np.arctan2(-_dot(ref, side[1:]), _dot(ref, up[1:]))
         share *= model.twist_share
+        share[_dot(axis[:-1], axis[1:]) < FOLDED] = 0.0  # a joint folded back on itself has no defined twist
         turn = np.zeros(turned.shape)
         turn[1:] -= 0.5 * share  # each child turns back by half its joint's correction...
         turn[1] -= 0.5 * share[0]  # ...bone 1 by all of it, as bone 0 is rigid with the anchor

@@ -59,43 +59,58 @@ def capsule(a: FloatArray, b: FloatArray, radius: float) -> Capsules:
     )
 
 
-def _offsets(x: FloatArray, caps: Capsules) -> FloatArray:
-    """For (V, 3, N) points: offset from the nearest axis point of each capsule, (K, V, 3, N)."""
-    a = caps.a[:, None, :, None]
-    ab = (caps.b - caps.a)[:, None, :, None]
-    p = x[None] - a
-    ab_len2 = np.maximum(np.sum((caps.b - caps.a) ** 2, axis=1), 1e-18)[:, None, None]
-    t = np.sum(p * ab, axis=2) / ab_len2
+def _offsets(x: FloatArray, caps: Capsules) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Offsets (K, V, N) per coordinate of (V, 3, N) points from each capsule's nearest axis point.
+
+    Works coordinate by coordinate on (K, V, N) arrays: no reductions over a short middle axis.
+    """
+    a = caps.a[:, :, None, None]  # (K, 3, 1, 1)
+    ab = (caps.b - caps.a)[:, :, None, None]
+    inv_len2 = 1.0 / np.maximum(np.sum((caps.b - caps.a) ** 2, axis=1), 1e-18)[:, None, None]
+    p0 = x[None, :, 0] - a[:, 0]
+    p1 = x[None, :, 1] - a[:, 1]
+    p2 = x[None, :, 2] - a[:, 2]
+    t = p0 * ab[:, 0]
+    t += p1 * ab[:, 1]
+    t += p2 * ab[:, 2]
+    t *= inv_len2
     np.clip(t, 0.0, 1.0, out=t)
-    p -= t[:, :, None, :] * ab
-    return p
+    p0 -= t * ab[:, 0]
+    p1 -= t * ab[:, 1]
+    p2 -= t * ab[:, 2]
+    return p0, p1, p2
 
 
 def depth(x: FloatArray, caps: Capsules) -> FloatArray:
     """How far each point of (V, 3, N) ``x`` is inside each capsule (K, V, N); <= 0 outside."""
-    d = _offsets(x, caps)
-    return np.asarray(caps.radius[:, None, None] - np.sqrt(np.sum(d * d, axis=2)), dtype=np.float64)
+    d0, d1, d2 = _offsets(x, caps)
+    return np.asarray(caps.radius[:, None, None] - np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), dtype=np.float64)
 
 
-def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> bool:
+def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> float:
     """Project the (V, 3, N) points ``x`` out of every capsule to ``skin`` beyond its surface, in place.
 
-    Returns True if any point moved.
+    A point inside several capsules gets every push. Returns the largest depth a
+    point was pushed from (metres), 0.0 when none was inside.
     """
-    d = _offsets(x, caps)
-    dist = np.sqrt(np.sum(d * d, axis=2))
-    radius = caps.radius[:, None, None]
-    inside = dist < radius
+    d0, d1, d2 = _offsets(x, caps)
+    dist2 = d0 * d0
+    dist2 += d1 * d1
+    dist2 += d2 * d2
+    inside = dist2 < (caps.radius * caps.radius)[:, None, None]
     if not inside.any():
-        return False
-    on_axis = inside & (dist < 1e-12)
+        return 0.0
+    k, v, n = np.nonzero(inside)
+    d = np.stack((d0[k, v, n], d1[k, v, n], d2[k, v, n]), axis=1)  # (M, 3)
+    dist = np.sqrt(dist2[k, v, n])
+    radius = caps.radius[k]
+    on_axis = dist < 1e-12
     if on_axis.any():  # no direction to push along: leave sideways (perpendicular to the axis)
-        k, v, n = np.nonzero(on_axis)
-        d[k, v, :, n] = _perpendicular(caps.b[k] - caps.a[k])
-        dist[k, v, n] = 1.0
-    scale = np.where(inside, (radius + skin) / np.maximum(dist, 1e-12) - 1.0, 0.0)
-    x += np.sum(d * scale[:, :, None, :], axis=0)
-    return True
+        d[on_axis] = _perpendicular(caps.b[k[on_axis]] - caps.a[k[on_axis]])
+        dist[on_axis] = 1.0
+    push = d * ((radius + skin) / np.maximum(dist, 1e-12) - 1.0)[:, None]
+    np.add.at(x, (v, slice(None), n), push)
+    return float(np.max(radius - dist))
 
 
 def _perpendicular(axis: FloatArray) -> FloatArray:

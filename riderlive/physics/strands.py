@@ -41,7 +41,9 @@ from riderlive.physics.collision import WEDGE_SKIN, Capsules, push_out
 
 FloatArray = npt.NDArray[np.float64]
 EXTRA_PASSES = 32
-"""Further collision passes, only while a vertex wedged between two shapes keeps moving."""
+"""Final collision passes, until no vertex is inside (a vertex wedged between two shapes may need several)."""
+REPAIR_DEPTH = 1e-3
+"""A push deeper than this (metres) is followed by a distance pass to repair the lengths it broke."""
 MAX_BEND = 0.5
 """Above this the all-at-once bending pass overshoots (each vertex gets three corrections)."""
 GRAVITY = 9.81
@@ -186,11 +188,14 @@ def _bend_pass(x: FloatArray, pre: dict[str, FloatArray]) -> None:
 
 
 def _follow_the_leader(x: FloatArray, rest: FloatArray, pinned: int) -> FloatArray:
-    """Put every free vertex at its rest distance from its predecessor, root to tip; return the moves (V, 3, N)."""
+    """Put every free vertex at its rest distance from its (already placed) predecessor, root to tip.
+
+    Modifies ``x``; returns the moves (V, 3, N).
+    """
     moves = np.zeros_like(x)
     for i in range(pinned, x.shape[0]):
         d = x[i] - x[i - 1]
-        f = rest[i - 1] / np.sqrt(np.maximum(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], 1e-24))
+        f = rest[i - 1] / np.sqrt(np.maximum(np.add.reduce(d * d, axis=0), 1e-24))
         f -= 1.0
         d *= f
         x[i] += d
@@ -220,15 +225,14 @@ def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Ca
     moves = _follow_the_leader(new, model.rest, model.pinned)
     if colliding:
         for _ in range(model.collision_passes):
-            if not push_out(free, colliders):  # type: ignore[arg-type]
+            if push_out(free, colliders) < REPAIR_DEPTH:  # type: ignore[arg-type]
                 break
-            _distance_pass(new, pre, "even", 0)  # repair the lengths a push broke...
+            _distance_pass(new, pre, "even", 0)  # a deep push broke lengths: repair them...
             if model.n_vertices >= 3:
                 _distance_pass(new, pre, "odd", 1)
-        else:  # ...and end outside every shape (wedged vertices get a wider margin)
-            for _ in range(EXTRA_PASSES):
-                if not push_out(free, colliders, WEDGE_SKIN):  # type: ignore[arg-type]
-                    break
+        for _ in range(EXTRA_PASSES):  # ...and end outside every shape (this pass finds nothing, normally)
+            if push_out(free, colliders, WEDGE_SKIN) == 0.0:  # type: ignore[arg-type]
+                break
     # Each vertex's velocity loses the part of its child's move that was not its own
     # (Mueller 2012's velocity correction), so the one-sided projection does not add a
     # drag toward the root.
