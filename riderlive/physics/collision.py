@@ -109,7 +109,7 @@ def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> float:
         d[on_axis] = _perpendicular(caps.b[k[on_axis]] - caps.a[k[on_axis]])
         dist[on_axis] = 1.0
     push = d * ((radius + skin) / np.maximum(dist, 1e-12) - 1.0)[:, None]
-    np.add.at(x, (v, slice(None), n), push)
+    np.add.at(x, (v, slice(None), n), push)  # type: ignore[arg-type]
     return float(np.max(radius - dist))
 
 
