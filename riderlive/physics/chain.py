@@ -73,10 +73,12 @@ def fan_profile(bones: int, chains_with_fan: list[bool]) -> FloatArray:
     return np.stack([ramp if fan else np.zeros(bones) for fan in chains_with_fan], axis=1)
 
 
+_ONES3 = np.ones(3)
+
+
 def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
-    p = a * b
-    out: FloatArray = p[:, 0] + p[:, 1]
-    out += p[:, 2]
+    """Dot product over axis 1 of (B, 3, C) arrays."""
+    out: FloatArray = _ONES3 @ (a * b)
     return out
 
 

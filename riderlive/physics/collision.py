@@ -16,6 +16,7 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 SKIN = 1e-9
 """Metres beyond the surface a pushed vertex is placed, so it tests as outside."""
+_ONES3 = np.ones(3)
 WEDGE_SKIN = 1e-5
 """A wider margin for a vertex wedged where two shapes overlap, so the pushes converge."""
 
@@ -66,7 +67,8 @@ def _offsets(x: FloatArray, caps: Capsules) -> tuple[FloatArray, FloatArray, Flo
     """
     a = caps.a[:, :, None, None]  # (K, 3, 1, 1)
     ab = (caps.b - caps.a)[:, :, None, None]
-    inv_len2 = 1.0 / np.maximum(np.sum((caps.b - caps.a) ** 2, axis=1), 1e-18)[:, None, None]
+    axis = caps.b - caps.a
+    inv_len2 = 1.0 / np.maximum((axis * axis) @ _ONES3, 1e-18)[:, None, None]
     p0 = x[None, :, 0] - a[:, 0]
     p1 = x[None, :, 1] - a[:, 1]
     p2 = x[None, :, 2] - a[:, 2]
