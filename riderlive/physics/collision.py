@@ -99,20 +99,23 @@ def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> float:
     dist2 = d0 * d0
     dist2 += d1 * d1
     dist2 += d2 * d2
-    inside = dist2 < (caps.radius * caps.radius)[:, None, None]
+    radius = caps.radius[:, None, None]
+    inside = dist2 < radius * radius
     if not inside.any():
         return 0.0
-    k, v, n = np.nonzero(inside)
-    d = np.stack((d0[k, v, n], d1[k, v, n], d2[k, v, n]), axis=1)  # (M, 3)
-    dist = np.sqrt(dist2[k, v, n])
-    radius = caps.radius[k]
-    on_axis = dist < 1e-12
+    dist = np.sqrt(dist2)
+    on_axis = inside & (dist < 1e-12)
     if on_axis.any():  # no direction to push along: leave sideways (perpendicular to the axis)
-        d[on_axis] = _perpendicular(caps.b[k[on_axis]] - caps.a[k[on_axis]])
-        dist[on_axis] = 1.0
-    push = d * ((radius + skin) / np.maximum(dist, 1e-12) - 1.0)[:, None]
-    np.add.at(x, (v, slice(None), n), push)  # type: ignore[arg-type]
-    return float(np.max(radius - dist))
+        k, v, n = np.nonzero(on_axis)
+        side = _perpendicular(caps.b[k] - caps.a[k])
+        d0[k, v, n], d1[k, v, n], d2[k, v, n] = side[:, 0], side[:, 1], side[:, 2]
+        dist[k, v, n] = 1.0
+    scale = np.where(inside, (radius + skin) / np.maximum(dist, 1e-12) - 1.0, 0.0)
+    deepest = float(np.max(np.where(inside, radius - dist, 0.0)))
+    flat = scale.reshape(len(caps), -1)
+    for c, d in enumerate((d0, d1, d2)):
+        x[:, c] += (np.ones(len(caps)) @ (d.reshape(flat.shape) * flat)).reshape(x[:, c].shape)
+    return deepest
 
 
 def _perpendicular(axis: FloatArray) -> FloatArray:

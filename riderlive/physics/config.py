@@ -52,7 +52,7 @@ class ReferenceTail(StrictModel):
 class SkinnedTail(StrictModel):
     """The one-strand tail and its 11-bone chain with three fan-out sub-chains."""
 
-    strand: StrandParams = StrandParams(length=0.865, iterations=2)
+    strand: StrandParams = StrandParams(length=0.865, iterations=1)
     """Length 0.865 m: the reference strands' mean (0.92 m less half the 12 % jitter), which it is to match."""
     twist_rate: Positive = 200.0
     """Torsion spring: relative twist between neighbour bones decays at this rate, 1/s."""
@@ -97,7 +97,7 @@ class RiderBody(StrictModel):
     braid_offset: Vec3 = (-0.1, 0.02, 0.0)
     """Root of the braid in the head frame (the back of the head)."""
     braid_direction: Vec3 = (-0.3, -1.0, 0.0)
-    braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.5, iterations=2)
+    braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.5, iterations=1)
 
 
 class PhysicsConfig(StrictModel):

@@ -76,7 +76,6 @@ class SkinnedModel:
             iterations=max(tail.iterations, braid.iterations),
             damping=np.array([tail.damping, braid.damping]),
             collision_passes=config.collision_passes,
-            collide_each_iteration=True,
         )
         sk = config.skinned
         bones = ChainModel(
