@@ -88,14 +88,29 @@ class FixedStepper(Generic[StateT]):
 
     Step ``k`` (1, 2, ...) ends at time ``start + k / rate`` and sees ``source`` at
     that time. Time is counted in whole steps, not accumulated floats, so no rounding
-    drifts between tick rates.
+    drifts between tick rates. Safe behaviour on bad input: a drive with NaN or inf is
+    replaced by the last good one (counted in ``bad_inputs``); a jump of more than
+    ``max_catch_up`` steps (a stalled caller) skips the excess time instead of
+    stepping through it all (counted in ``skipped_steps``), so one late tick cannot
+    stall the loop.
     """
 
-    def __init__(self, step: Callable[[StateT, Drive], StateT], state: StateT, rate: float, start: float = 0.0) -> None:
+    def __init__(
+        self,
+        step: Callable[[StateT, Drive], StateT],
+        state: StateT,
+        rate: float,
+        start: float = 0.0,
+        max_catch_up: int | None = None,
+    ) -> None:
         if not (math.isfinite(rate) and rate > 0.0):
             raise ValueError(f"rate must be a finite number > 0, got {rate!r}")
         self._step, self.state, self.rate, self.start = step, state, rate, start
+        self.max_catch_up = max_catch_up
         self.steps = 0
+        self.bad_inputs = 0
+        self.skipped_steps = 0
+        self._last_good: Drive | None = None
 
     @property
     def time(self) -> float:
@@ -105,9 +120,25 @@ class FixedStepper(Generic[StateT]):
     def advance_to(self, t: float, source: Source) -> int:
         """Take every step that ends at or before ``t``; returns how many were taken."""
         due = math.floor((t - self.start) * self.rate + 1e-6)
+        if self.max_catch_up is not None and due - self.steps > self.max_catch_up:
+            skip = due - self.steps - self.max_catch_up
+            self.skipped_steps += skip
+            self.start += skip / self.rate
+            due = math.floor((t - self.start) * self.rate + 1e-6)
         taken = 0
         while self.steps < due:
             self.steps += 1
-            self.state = self._step(self.state, source(self.start + self.steps / self.rate))
+            drive = source(self.start + self.steps / self.rate)
+            if not _finite(drive):
+                self.bad_inputs += 1
+                if self._last_good is None:
+                    raise ValueError("the first drive has non-finite values: nothing to hold")
+                drive = self._last_good
+            self._last_good = drive
+            self.state = self._step(self.state, drive)
             taken += 1
         return taken
+
+
+def _finite(drive: Drive) -> bool:
+    return bool(np.isfinite(drive.horse).all() and (drive.rider is None or np.isfinite(drive.rider).all()))

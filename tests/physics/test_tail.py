@@ -150,3 +150,25 @@ def test_collision_shapes_follow_the_horse() -> None:
     caps: Capsules = ref.horse.colliders(drive.horse, ref.horse.hindquarters(drive.horse))
     assert len(caps) == 3
     assert np.all(caps.b[1:, 1] < caps.a[1:, 1])  # legs run down from the hips toward the hooves
+
+
+def test_bad_drive_holds_the_last_good_one_and_a_stall_is_skipped() -> None:
+    sk = SkinnedModel.build(CONFIG)
+    good = source("gallop")
+
+    def flaky(t: float) -> Drive:
+        drive = good(t)
+        if 0.5 <= t < 0.6:
+            horse = drive.horse.copy()
+            horse[0] = np.nan
+            return Drive(horse)
+        return drive
+
+    stepper = FixedStepper(sk.step, sk.initial(good(0.0)), CONFIG.rate, max_catch_up=48)
+    for k in range(1, 61):
+        stepper.advance_to(k / 60.0, flaky)
+    assert stepper.bad_inputs == 24  # 0.1 s of 240 Hz steps
+    assert np.isfinite(stepper.state.strands.x).all()
+    taken = stepper.advance_to(30.0, good)  # the caller stalled for 29 s
+    assert taken == 48 and stepper.skipped_steps > 6000
+    assert abs(stepper.time - 30.0) < 1e-6
