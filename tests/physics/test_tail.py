@@ -49,8 +49,9 @@ def run(kind: str) -> Run:
         s.advance_to(t, src)
         drive = src(r.time)
         hq = ref.horse.hindquarters(drive.horse)
-        out.ref_stretch = max(out.ref_stretch, float(stretch(ref.strands, r.state.x).max()))
-        out.ref_depth = max(out.ref_depth, float(depth(r.state.x[2:], ref.horse.colliders(drive.horse, hq)).max()))
+        if kind != "trot_rear_gallop":  # its reference is only compared, not checked
+            out.ref_stretch = max(out.ref_stretch, float(stretch(ref.strands, r.state.x).max()))
+            out.ref_depth = max(out.ref_depth, float(depth(r.state.x[2:], ref.horse.colliders(drive.horse, hq)).max()))
         st = stretch(sk.strands, s.state.strands.x)
         out.tail_stretch = max(out.tail_stretch, float(st[:, TAIL].max()))
         out.braid_stretch = max(out.braid_stretch, float(st[:, BRAID].max()))
