@@ -35,3 +35,10 @@ def test_unknown_channel_is_an_error(take: Path, tmp_path: Path, capsys: pytest.
     assert main(["plot", str(take), "--channels", "tail.rz", "-o", str(tmp_path / "x.png")]) == 2
     assert "unknown channel 'tail.rz'" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_plot_a_rider_take_without_hooves(take: Path, tmp_path: Path) -> None:
+    rider, out = tmp_path / "rider.csv", tmp_path / "rider.svg"
+    assert main(["bake", str(take), "--scale", "25", "-o", str(rider)]) == 0
+    assert main(["plot", str(rider), "--channels", "lower_back.rz,cog.ty", "-o", str(out)]) == 0
+    assert out.read_text().lstrip().startswith("<?xml")

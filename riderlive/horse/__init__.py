@@ -9,7 +9,8 @@
   ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres, degrees) for
   ``t`` in seconds, non-decreasing; ``set_gait(gait, speed=None)`` changes gait or
   speed at any time, ``perform(move)`` starts a movement from the current state,
-  ``play(script)`` follows a :class:`ShotScript` from now on. Every channel stays C1
+  ``play(script)`` follows a :class:`ShotScript` from now on; ``gait``, ``move`` and
+  ``speed`` (m/s) report what it is doing. Every channel stays C1
   across every change. A seed turns on seeded stride-to-stride variation.
 - ``generate(script, rate)`` / ``generate_gait(gait, seconds, rate)``: a whole take as
   a :class:`riderlive.framefile.FrameTable` (NumPy, same numbers as the live path).
@@ -24,8 +25,9 @@ back's bend; ``root.tx`` distance travelled, ``root.ty/tz/ry`` 0 (straight, flat
 from __future__ import annotations
 
 from riderlive.framefile import FrameTable
+from riderlive.horse.curves import SCALAR
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
-from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step
+from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, unschedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
 
@@ -68,6 +70,7 @@ class ProceduralHorse:
         self._start = (parse_gait(gait), speed)
         initial(self.model, *self._start)  # validates gait and speed now
         self._state: State | None = None
+        self._t = 0.0  # time of the last sample (s)
         self._queued: list[SetGait | Perform | ShotScript] = []
 
     @property
@@ -80,26 +83,39 @@ class ProceduralHorse:
         return (self._state.gait if self._state else self._start[0]).value
 
     @property
+    def speed(self) -> float:
+        """Ground speed (m/s) at the last sample."""
+        if self._state is None:
+            return initial(self.model, *self._start).gait_speed
+        v, _, _ = self._state.ramp.at(self._t, SCALAR)
+        return float(v)
+
+    @property
     def move(self) -> str | None:
         return self._state.move.value if self._state and self._state.move else None
 
     def sample(self, t: float) -> list[float]:
         """The frame at ``t`` (s): ``len(channels.HORSE)`` floats, metres and degrees."""
+        t = float(t)
         if self._state is None:
-            self._state = initial(self.model, *self._start, t=float(t))
+            self._state = initial(self.model, *self._start, t=t)
+            self._t = t
             for queued in self._queued:
                 self._apply(queued)
             self._queued.clear()
-        self._state, out = step(self.model, self._state, float(t))
+        elif not t >= self._t:
+            raise ValueError(f"time went backwards or is not finite: {t!r} after {self._t!r}")
+        self._t = t
+        self._state, out = step(self.model, self._state, t)
         return out
 
     def set_gait(self, gait: str, speed: float | None = None) -> None:
-        """Change gait and/or speed (m/s, within the gait's range) from now, C1."""
+        """Change gait and/or speed (m/s, within the gait's range) from now, C1; ends a playing script."""
         g = parse_gait(gait)
         self._apply(SetGait(g, None if speed is None else float(speed)), validate=True)
 
     def perform(self, move: str) -> None:
-        """Start a movement (jump, rear, stop, buck) from the current state."""
+        """Start a movement (jump, rear, stop, buck) from the current state; ends a playing script."""
         self._apply(Perform(parse_move(move)))
 
     def play(self, script: ShotScript) -> None:
@@ -112,7 +128,8 @@ class ProceduralHorse:
         if self._state is None:
             self._queued.append(cmd)
             return
+        state = unschedule(self._state)  # a new command or script replaces a script in progress
         if isinstance(cmd, ShotScript):
-            self._state = cmd.start(self.model, self._state.t, self._state)
+            self._state = cmd.start(self.model, self._t, state)
         else:
-            self._state = command(self.model, self._state, cmd)
+            self._state = command(self.model, state, cmd, self._t)

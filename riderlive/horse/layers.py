@@ -75,28 +75,37 @@ class GaitLayer:
         phase, v = self.phase(t, ops)
         a, b = self.spec.frequency_slope
         half_step = v / (2.0 * (a + b * v))  # reach = duty * half_step: half the support sweep
-        vary, where, floor = self.variation, ops.where, ops.floor
+        vary, where, floor, scalar = self.variation, ops.where, ops.floor, not ops.is_array
         out: list[Any] = []
         for offset, duty, peak, paddle, salt in self.legs:
             p = phase - offset
             stride = floor(p)
             p = p - stride
             reach = duty * half_step
+            on_ground = reach * (1.0 - 2.0 * p / duty)  # support: back at the ground's speed
+            if scalar and p < duty:  # the live path computes only the branch it needs
+                out += (on_ground, 0.0, 0.0)
+                continue
+            # transfer: Hermite -reach -> reach, leaving and meeting the support's velocity
+            # (slope -2 reach swing / duty per unit s), lifted by swing_bump(s)
             swing = 1.0 - duty
             s = (p - duty) / swing
             s2 = s * s
-            lift = peak * (1.0 + vary * stride_noise(self.seed + salt, p + stride, ops)) if vary else peak
-            q = s - s2
-            bump = 16.0 * q * q  # swing_bump(s)
-            support = p < duty
-            # support: back at the ground's speed; transfer: Hermite -reach -> reach leaving
-            # and meeting the support's velocity (slope -2 reach swing / duty per unit s)
-            slope = -2.0 * reach * swing / duty
             s3 = s2 * s
+            slope = -2.0 * reach * swing / duty
             flight = reach * (6.0 * s2 - 4.0 * s3 - 1.0) + slope * (2.0 * s3 - 3.0 * s2 + s)
-            out.append(where(support, reach * (1.0 - 2.0 * p / duty), flight))
-            out.append(where(support, 0.0, lift * bump))
-            out.append(where(support, 0.0, paddle * bump))
+            q = s - s2
+            bump = 16.0 * q * q
+            lift = peak * (1.0 + vary * stride_noise(self.seed + salt, p + stride, ops)) if vary else peak
+            if scalar:
+                out += (flight, lift * bump, paddle * bump)
+            else:
+                support = p < duty
+                out += (
+                    where(support, on_ground, flight),
+                    where(support, 0.0, lift * bump),
+                    where(support, 0.0, paddle * bump),
+                )
         gain = 1.0 + vary * stride_noise(self.seed, phase, ops) if vary else 1.0
         cos = ops.cos
         for amplitude, w, at, varied in self.trunk:

@@ -10,7 +10,6 @@ evaluates the frame, so the output never depends on the sampling rate.
 
 from __future__ import annotations
 
-import copy
 import heapq
 import math
 from dataclasses import dataclass, field, replace
@@ -55,7 +54,7 @@ class _Resume:
 
 @dataclass(frozen=True, slots=True)
 class _Settle:
-    blend: BlendLayer
+    """A blend's end: drop every finished blend from the layer chain."""
 
 
 Command = SetGait | Perform | _Resume | _Settle
@@ -78,7 +77,11 @@ class Model:
 
 @dataclass(frozen=True)
 class State:
-    """Everything that changes: time of the last frame (s), motion, root ramp, events."""
+    """Everything that changes: motion, root ramp, pending events.
+
+    ``t`` is the time (s) of the last command or event applied: no later command may
+    precede it. A tick without events returns the same object, so a frame costs no copy.
+    """
 
     t: float
     layer: Layer
@@ -90,12 +93,6 @@ class State:
     move_started: float | None = None
     events: tuple[Event, ...] = field(default=())
     seq: int = 0
-
-    def at(self, t: float) -> State:
-        """This state with its clock at ``t`` (a cheap copy: the live tick's hot path)."""
-        new = copy.copy(self)
-        object.__setattr__(new, "t", t)
-        return new
 
 
 def _target_speed(gait: Gait, speed: float | None) -> float:
@@ -130,15 +127,28 @@ def _retarget(state: State, at: float, target: float, omega: float) -> State:
     return replace(state, ramp=state.ramp.retarget(at, target, omega), x0=state.x0 + float(x))
 
 
+MAX_BLENDS = 6
+"""Fading layers kept at once; a burst of more commands drops the oldest (the only non-C1 case)."""
+
+
+def _prune(layer: Layer, at: float, keep: int = MAX_BLENDS) -> Layer:
+    """``layer`` without the blends finished by ``at`` and with at most ``keep`` blends."""
+    if not isinstance(layer, BlendLayer):
+        return layer
+    if at >= layer.t0 + layer.duration or keep <= 0:
+        return _prune(layer.after, at, keep)
+    return replace(layer, before=_prune(layer.before, at, keep - 1))
+
+
 def _blend_to(state: State, at: float, layer: Layer, duration: float) -> State:
-    blend = BlendLayer(state.layer, layer, at, duration)
-    return _schedule(replace(state, layer=blend), at + duration, _Settle(blend))
+    blend = BlendLayer(_prune(state.layer, at, MAX_BLENDS - 1), layer, at, duration)
+    return _schedule(replace(state, layer=blend), at + duration, _Settle())
 
 
 def apply(model: Model, state: State, at: float, command: Command) -> State:
     """The state after ``command`` takes effect at time ``at`` (s)."""
     if isinstance(command, _Settle):
-        return replace(state, layer=command.blend.after) if state.layer is command.blend else state
+        return replace(state, layer=_prune(state.layer, at))
     if isinstance(command, _Resume):
         if state.move_started != command.started or state.move is None:
             return state
@@ -173,11 +183,11 @@ def _set_gait(
     if gait is Gait.HALT:
         return _blend_to(state, at, HaltLayer(), blend or 0.8)
     if same:  # a speed change within the gait: same layer, phase carried over
-        old = state.layer
-        assert isinstance(old, GaitLayer)
-        phase, _ = old.phase(at, SCALAR)
-        own = old.speed.retarget(at, target, omega)  # the legs' own speed, C1
-        return replace(state, layer=_gait_layer(model, gait, own, float(phase)))
+        return replace(state, layer=_retarget_gait(model, state.layer, at, target, omega))
+    incoming = state.layer.after if isinstance(state.layer, BlendLayer) else None
+    if isinstance(incoming, GaitLayer) and incoming.spec.gait is gait and isinstance(state.layer, BlendLayer):
+        # already blending into this gait: only its speed changes (a slider stays cheap)
+        return replace(state, layer=replace(state.layer, after=_retarget_gait(model, incoming, at, target, omega)))
     spec = GAIT_TABLE[gait]
     v_now = min(max(state.ramp.v0, spec.speed[0]), spec.speed[1])
     legs = _gait_layer(model, gait, Ramp(at, v_now, 0.0, target, omega))
@@ -185,9 +195,27 @@ def _set_gait(
     return _blend_to(state, at, legs, duration)
 
 
-def command(model: Model, state: State, cmd: SetGait | Perform) -> State:
-    """Apply a user command now (at the time of the last frame)."""
-    return apply(model, state, state.t, cmd)
+def _retarget_gait(model: Model, layer: Layer, at: float, target: float, omega: float) -> GaitLayer:
+    """The same gait layer heading for a new speed from ``at``: phase and speed stay C1."""
+    assert isinstance(layer, GaitLayer)
+    phase, _ = layer.phase(at, SCALAR)
+    own = layer.speed.retarget(at, target, omega)  # the legs' own speed
+    return _gait_layer(model, layer.spec.gait, own, float(phase))
+
+
+def command(model: Model, state: State, cmd: SetGait | Perform, at: float | None = None) -> State:
+    """Apply a user command at ``at`` (s; default the state's time), after any events due by then."""
+    if at is not None:
+        state = advance(model, state, at)
+    when = state.t if at is None else at
+    return replace(apply(model, state, when, cmd), t=when)
+
+
+def unschedule(state: State) -> State:
+    """Drop every queued user command (a script's remaining segments); internal events stay."""
+    kept = [e for e in state.events if not isinstance(e[2], SetGait | Perform)]
+    heapq.heapify(kept)
+    return replace(state, events=tuple(kept))
 
 
 def schedule(state: State, at: float, cmd: SetGait | Perform) -> State:
@@ -196,7 +224,7 @@ def schedule(state: State, at: float, cmd: SetGait | Perform) -> State:
 
 
 def advance(model: Model, state: State, t: float) -> State:
-    """Apply every event due at or before ``t``, each at its own time."""
+    """Apply every event due at or before ``t``, each at its own time (``t`` >= ``state.t``)."""
     if not math.isfinite(t):
         raise ValueError(f"time must be finite, got {t!r}")
     if t < state.t:
@@ -205,7 +233,7 @@ def advance(model: Model, state: State, t: float) -> State:
         events = list(state.events)
         at, _, cmd = heapq.heappop(events)
         state = apply(model, replace(state, events=tuple(events), t=max(state.t, at)), at, cmd)
-    return state.at(t)
+    return state
 
 
 def frame(state: State, t: Any, ops: Ops) -> list[Any]:
@@ -235,7 +263,5 @@ def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, Floa
             hi = min(lo + CHUNK, stop)
             for column, values in enumerate(frame(state, times[lo:hi], ARRAY)):
                 out[lo:hi, column] = values
-        chunk = times[start:stop]
-        state = state.at(float(chunk[-1]))
         start = stop
     return state, out

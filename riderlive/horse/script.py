@@ -57,6 +57,8 @@ class Segment(StrictModel):
             if self.seconds is None:
                 raise ValueError("a gait segment needs 'seconds'")
             gait = parse_gait(self.gait)
+            if gait is Gait.HALT and self.speed not in (None, 0.0):
+                raise ValueError("halt has speed 0")
             if self.speed is not None and gait is not Gait.HALT:
                 GAIT_TABLE[gait].check_speed(self.speed)
         else:
@@ -123,7 +125,12 @@ def load_script(path: str | Path) -> ShotScript:
 
 
 def gait_script(gait: str, seconds: float, speed: float | None = None, seed: int | None = None) -> ShotScript:
-    """A one-segment script: ``gait`` for ``seconds``."""
+    """A one-segment script: ``gait`` for ``seconds``; a bad name or speed is a plain ValueError."""
+    parsed = parse_gait(gait)
+    if speed is not None and parsed is not Gait.HALT:
+        GAIT_TABLE[parsed].check_speed(speed)
+    if not (0.0 < seconds <= 3600.0):
+        raise ValueError(f"seconds must be within 0-3600, got {seconds!r}")
     return ShotScript(seed=seed, segment=[Segment(gait=gait, seconds=seconds, speed=speed)])
 
 

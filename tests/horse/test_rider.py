@@ -85,6 +85,32 @@ def test_lift_peaks_twice_per_trot_stride() -> None:
     assert np.ptp(lift) > 0.0
 
 
+def test_in_the_trot_the_rider_only_bounces() -> None:
+    """Section 6.3: the hooves stay under the horse, so the rider bounces but hardly leans."""
+    table = _take({"gait": "trot", "seconds": 6.0})
+    rider = RIDER.evaluate_batch(table.values)
+    assert np.abs(rider[:, RIDER_INDEX["lower_back.rz"]]).max() < 2.0
+    assert np.ptp(rider[:, RIDER_INDEX["cog.ty"]]) * DEFAULT_SCALE > 0.5  # lift, rig units
+
+
+def test_in_the_walk_the_rider_leans_forward_as_a_front_leg_lifts() -> None:
+    """Section 9.6: forward as each front leg is lifted and set down in front, a rolling motion."""
+    table = _take({"gait": "walk", "seconds": 8.0})
+    back = _lower_back(table)
+    front = table.values[:, HORSE_INDEX["lfHoof.ty"]] + table.values[:, HORSE_INDEX["rfHoof.ty"]]
+    assert back[front > 0.05].mean() > back[front == 0.0].mean() + 0.5
+
+
+def test_in_the_gallop_the_rider_lifts_in_the_airborne_phase() -> None:
+    """Section 9.3: the rider lifts into the air when the horse's feet are off the ground."""
+    table = _take({"gait": "gallop", "seconds": 6.0})
+    lift = RIDER.evaluate_batch(table.values)[:, RIDER_INDEX["cog.ty"]]
+    hooves = [HORSE_INDEX[f"{leg}Hoof.ty"] for leg in ("lf", "rf", "lb", "rb")]
+    airborne = (table.values[:, hooves] > 0.0).all(axis=1)
+    assert airborne.any()
+    assert lift[airborne].mean() > 2.0 * lift[~airborne].mean()
+
+
 def test_rider_leans_forward_at_take_off_and_back_at_landing() -> None:
     table = _take({"gait": "canter", "seconds": LEAD_IN, "speed": 5.5}, "jump")
     back = _lower_back(table)

@@ -27,6 +27,7 @@ def _write(tmp_path: Path, text: str) -> Path:
         ('[[segment]]\ngait = "trot"\nseconds = 2\nspeed = 9.0', "segment.0", "3.2-4.9"),
         ('[[segment]]\ngait = "amble"\nseconds = 2', "segment.0", "gait must be one of"),
         ('[[segment]]\nmove = "jump"\nspeed = 3.0', "segment.0", "own speed"),
+        ('[[segment]]\ngait = "halt"\nseconds = 1\nspeed = 2.0', "segment.0", "halt has speed 0"),
         ('[[segment]]\ngait = "walk"\nseconds = -1', "segment.0.seconds", "greater than 0"),
         ('[[segment]]\ngait = "walk"\nseconds = nan', "segment.0.seconds", "finite"),
         ('tempo = 3\n[[segment]]\ngait = "walk"\nseconds = 1', "tempo", "unknown key"),
@@ -75,6 +76,7 @@ def test_cli_script_take(tmp_path: Path) -> None:
         (["--gait", "trot", "--rate", "5"], "--rate"),
         (["--gait", "trot", "--speed", "12"], "3.2-4.9"),
         (["--script", "missing.toml"], "file not found"),
+        (["--gait", "walk", "--seconds", "0"], "seconds must be within"),
     ],
 )
 def test_cli_errors_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str) -> None:

@@ -10,6 +10,8 @@ import pytest
 from riderlive.channels import HORSE, HORSE_NAMES
 from riderlive.configfile import CONFIG_DIR
 from riderlive.horse import GAITS, MOVES, ProceduralHorse, generate, load_script
+from riderlive.horse.layers import BlendLayer
+from riderlive.horse.model import MAX_BLENDS, Model, advance
 from riderlive.horse.script import Segment, ShotScript
 from tests.horse.signals import curvature
 
@@ -152,3 +154,62 @@ def test_bad_names_and_speeds_are_rejected() -> None:
         horse.set_gait("trot", 9.0)
     with pytest.raises(ValueError, match="speed"):
         ProceduralHorse("walk", speed=5.0)
+
+
+def _blends(layer) -> int:
+    return 1 + max(_blends(layer.before), _blends(layer.after)) if isinstance(layer, BlendLayer) else 0
+
+
+def test_a_speed_slider_during_a_blend_stays_c1_and_shallow() -> None:
+    speeds = [3.3 + 1.5 * abs(np.sin(i / 7.0)) for i in range(60)]
+    segments = [{"gait": "walk", "seconds": 1.0}] + [{"gait": "trot", "seconds": 0.02, "speed": v} for v in speeds]
+    script = _script(*segments, {"gait": "trot", "seconds": 1.0})
+    assert_c1(script)
+    state = script.start(Model())
+    for t in np.arange(0.0, 1.5, 0.005):
+        state = advance(Model(), state, float(t))
+        assert _blends(state.layer) <= 1
+
+
+def test_a_burst_of_commands_keeps_the_layer_chain_bounded() -> None:
+    horse = ProceduralHorse("trot")
+    for i in range(400):
+        if i % 2 == 0:
+            horse.set_gait(("walk", "trot", "canter", "gallop")[i // 2 % 4])
+        if i % 50 == 25:
+            horse.perform("buck")
+        frame = horse.sample(i / 100.0)
+        assert np.all(np.isfinite(frame))
+        assert horse.state is not None and _blends(horse.state.layer) <= MAX_BLENDS
+    for i in range(400, 700):
+        horse.sample(i / 100.0)
+    assert horse.state is not None and _blends(horse.state.layer) == 0  # everything settled
+
+
+def test_speed_follows_commands() -> None:
+    horse = ProceduralHorse("gallop")
+    assert horse.speed == 12.0
+    horse.sample(0.0)
+    horse.perform("stop")
+    horse.sample(5.0)
+    assert horse.speed < 0.05 and horse.gait == "halt" and horse.move is None
+
+
+def test_a_live_command_ends_a_playing_script() -> None:
+    script = load_script(CONFIG_DIR / "shots" / "ramp.toml")
+    horse = ProceduralHorse("walk")
+    horse.sample(0.0)
+    horse.play(script)
+    horse.sample(4.0)
+    assert horse.gait == "trot"
+    horse.set_gait("walk")
+    for i in range(1, 25):
+        horse.sample(4.0 + i)
+    assert horse.gait == "walk"  # the script's later segments were dropped
+    horse.play(load_script(CONFIG_DIR / "shots" / "stop.toml"))
+    horse.play(load_script(CONFIG_DIR / "shots" / "rear.toml"))  # replaces the stop script
+    seen = set()
+    for i in range(1, 800):
+        horse.sample(28.0 + i / 100)
+        seen.add(horse.move)
+    assert "rear" in seen and "stop" not in seen
