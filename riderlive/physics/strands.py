@@ -221,24 +221,24 @@ def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Ca
     pre = model._pre
     if model._bends:
         _bend_pass(new, pre)
-    colliding = colliders is not None and len(colliders) > 0
+    caps = colliders if colliders is not None and len(colliders) > 0 else None
     free = new[model.pinned :]
     for _ in range(model.iterations):
         _distance_pass(new, pre, "even", 0)
         if model.n_vertices >= 3:
             _distance_pass(new, pre, "odd", 1)
-        if colliding and model.collide_each_iteration:
-            push_out(free, colliders)  # type: ignore[arg-type]
+        if caps is not None and model.collide_each_iteration:
+            push_out(free, caps)
     moves = _follow_the_leader(new, model.rest, model.pinned)
-    if colliding:
+    if caps is not None:
         for _ in range(model.collision_passes):
-            if push_out(free, colliders) < REPAIR_DEPTH:  # type: ignore[arg-type]
+            if push_out(free, caps) < REPAIR_DEPTH:
                 break
             _distance_pass(new, pre, "even", 0)  # a deep push broke lengths: repair them...
             if model.n_vertices >= 3:
                 _distance_pass(new, pre, "odd", 1)
         for _ in range(EXTRA_PASSES):  # ...and end outside every shape (this pass finds nothing, normally)
-            if push_out(free, colliders, WEDGE_SKIN) == 0.0:  # type: ignore[arg-type]
+            if push_out(free, caps, WEDGE_SKIN) == 0.0:
                 break
     # Each vertex's velocity loses the part of its child's move that was not its own
     # (Mueller 2012's velocity correction), so the one-sided projection does not add a
@@ -258,7 +258,8 @@ def energy(model: StrandModel, state: StrandState) -> float:
     """Kinetic plus gravitational energy of the free vertices, joules.
 
     Kinetic from the Verlet velocity (x - x_prev)/dt, potential at the current
-    positions: the measure under which position projection only ever removes energy.
+    positions (under this measure, not the mid-step one, a released strand never
+    rises above its starting energy in the tests).
     """
     free = slice(model.pinned, None)
     w = np.asarray(model.inv_mass)[free]
