@@ -100,7 +100,7 @@ def _states_at_common_times(tick: float, seconds: float) -> list[tuple[np.ndarra
     config = PhysicsConfig.model_validate({"reference": {"strands": 16}})
     horse = ProceduralHorse("canter")
     rules = RiderModel(params=load_preset("kuhnel2003"), scale=DEFAULT_SCALE)
-    src = LiveSource(horse, rules)  # sampled only at the internal steps' own times
+    src = LiveSource(_Replay(horse), rules)
     sk, ref = SkinnedModel.build(config), ReferenceModel.build(config)
     s = FixedStepper(sk.step, sk.initial(src(0.0)), config.rate)
     r = FixedStepper(ref.step, ref.initial(src(0.0)), config.rate)
@@ -113,6 +113,19 @@ def _states_at_common_times(tick: float, seconds: float) -> list[tuple[np.ndarra
             st = s.state
             found.append((st.strands.x, st.strands.x_prev, st.bones.up, st.bones.fan, r.state.x, r.state.x_prev))
     return found
+
+
+class _Replay:
+    """The live horse sampled once per internal step time, so every tick rate sees the same frames."""
+
+    def __init__(self, horse: ProceduralHorse) -> None:
+        self.horse = horse
+        self.frames: dict[float, list[float]] = {}
+
+    def sample(self, t: float) -> list[float]:
+        if t not in self.frames:
+            self.frames[t] = self.horse.sample(t)
+        return self.frames[t]
 
 
 def test_same_input_at_any_tick_rate_gives_identical_states() -> None:
