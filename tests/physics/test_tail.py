@@ -116,7 +116,7 @@ def _states_at_common_times(tick: float, seconds: float) -> list[tuple[np.ndarra
 
 
 class _Replay:
-    """The live horse sampled once per internal step time, so every tick rate sees the same frames."""
+    """A live horse shared by two steppers: frames cached by time, since a live horse only moves forward."""
 
     def __init__(self, horse: ProceduralHorse) -> None:
         self.horse = horse
