@@ -1,7 +1,7 @@
 """Strand physics timings: the reference tail (400 and 4000 strands) and the skinned tail plus braid.
 
 Prints CPU microseconds per internal step (1/240 s) on one core (the thread's CPU
-clock, so waiting for a core on the shared machine does not count), median of
+clock, so waiting for a core on the shared machine does not count), best of
 blocks, and the ratio to a baseline measured in the same run: one 12-vertex strand
 stepped in plain Python floats (Verlet, 4 distance iterations, follow-the-leader; no
 bending, no collisions), the cheapest honest way to simulate one strand without NumPy.
@@ -12,7 +12,6 @@ bending, no collisions), the cheapest honest way to simulate one strand without 
 from __future__ import annotations
 
 import math
-import statistics
 import sys
 import time
 from collections.abc import Callable
@@ -28,15 +27,16 @@ from riderlive.physics.skinned import SkinnedModel
 
 
 def per_call_us(fn: Callable[[], object], calls: int, blocks: int) -> float:
-    """Median over ``blocks`` of the CPU time per call (this thread's CPU clock: time spent
-    waiting for a core on a shared machine does not count, cache and frequency effects do)."""
+    """Best over ``blocks`` of the CPU time per call (this thread's CPU clock: time spent
+    waiting for a core on a shared machine does not count; cache and frequency effects
+    of the other work do, and only ever add, hence the minimum)."""
     samples = []
     for _ in range(blocks):
         start = time.thread_time()
         for _ in range(calls):
             fn()
         samples.append((time.thread_time() - start) / calls * 1e6)
-    return statistics.median(samples)
+    return min(samples)
 
 
 def python_strand(n: int = 12, iterations: int = 4) -> Callable[[], None]:
