@@ -199,3 +199,22 @@ def test_close_parks_then_torques_off_within_bound(bus_factory: Callable[..., Em
     for servo_id in (1, 2, 3):
         assert torque(emu, servo_id) == 0
     assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - 190.0) < 0.1  # head's park_deg
+
+
+def test_requests_out_of_turn_are_refused_or_safe(bus_factory: Callable[..., EmulatedBus]) -> None:
+    driver, emu = bench_driver(bus_factory)
+    assert driver.open()
+    assert not driver.open()  # already starting
+    drive(driver, 2.0, until=lambda s: s.state is RigState.CONFIGURING)
+    driver.request_park()  # during configuring: stop the start-up, torque off
+    assert driver.state is RigState.TORQUE_OFF
+    emu.settle()
+    assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    assert driver.reset()
+    drive(driver, 3.0, until=lambda s: s.state is RigState.RUNNING)
+    assert driver.state is RigState.RUNNING
+    assert not driver.reset() and not driver.reconnect()  # only from TORQUE_OFF / ESTOP / FAULT
+    assert driver.state is RigState.RUNNING
+    assert [t.target for t in driver.history][-1] is RigState.RUNNING
+    driver.close()
+    assert driver.state is RigState.CLOSED
