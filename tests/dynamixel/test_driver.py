@@ -202,16 +202,18 @@ def test_close_parks_then_torques_off_within_bound(bus_factory: Callable[..., Em
 
 
 def test_requests_out_of_turn_are_refused_or_safe(bus_factory: Callable[..., EmulatedBus]) -> None:
-    driver, emu = bench_driver(bus_factory)
+    rig = short_rig(baud=4_000_000)  # 24 servos: configuring spans many ticks
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    driver = RigDriver(rig, port=emu.port)
     assert driver.open()
     assert not driver.open()  # already starting
     drive(driver, 2.0, until=lambda s: s.state is RigState.CONFIGURING)
     driver.request_park()  # during configuring: stop the start-up, torque off
     assert driver.state is RigState.TORQUE_OFF
     emu.settle()
-    assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    assert all(torque(emu, i) == 0 for i in rig.ids)
     assert driver.reset()
-    drive(driver, 3.0, until=lambda s: s.state is RigState.RUNNING)
+    drive(driver, 5.0, until=lambda s: s.state is RigState.RUNNING)
     assert driver.state is RigState.RUNNING
     assert not driver.reset() and not driver.reconnect()  # only from TORQUE_OFF / ESTOP / FAULT
     assert driver.state is RigState.RUNNING
