@@ -5,13 +5,18 @@ scene units of the thesis rig) or ``rx ry rz`` (rotate, degrees).
 
 Axis convention of both rigs (thesis section 7): rotate Z bends front/back, rotate X
 twists, rotate Y is side to side; translate X is forward/back, translate Y is up/down,
-translate Z is side to side. A positive ``lower_back.rz`` leans the rider forward.
+translate Z is side to side. The frame is right-handed like the thesis' Maya scene:
++X forward, +Y up, +Z to the horse's (and rider's) right; rotations follow the right
+hand (+rz nose up, +rx rolls to the right, +ry turns left). A positive
+``lower_back.rz`` leans the rider forward.
 """
 
 from __future__ import annotations
 
 import enum
+import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 
 class Kind(enum.Enum):
@@ -144,13 +149,33 @@ AXIS_CONVENTION: dict[str, str] = {
 """The thesis rigs' axis convention (section 7), as published in hellos and docs."""
 
 
+BONE_CHANNEL = re.compile(r"(?P<node>(?:tail|braid)_\d{2})\.(?P<attr>t[xyz]|r[xyz]|q[xyzw]|fan)|tail_ref\.t[xyz]")
+"""Simulated bone chains (``riderlive.physics``): ``tail_NN`` / ``braid_NN`` with world
+position ``t*`` (m), local rotation ``r*`` (deg) and ``q*`` (unit quaternion, x y z w),
+``fan`` (sub-chain spread, m); ``tail_ref`` is the reference tail's mean tip (m)."""
+
+
 class UnknownChannelError(KeyError):
     """A channel name that is not part of the vocabulary."""
 
 
+@lru_cache(maxsize=4096)
+def _bone_channel(name: str) -> Channel | None:
+    if not BONE_CHANNEL.fullmatch(name):
+        return None
+    attr = name.split(".", 1)[1]
+    kind = Kind.TRANSLATION if attr == "fan" else _kind_of(attr)
+    return Channel(name, kind, "simulated bone chain")
+
+
 def lookup(name: str) -> Channel:
     """Return the channel called ``name`` or raise :class:`UnknownChannelError`."""
-    try:
-        return BY_NAME[name]
-    except KeyError:
-        raise UnknownChannelError(name) from None
+    channel = BY_NAME.get(name) or _bone_channel(name)
+    if channel is None:
+        raise UnknownChannelError(name)
+    return channel
+
+
+def is_known(name: str) -> bool:
+    """Whether ``name`` is a horse, rider or simulated-bone channel."""
+    return name in BY_NAME or _bone_channel(name) is not None

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import orjson
 
-from riderlive.channels import BY_NAME
+from riderlive.channels import is_known
 
 FloatArray = npt.NDArray[np.float64]
 TIME = "t"
@@ -79,7 +79,7 @@ def file_format(path: str, override: str | None = None) -> str:
 def _check_names(source: str, names: Sequence[str], required: Iterable[str]) -> None:
     seen: set[str] = set()
     for name in names:
-        if name != TIME and name not in BY_NAME:
+        if name != TIME and not is_known(name):
             raise FrameFileError(source, "unknown channel", line=1, column=name)
         if name in seen:
             raise FrameFileError(source, "duplicate column", line=1, column=name)

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from riderlive.channels import BY_NAME, RIDER_INDEX, Kind
+from riderlive.channels import RIDER_INDEX, Kind, is_known, lookup
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames
 
@@ -64,8 +64,8 @@ def plot_tables(
         raise FrameFileError("--channels", f"channel {name!r} is not in the take" + ("" if rider else " (try --bake)"))
 
     hooves = all(f"{h}.ty" in horse.names for h, _ in HOOVES)
-    angles = [c for c in channels if BY_NAME[c].kind is Kind.ROTATION]
-    lengths = [c for c in channels if BY_NAME[c].kind is not Kind.ROTATION]
+    angles = [c for c in channels if lookup(c).kind is Kind.ROTATION]
+    lengths = [c for c in channels if lookup(c).kind is not Kind.ROTATION]
     rows = [r for r, used in (("hooves", hooves), ("deg", angles), ("len", lengths)) if used]
     if not rows:
         raise FrameFileError("--channels", "nothing to plot: no hoof heights and no channels")
@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         channels = [c.strip() for c in args.channels.split(",") if c.strip()]
         for name in channels:
-            if name not in BY_NAME:
+            if not is_known(name):
                 raise FrameFileError("--channels", f"unknown channel {name!r}")
         horse = read_frames(args.input)
         rider = None

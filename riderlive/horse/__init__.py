@@ -17,8 +17,9 @@
 - The pure core is :mod:`riderlive.horse.model` (Model / State / step, no clocks).
 
 Frames: hoof ``tx`` forward (+) of the hoof's square-standing spot, ``ty`` height above
-the ground, ``tz`` side (+ left); ``rearPivot.t*`` the hips' displacement from standing,
-``rearPivot.rz`` pitch (+ nose up), ``rx`` roll (+ left), ``ry`` yaw; ``backMid.rz`` the
+the ground, ``tz`` side (+ to the horse's right: the rig is right-handed, +X forward,
++Y up); ``rearPivot.t*`` the hips' displacement from standing, ``rearPivot.rz`` pitch
+(+ nose up), ``rx`` roll (+ rolling right), ``ry`` yaw (+ left); ``backMid.rz`` the
 back's bend; ``root.tx`` distance travelled, ``root.ty/tz/ry`` 0 (straight, flat ground).
 """
 

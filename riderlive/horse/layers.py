@@ -4,9 +4,11 @@ A layer's :meth:`pose` returns the 19 body channels of ``channels.HORSE`` (the f
 hooves' ``tx ty tz``, ``rearPivot.*`` and ``backMid.rz``; ``root.*`` is the
 generator's) for a time ``t`` (s) or an array of times. Frames (see ``docs/horse.md``):
 hoof ``tx`` is forward (+) / back of the hoof's square-standing spot, ``ty`` its height
-above the ground, ``tz`` its side offset (+ left); ``rearPivot.t*`` is the hips'
+above the ground, ``tz`` its side offset (+ left here; ``model.frame`` turns it into
+the rig's + right); ``rearPivot.t*`` is the hips'
 displacement from standing (m) and ``rearPivot.r*`` / ``backMid.rz`` the trunk's
-rotation (deg: ``rz`` + nose up, ``rx`` + roll left, ``ry`` + yaw left).
+rotation (deg: ``rz`` + nose up, ``rx`` + roll left here (+ right in the rig), ``ry`` + yaw
+left).
 """
 
 from __future__ import annotations

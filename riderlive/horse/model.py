@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.channels import HORSE
+from riderlive.channels import HORSE, HORSE_NAMES
 from riderlive.horse.curves import ARRAY, SCALAR, Ops, Ramp
 from riderlive.horse.gaits import GAIT_TABLE, Gait
-from riderlive.horse.layers import BlendLayer, GaitLayer, HaltLayer, Layer, MoveLayer
+from riderlive.horse.layers import BODY_CHANNELS, BlendLayer, GaitLayer, HaltLayer, Layer, MoveLayer
 from riderlive.horse.moves import MOVE_TABLE, Move
 
 FloatArray = npt.NDArray[np.float64]
@@ -236,10 +236,22 @@ def advance(model: Model, state: State, t: float) -> State:
     return state
 
 
+_TO_RIG_SIDE = tuple(
+    -1.0 if name.endswith(".tz") or name == "rearPivot.rx" else 1.0 for name in HORSE_NAMES[:BODY_CHANNELS]
+)
+"""The layers count sideways + to the horse's left; the rig is right-handed (+Z right)."""
+
+
 def frame(state: State, t: Any, ops: Ops) -> list[Any]:
-    """All channels of ``channels.HORSE`` at ``t`` (float or array) from ``state``."""
+    """All channels of ``channels.HORSE`` at ``t`` (float or array) from ``state``.
+
+    Rig convention (``channels``): right-handed, +X forward, +Y up, +Z to the horse's
+    right, so ``tz`` is + right and ``rearPivot.rx`` is + when the horse rolls right.
+    """
     _, _, x = state.ramp.at(t, ops)
-    return [*state.layer.pose(t, ops), state.x0 + x, 0.0, 0.0, 0.0]
+    pose = state.layer.pose(t, ops)
+    body = [v if sign > 0.0 else -v for v, sign in zip(pose, _TO_RIG_SIDE, strict=True)]
+    return [*body, state.x0 + x, 0.0, 0.0, 0.0]
 
 
 def step(model: Model, state: State, t: float) -> tuple[State, list[float]]:
