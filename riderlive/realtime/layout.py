@@ -52,6 +52,8 @@ COUNTERS: tuple[str, ...] = (
     "input_frames",
     "input_lapped",
     "input_out_of_order",
+    "step_errors",
+    "nonfinite_outputs",
     "realtime",
     "alive",
     *(f"lateness_bucket_{i}" for i in range(len(LATENESS_BUCKETS) + 1)),

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
+import math
 import os
 import signal
 import threading
@@ -28,7 +29,7 @@ import orjson
 from riderlive.horse import ProceduralHorse
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
-from riderlive.realtime.core import Mode, TickCore, Timing
+from riderlive.realtime.core import Driver, Mode, TickCore, TickResult, Timing
 from riderlive.realtime.output import RigOutput, TickOutput
 from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
@@ -88,6 +89,7 @@ class TickLoop:
         self.events: deque[str] = deque(maxlen=10)
         self.rig: dict[str, Any] | None = None
         self._status_dirty = True
+        self._last_good: TickResult | None = None
 
     # -- commands ---------------------------------------------------------------
     def _handle(self, command: cmd.Command, now: float) -> None:
@@ -184,7 +186,7 @@ class TickLoop:
                     values[index["input_out_of_order"]] += 1
                 newest_rx = max(newest_rx, rx)
             values[index["input_lapped"]] = self.inputs.lapped
-            result = self.core.step(now)
+            result = self._step(now, values, index)
             if self.output is not None:
                 try:
                     status = self.output.tick(result.rider, deadline)
@@ -231,6 +233,30 @@ class TickLoop:
                 self.running = False
         values[index["alive"]] = 0.0
         self._publish_status()
+
+    def _step(self, now: float, values: Any, index: dict[str, int]) -> TickResult:
+        """``core.step``, never raising and never returning a non-finite rider value.
+
+        A failure or a NaN/inf (from a parameter change, say) repeats the last good
+        frame, counted and reported: the rig must never be sent a non-finite goal.
+        """
+        try:
+            result = self.core.step(now)
+            if all(math.isfinite(v) for v in result.rider):
+                self._last_good = result
+                return result
+            values[index["nonfinite_outputs"]] += 1
+            problem = "the rules produced a non-finite value"
+        except Exception as exc:
+            values[index["step_errors"]] += 1
+            problem = f"tick step failed: {exc}"
+        if not self.events or self.events[-1] != problem:
+            self.events.append(problem)
+            self._status_dirty = True
+        if self._last_good is None:
+            neutral = self.core.neutral_rider
+            self._last_good = TickResult(Driver.NEUTRAL, now, -1, list(self.core.neutral_horse), list(neutral))
+        return self._last_good
 
     def close(self) -> None:
         if self.output is not None:

@@ -100,6 +100,8 @@ def render(
         ("input_frames", "Horse frames taken by the tick."),
         ("input_lapped", "Horse frames overwritten in the ring before the tick read them."),
         ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
+        ("step_errors", "Ticks whose step raised (the last good frame was repeated)."),
+        ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
