@@ -82,5 +82,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
     app = create_app(config)
     server = RiderServer(uvicorn_config(app, config), app.state.service)
-    server.run(sockets=[sock])
+    try:
+        server.run(sockets=[sock])
+    except KeyboardInterrupt:  # uvicorn re-raises Ctrl+C after its clean shutdown
+        return 130
     return 0
