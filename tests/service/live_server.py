@@ -19,7 +19,10 @@ ROOT = Path(__file__).resolve().parents[2]
 class LiveServer:
     """``riderlive serve --config FILE --port 0``; its stderr is kept in ``log``."""
 
-    def __init__(self, config_text: str, workdir: Path, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self, config_text: str, workdir: Path, host: str = "127.0.0.1", port: int = 0, token: str | None = None
+    ) -> None:
+        self.token = token
         self.workdir = workdir
         self.host = host
         config = workdir / "service.toml"
@@ -42,6 +45,21 @@ class LiveServer:
             raise RuntimeError("server did not start:\n" + "".join(self.log))
         self.base = f"http://{host}:{self.port}"
         self.ws = f"ws://{host}:{self.port}"
+        self._wait_for_ticks()
+
+    def _wait_for_ticks(self, timeout: float = 30.0) -> None:
+        """The tick process is spawned at startup and needs a moment to import."""
+        deadline = time.perf_counter() + timeout
+        while time.perf_counter() < deadline:
+            try:
+                headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+                if self.get("/api/state", headers=headers).json()["counters"].get("ticks", 0) > 10:
+                    return
+            except (httpx.HTTPError, ValueError, KeyError):
+                pass
+            time.sleep(0.05)
+        self.stop()
+        raise RuntimeError("the tick never started:\n" + "".join(self.log))
 
     def _read(self) -> None:
         assert self.proc.stderr is not None

@@ -82,7 +82,7 @@ def test_the_token_never_reaches_the_log(guarded: LiveServer) -> None:
 
 
 def test_publish_may_require_the_token(tmp_path: Path) -> None:
-    live = LiveServer(CONFIG + "publish_requires_token = true\n", tmp_path)
+    live = LiveServer(CONFIG + "publish_requires_token = true\n", tmp_path, token=TOKEN)
     try:
         with connect(live.ws + "/ws/rider") as ws:
             ws.send(json.dumps({"type": "auth", "token": "nope-nope-nope"}))
