@@ -60,6 +60,32 @@ def _fmax(a: float, b: float) -> float:
     return a if (a >= b or math.isnan(a)) else b
 
 
+Vec = tuple[float, float, float]
+"""A 3-vector as a tuple: numba keeps it in registers (array expressions compile slowly and allocate)."""
+
+
+@_jit
+def _at(a: FloatArray, i: int, s: int) -> Vec:
+    """Row ``i``, column ``s`` of a (rows, 3, columns) array."""
+    return (a[i, 0, s], a[i, 1, s], a[i, 2, s])
+
+
+@_jit
+def _put(a: FloatArray, i: int, s: int, v: Vec) -> None:
+    a[i, 0, s], a[i, 1, s], a[i, 2, s] = v
+
+
+@_jit
+def _sub(a: Vec, b: Vec) -> Vec:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@_jit
+def _dot(a: Vec, b: Vec) -> float:
+    """Summed in index order, as NumPy's matmul with a ones vector does."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
 @_jit
 def _distance_pass(x: FloatArray, rest: FloatArray, w: FloatArray, first: int) -> None:
     n_vert, _, n = x.shape
@@ -89,12 +115,10 @@ def _bend_pass(x: FloatArray, w: FloatArray, bend: FloatArray) -> None:
     k = np.empty((n_vert - 2, 3, n))  # coefficients for a, b, c (in the coordinate slot)
     for i in range(n_vert - 2):
         for s in range(n):
-            u = x[i + 2, :, s] - x[i, :, s]
-            mm = x[i + 1, :, s] - x[i, :, s]
-            uu = _fmax(u[0] * u[0] + u[1] * u[1] + u[2] * u[2], 1e-18)
-            t = (mm[0] * u[0] + mm[1] * u[1] + mm[2] * u[2]) / uu
-            for c in range(3):
-                m[i, c, s] = mm[c] - u[c] * t
+            u = _sub(_at(x, i + 2, s), _at(x, i, s))
+            mm = _sub(_at(x, i + 1, s), _at(x, i, s))
+            t = _dot(mm, u) / _fmax(_dot(u, u), 1e-18)
+            _put(m, i, s, (mm[0] - u[0] * t, mm[1] - u[1] * t, mm[2] - u[2] * t))
             wa, wb, wc = w[i, s], w[i + 1, s], w[i + 2, s]
             den = wb + 0.25 * (wa + wc)
             kk = bend[s] / (den if den > 0.0 else 1.0)
@@ -123,9 +147,10 @@ def _follow_the_leader(x: FloatArray, rest: FloatArray, pinned: int) -> FloatArr
             d1 = x[i, 1, s] - x[i - 1, 1, s]
             d2 = x[i, 2, s] - x[i - 1, 2, s]
             f = rest[i - 1, s] / math.sqrt(_fmax(d0 * d0 + d1 * d1 + d2 * d2, 1e-24)) - 1.0
-            for c, d in ((0, d0), (1, d1), (2, d2)):
+            d = (d0, d1, d2)
+            for c in range(3):
                 before = x[i, c, s]
-                x[i, c, s] += d * f
+                x[i, c, s] += d[c] * f
                 moves[i, c, s] = x[i, c, s] - before
     return moves
 
@@ -137,9 +162,11 @@ def _push_out(  # noqa: PLR0917
     """collision.push_out on vertices ``first:`` of ``x``: every capsule's push from the same positions."""
     n_vert, _, n = x.shape
     k_caps = radius.shape[0]
-    ab = b - a
+    ab = np.empty((k_caps, 3))
     inv_len2 = np.empty(k_caps)
     for k in range(k_caps):
+        for c in range(3):
+            ab[k, c] = b[k, c] - a[k, c]
         inv_len2[k] = 1.0 / _fmax(ab[k, 0] * ab[k, 0] + ab[k, 1] * ab[k, 1] + ab[k, 2] * ab[k, 2], 1e-18)
     off = np.empty((k_caps, 3))
     scale = np.empty(k_caps)
@@ -163,8 +190,7 @@ def _push_out(  # noqa: PLR0917
                 inside_any, pushed = True, True
                 dist = math.sqrt(dist2)
                 if dist < 1e-12:  # on the axis: leave sideways, as collision.push_out does
-                    side = _perpendicular(ab[k])
-                    off[k, 0], off[k, 1], off[k, 2] = side[0], side[1], side[2]
+                    off[k, 0], off[k, 1], off[k, 2] = _perpendicular((ab[k, 0], ab[k, 1], ab[k, 2]))
                     dist = 1.0
                 scale[k] = (r + skin) / _fmax(dist, 1e-12) - 1.0
                 deepest = max(deepest, r - dist)
@@ -180,14 +206,14 @@ def _push_out(  # noqa: PLR0917
 
 
 @_jit
-def _perpendicular(axis: FloatArray) -> FloatArray:
+def _perpendicular(axis: Vec) -> Vec:
     """collision._perpendicular for one axis."""
     h0, h1 = (1.0, 0.0) if abs(axis[0]) < 0.9 else (0.0, 1.0)
-    out = np.array([-axis[2] * h1, axis[2] * h0, axis[0] * h1 - axis[1] * h0])
-    norm = math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+    out = (-axis[2] * h1, axis[2] * h0, axis[0] * h1 - axis[1] * h0)
+    norm = math.sqrt(_dot(out, out))
     if norm > 1e-12:
-        return out / _fmax(norm, 1e-12)
-    return np.array([0.0, 0.0, 1.0])
+        return (out[0] / norm, out[1] / norm, out[2] / norm)
+    return (0.0, 0.0, 1.0)
 
 
 @_jit
@@ -223,7 +249,10 @@ def _strand_step(  # noqa: PLR0917
                 new[i, c, s] = (x[i, c, s] - prev[i, c, s]) * keep[s] + x[i, c, s]
         for s in range(n):
             new[i, 1, s] -= fall
-    new[:pinned] = pins
+    for i in range(pinned):
+        for c in range(3):
+            for s in range(n):
+                new[i, c, s] = pins[i, c, s]
     if bends:
         _bend_pass(new, w, bend)
     caps = cap_r.shape[0] > 0
@@ -292,16 +321,10 @@ def strand_step(
 
 
 @_jit
-def _carry(a: FloatArray, b: FloatArray, v: FloatArray) -> FloatArray:
-    ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    scale = (v[0] * b[0] + v[1] * b[1] + v[2] * b[2]) / _fmax(1.0 + ab, 1e-12)
-    out: FloatArray = v - scale * (a + b)
-    return out
-
-
-@_jit
-def _dot(a: FloatArray, b: FloatArray) -> float:
-    return float(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+def _carry(a: Vec, b: Vec, v: Vec) -> Vec:
+    """chain.carry for one vector."""
+    scale = _dot(v, b) / _fmax(1.0 + _dot(a, b), 1e-12)
+    return (v[0] - scale * (a[0] + b[0]), v[1] - scale * (a[1] + b[1]), v[2] - scale * (a[2] + b[2]))
 
 
 @_jit
@@ -323,33 +346,36 @@ def _chain_step(  # noqa: PLR0917
     n_bones, _, n = old_axis.shape
     axis = np.empty_like(old_axis)
     up = np.empty_like(old_up)
+    side = np.empty_like(old_up)
     velocity = np.empty_like(old_fan)
     fan = np.empty_like(old_fan)
-    side = np.empty((n_bones, 3))
     turn = np.zeros(n_bones)
+    share = np.zeros(n_bones)
     for ch in range(n):
-        carried0 = np.empty(3)
+        carried0 = (0.0, 0.0, 0.0)
         for j in range(n_bones):
-            d = x[j + 1, :, ch] - x[j, :, ch]
-            a = d / math.sqrt(_fmax(_dot(d, d), 1e-24))
-            carried = _carry(old_axis[j, :, ch], a, old_up[j, :, ch])
+            d = _sub(_at(x, j + 1, ch), _at(x, j, ch))
+            norm = math.sqrt(_fmax(_dot(d, d), 1e-24))
+            a = (d[0] / norm, d[1] / norm, d[2] / norm)
+            carried = _carry(_at(old_axis, j, ch), a, _at(old_up, j, ch))
             if j == 0:
                 carried0 = carried
-                carried = anchor_up[:, ch].copy()
-            u = carried - _dot(carried, a) * a
-            u = u / math.sqrt(_dot(u, u))
-            axis[j, :, ch], up[j, :, ch] = a, u
-            side[j, 0] = a[1] * u[2] - a[2] * u[1]
-            side[j, 1] = a[2] * u[0] - a[0] * u[2]
-            side[j, 2] = a[0] * u[1] - a[1] * u[0]
-        turned0 = math.atan2(-_dot(carried0, side[0]), _dot(carried0, up[0, :, ch]))
-        turn[:] = 0.0
+                carried = (anchor_up[0, ch], anchor_up[1, ch], anchor_up[2, ch])
+            k = _dot(carried, a)
+            u = (carried[0] - k * a[0], carried[1] - k * a[1], carried[2] - k * a[2])
+            norm = math.sqrt(_dot(u, u))
+            u = (u[0] / norm, u[1] / norm, u[2] / norm)
+            _put(axis, j, ch, a)
+            _put(up, j, ch, u)
+            _put(side, j, ch, (a[1] * u[2] - a[2] * u[1], a[2] * u[0] - a[0] * u[2], a[0] * u[1] - a[1] * u[0]))
+        turned0 = math.atan2(-_dot(carried0, _at(side, 0, ch)), _dot(carried0, _at(up, 0, ch)))
+        for j in range(n_bones):
+            turn[j] = 0.0
         if n_bones > 1:
-            share = np.empty(n_bones - 1)
             for j in range(n_bones - 1):
-                ref = _carry(axis[j, :, ch], axis[j + 1, :, ch], up[j, :, ch])
-                share[j] = math.atan2(-_dot(ref, side[j + 1]), _dot(ref, up[j + 1, :, ch])) * twist_share
-                if _dot(axis[j, :, ch], axis[j + 1, :, ch]) < folded:
+                ref = _carry(_at(axis, j, ch), _at(axis, j + 1, ch), _at(up, j, ch))
+                share[j] = math.atan2(-_dot(ref, _at(side, j + 1, ch)), _dot(ref, _at(up, j + 1, ch))) * twist_share
+                if _dot(_at(axis, j, ch), _at(axis, j + 1, ch)) < folded:
                     share[j] = 0.0
             for j in range(1, n_bones):
                 turn[j] -= 0.5 * share[j - 1]
@@ -359,10 +385,9 @@ def _chain_step(  # noqa: PLR0917
             for j in range(n_bones):
                 cs, sn = math.cos(turn[j]), math.sin(turn[j])
                 for c in range(3):
-                    up[j, c, ch] = up[j, c, ch] * cs + side[j, c] * sn
+                    up[j, c, ch] = up[j, c, ch] * cs + side[j, c, ch] * sn
         for j in range(n_bones):
-            turned = (turned0 if j == 0 else 0.0) + turn[j]
-            velocity[j, ch] = turned / dt
+            velocity[j, ch] = ((turned0 if j == 0 else 0.0) + turn[j]) / dt
             target = min(fan_gain * abs(velocity[j, ch]) * fan_profile[j, ch], fan_max)
             fan[j, ch] = old_fan[j, ch] + fan_share * (target - old_fan[j, ch])
     return axis, up, velocity, fan
@@ -428,9 +453,11 @@ def _mat(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 @_jit
-def _apply(m: FloatArray, v: FloatArray) -> FloatArray:
-    """m @ v for 3x3 ``m`` and a 3-vector, summed in index order."""
-    return np.array([m[r, 0] * v[0] + m[r, 1] * v[1] + m[r, 2] * v[2] for r in range(3)])
+def _place(origin: FloatArray, m: FloatArray, v: FloatArray, shift: FloatArray, out: FloatArray) -> None:
+    """out = origin + m @ (v + shift), for 3x3 ``m`` and 3-vectors."""
+    p = (v[0] + shift[0], v[1] + shift[1], v[2] + shift[2])
+    for r in range(3):
+        out[r] = origin[r] + (m[r, 0] * p[0] + m[r, 1] * p[1] + m[r, 2] * p[2])
 
 
 @_jit
@@ -445,27 +472,30 @@ def _pose(  # noqa: PLR0917
     braid_root: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """SkinnedModel.anchors: pins (2, 3, 2), up (3, 2), capsule ends (4, 3) x 2, hindquarters and head frames."""
+    zero = np.zeros(3)
     root = h[0:3]
     yaw = _rot(1, h[3])
     hq_rot = _mat(_mat(_rot(1, h[3] + h[7]), _rot(2, h[8])), _rot(0, h[9]))
-    hq = root + _apply(yaw, h[4:7] + points[PIVOT])
-    dock = hq + _apply(hq_rot, points[DOCK])
+    hq, dock, seat, head, braid = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    _place(root, yaw, h[4:7], points[PIVOT], hq)
+    _place(hq, hq_rot, points[DOCK], zero, dock)
     dock_rot = _mat(hq_rot, dock_rest)
     cap_a, cap_b = np.empty((4, 3)), np.empty((4, 3))
-    cap_a[0] = hq + _apply(hq_rot, points[CENTRE])
-    cap_b[0] = cap_a[0]
-    cap_a[1] = hq + _apply(hq_rot, points[HIP_L])
-    cap_a[2] = hq + _apply(hq_rot, points[HIP_R])
-    cap_b[1] = root + _apply(yaw, h[10:13] + points[HOOF_L])
-    cap_b[2] = root + _apply(yaw, h[13:16] + points[HOOF_R])
-    lift = min(max(rider[0], -lift_limit), lift_limit)
-    seat = hq + _apply(hq_rot, points[SEAT] + np.array([0.0, lift, 0.0]))
+    _place(hq, hq_rot, points[CENTRE], zero, cap_a[0])
+    _place(hq, hq_rot, points[CENTRE], zero, cap_b[0])
+    _place(hq, hq_rot, points[HIP_L], zero, cap_a[1])
+    _place(hq, hq_rot, points[HIP_R], zero, cap_a[2])
+    _place(root, yaw, h[10:13], points[HOOF_L], cap_b[1])
+    _place(root, yaw, h[13:16], points[HOOF_R], cap_b[2])
+    lift = np.zeros(3)
+    lift[1] = min(max(rider[0], -lift_limit), lift_limit)
+    _place(hq, hq_rot, points[SEAT], lift, seat)
     spine = _mat(_mat(_mat(hq_rot, _rot(0, rider[1])), _rot(1, rider[2])), _rot(2, -rider[3]))
     head_rot = _mat(_mat(spine, _rot(1, rider[4])), _rot(2, -rider[5]))
-    cap_a[3] = seat + _apply(spine, points[BACK_LO])
-    cap_b[3] = seat + _apply(spine, points[BACK_HI])
-    head = seat + _apply(spine, points[HEAD])
-    braid = head + _apply(head_rot, points[BRAID])
+    _place(seat, spine, points[BACK_LO], zero, cap_a[3])
+    _place(seat, spine, points[BACK_HI], zero, cap_b[3])
+    _place(seat, spine, points[HEAD], zero, head)
+    _place(head, head_rot, points[BRAID], zero, braid)
     braid_rot = _mat(head_rot, braid_rest)
     pins, up = np.empty((2, 3, 2)), np.empty((3, 2))
     for c in range(3):
