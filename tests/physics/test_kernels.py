@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from riderlive.channels import HORSE_NAMES
+from riderlive.cli import main
+from riderlive.framefile import FrameTable, write_frames
 from riderlive.physics import chain, kernels, strands
 from riderlive.physics.config import PhysicsConfig
 from riderlive.physics.skinned import SkinnedModel, SkinnedState
@@ -144,3 +148,16 @@ def test_numpy_path_is_selectable_and_each_kernel_compiles_once() -> None:
     _compare_take("buck")
     for kernel in (kernels._strand_step, kernels._chain_step, kernels._pose):
         assert len(kernel.signatures) == 1, kernel  # type: ignore[attr-defined]
+
+
+def test_tail_command_numpy_flag_gives_the_same_channels(tmp_path: Path) -> None:
+    times, frames = horse_take("buck")
+    take = tmp_path / "buck.csv"
+    write_frames(str(take), FrameTable(HORSE_NAMES, frames[:240:4], times[:240:4]))
+    outputs = []
+    for extra in ([], ["--numpy"]):
+        out = tmp_path / f"tail{len(extra)}.csv"
+        assert main(["tail", str(take), "-o", str(out), *extra]) == 0
+        outputs.append(np.loadtxt(out, delimiter=",", skiprows=1))
+    assert outputs[0].shape == (60, outputs[1].shape[1])
+    assert np.allclose(outputs[0], outputs[1], rtol=0.0, atol=1e-8)  # metres, degrees, quaternions
