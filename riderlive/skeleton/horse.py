@@ -4,7 +4,9 @@ Channels are metres and degrees in the horse's body frame (origin on the ground 
 the middle of the body, ``+x`` forward, ``+y`` up, ``+z`` right). The hoof channels
 are hoof positions relative to the body: ``tx`` forward from the middle, ``ty``
 height above the ground, ``tz`` sideways from the leg's rest line; the rear pivot's
-``ty`` is its height above the ground. :data:`HORSE_NEUTRAL` is the standing horse,
+``tx ty tz`` are its position (``ty`` its height above the ground). The rear pivot turns
+by ``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last), like ``riderlive.physics``' frame
+of the hindquarters; the tail root sits where its dock is. :data:`HORSE_NEUTRAL` is the standing horse,
 whose pose is the rest pose. ``rearPivot.rz`` > 0 lifts the front (pitch up),
 ``rearPivot.rx`` > 0 rolls the right side down, ``root.ry`` > 0 turns left.
 """
@@ -32,22 +34,23 @@ def _leg(hoof: str, parent: str, right: bool, knee: Vec3, fetlock: Vec3) -> list
 _FRONT_KNEE: Vec3 = (0.10, -0.62, 0.0)
 _FRONT_CANNON: Vec3 = (-0.07, -0.34, 0.0)
 _HIND_HOCK: Vec3 = (-0.17, -0.50, 0.0)
-_HIND_CANNON: Vec3 = (0.10, -0.32, 0.0)
+_HIND_CANNON: Vec3 = (0.05, -0.32, 0.0)
 
 _ROWS: list[tuple[str, str | None, Vec3]] = [
     ("root", None, (0.0, 0.0, 0.0)),
-    ("rearPivot", "root", (-0.55, 1.0, 0.0)),
-    ("backMid", "rearPivot", (0.55, 0.28, 0.0)),
+    ("rearPivot", "root", (0.0, 1.0, 0.0)),
+    ("backMid", "rearPivot", (0.0, 0.28, 0.0)),
     ("saddle", "backMid", (0.1, 0.14, 0.0)),
     ("shoulders", "backMid", (0.55, -0.14, 0.0)),
     ("neck", "shoulders", (0.25, 0.2, 0.0)),
     ("head", "neck", (0.35, 0.42, 0.0)),
     ("muzzle", "head", (0.2, -0.45, 0.0)),
-    ("tailRoot", "rearPivot", (-0.22, 0.32, 0.0)),
+    ("tailRoot", "rearPivot", (-0.5, 0.42, 0.0)),
     *_leg("lf", "shoulders", False, _FRONT_KNEE, _FRONT_CANNON),
     *_leg("rf", "shoulders", True, _FRONT_KNEE, _FRONT_CANNON),
-    *_leg("lb", "rearPivot", False, _HIND_HOCK, _HIND_CANNON),
-    *_leg("rb", "rearPivot", True, _HIND_HOCK, _HIND_CANNON),
+    ("hips", "rearPivot", (-0.5, 0.0, 0.0)),
+    *_leg("lb", "hips", False, _HIND_HOCK, _HIND_CANNON),
+    *_leg("rb", "hips", True, _HIND_HOCK, _HIND_CANNON),
 ]
 
 
@@ -89,8 +92,8 @@ HORSE_RIG = Rig(
     rotations=(
         Drive("root.ry", "root", Y),
         Drive("rearPivot.rx", "rearPivot", X),
-        Drive("rearPivot.ry", "rearPivot", Y),
         Drive("rearPivot.rz", "rearPivot", Z),
+        Drive("rearPivot.ry", "rearPivot", Y),
         Drive("backMid.rz", "backMid", Z),
     ),
     translations=(
