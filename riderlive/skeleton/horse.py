@@ -40,7 +40,7 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
     ("root", None, (0.0, 0.0, 0.0)),
     ("rearPivot", "root", (0.0, 1.0, 0.0)),
     ("backMid", "rearPivot", (0.0, 0.28, 0.0)),
-    ("saddle", "backMid", (0.1, 0.14, 0.0)),
+    ("saddle", "backMid", (0.1, 0.18, 0.0)),
     ("shoulders", "backMid", (0.55, -0.14, 0.0)),
     ("neck", "shoulders", (0.25, 0.2, 0.0)),
     ("head", "neck", (0.35, 0.42, 0.0)),

@@ -42,7 +42,7 @@ _LEFT_LIMBS: list[tuple[str, str, Vec3]] = [
     ("lf_forearm", "lf_upperarm", (-0.04, -0.27, -0.03)),
     ("lf_hand", "lf_forearm", (0.24, 0.04, 0.08)),
     ("lf_thigh", "hips", (0.0, -0.04, -0.10)),
-    ("lf_shin", "lf_thigh", (0.30, -0.26, -0.16)),
+    ("lf_shin", "lf_thigh", (0.28, -0.26, -0.22)),
     ("lf_foot", "lf_shin", (-0.12, -0.40, 0.02)),
     ("lf_toes", "lf_foot", (0.15, -0.04, 0.0)),
 ]

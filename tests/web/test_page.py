@@ -1,0 +1,149 @@
+"""The previs page in a real headless Chromium against the real service."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from riderlive.horse import DEFAULT_SCALE
+from riderlive.skeleton import bone_quaternions, rider_rig
+from tests.web.conftest import PageUnderTest, Server, free_port, open_page
+
+pytestmark = pytest.mark.browser
+
+
+def _recent(p: PageUnderTest, channel: str, seconds: float) -> list[float]:
+    """Values of ``channel`` in the frames the page received over the last ``seconds``."""
+    return list(p.state(f"riderlive.history({channel!r}, {seconds})"))
+
+
+def test_page_loads_live_without_console_errors(live_page: PageUnderTest) -> None:
+    live_page.wait_for("riderlive.fps > 0", timeout=5)
+    assert live_page.state("riderlive.state") == "live"
+    assert live_page.page.locator("#conn").inner_text() == "live"
+    assert live_page.page.locator("#estop").is_visible()
+    assert live_page.page.locator("#gone").is_hidden()
+    assert live_page.state("riderlive.errors") == []
+    assert live_page.errors == []
+
+
+def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page: PageUnderTest) -> None:
+    names = list(rider_rig().names)
+    poses = []
+    for _ in range(2):
+        seq, values, pose = live_page.state("[riderlive.seq, riderlive.values, riderlive.pose.rider]")
+        poses.append((seq, values, pose))
+        # The page's pose is the Python skeleton's pose of the same frame.
+        expected = np.array(bone_quaternions(values)).reshape(-1, 4)
+        got = np.array([pose[n] for n in names])
+        assert np.allclose(got, expected, atol=1e-9)
+        time.sleep(0.4)
+    (seq0, _, pose0), (seq1, _, pose1) = poses
+    assert seq1 > seq0
+    assert not np.allclose(pose0["lower_back"], pose1["lower_back"], atol=1e-6), "the rider did not move"
+
+
+def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Server) -> None:
+    assert server.get("/api/state")["tick"]["estop"] is False
+    live_page.page.locator("#estop").click()
+    deadline = time.monotonic() + 5
+    while not server.get("/api/state")["tick"]["estop"]:
+        assert time.monotonic() < deadline, "the e-stop never reached the service"
+        time.sleep(0.05)
+    live_page.wait_for("document.getElementById('estop').classList.contains('engaged')", timeout=5)
+    live_page.page.locator("#reset").click()
+    deadline = time.monotonic() + 5
+    while server.get("/api/state")["tick"]["estop"]:
+        assert time.monotonic() < deadline, "reset did not clear the e-stop"
+        time.sleep(0.05)
+
+
+def _move_slider(p: PageUnderTest, key: str, value: float) -> None:
+    p.page.evaluate(
+        """([key, value]) => {
+            const input = document.querySelector(`#params input[data-key="${key}"]`);
+            input.value = value;
+            input.dispatchEvent(new Event("input", { bubbles: true }));
+        }""",
+        [key, value],
+    )
+
+
+def test_weight_slider_changes_the_next_frames(live_page: PageUnderTest, server: Server) -> None:
+    key = "knees.lift_offset"
+    before_param = server.get("/api/params")[key]
+    live_page.wait_for(f"document.querySelector('#params input[data-key=\"{key}\"]') !== null")
+    live_page.wait_for("riderlive.history('lf_knee.ty', 2).length > 100", timeout=10)
+    before = _recent(live_page, "lf_knee.ty", 1.0)
+    _move_slider(live_page, key, before_param - 2.0)
+    deadline = time.monotonic() + 5
+    while server.get("/api/params")[key] != pytest.approx(before_param - 2.0, abs=0.02):
+        assert time.monotonic() < deadline, "the slider never reached the service"
+        time.sleep(0.05)
+    time.sleep(1.2)
+    after = _recent(live_page, "lf_knee.ty", 1.0)
+    try:
+        assert len(before) > 30 and len(after) > 30
+        # lift_offset is in thesis units; the service speaks metres (its default length scale).
+        scale = DEFAULT_SCALE
+        shift = np.median(after) - np.median(before)
+        assert shift == pytest.approx(-2.0 / scale, abs=0.01)
+        assert max(after) < min(before)
+    finally:
+        server.request("PATCH", "/api/params", {key: before_param})
+
+
+def test_recorded_take_replays_on_the_page(live_page: PageUnderTest, server: Server) -> None:
+    page: Any = live_page.page
+    page.locator("#rec-start").click()
+    live_page.wait_for("document.getElementById('rec-now').textContent.startsWith('recording')", timeout=5)
+    time.sleep(1.0)
+    page.locator("#rec-stop").click()
+    live_page.wait_for("document.querySelectorAll('#takes li').length > 0", timeout=5)
+    name = page.locator("#takes li").first.inner_text()
+    assert name in [t["name"] for t in server.get("/api/takes")["takes"]]
+    seq = live_page.state("riderlive.seq")
+    page.locator("#takes li").first.click()
+    deadline = time.monotonic() + 5
+    while server.get("/api/state")["source"].get("kind") != "replay":
+        assert time.monotonic() < deadline, "clicking the take did not start its replay"
+        time.sleep(0.05)
+    assert server.get("/api/state")["source"].get("take") == name
+    live_page.wait_for(f"riderlive.seq > {seq} + 30", timeout=5)
+    live_page.wait_for("document.getElementById('src-now').textContent.includes('replay')", timeout=5)
+    server.request("PUT", "/api/source", {"kind": "procedural", "gait": "trot", "speed": 4.0})
+    assert live_page.errors == []
+
+
+def test_views_switch_the_camera(live_page: PageUnderTest) -> None:
+    spots = {}
+    for view in ("side", "front", "perspective"):
+        live_page.page.locator(f"[data-view={view}]").click()
+        spots[view] = live_page.state("riderlive.camera")
+    assert len({tuple(np.round(v, 3)) for v in spots.values()}) == 3
+    side, front = np.array(spots["side"]), np.array(spots["front"])
+    assert abs(side[2]) > 3 * abs(side[0])  # looks along z: at the horse's flank
+    assert abs(front[0]) > 3 * abs(front[2])  # looks along x: at the horse's chest
+
+
+def test_page_shows_a_vanished_service_and_reconnects(browser: Any, tmp_path: Any) -> None:
+    s = Server(free_port(), tmp_path)
+    s.start()
+    try:
+        p = open_page(browser, s.url)
+        p.wait_for("riderlive.connected && riderlive.frames > 5")
+        first = p.state("riderlive.session")
+        s.stop()
+        p.wait_for("riderlive.state === 'gone'", timeout=5)
+        assert p.page.locator("#gone").is_visible()
+        assert p.page.locator("#conn").inner_text() == "service gone"
+        s.start()
+        p.wait_for("riderlive.connected && riderlive.session !== null", timeout=15)
+        p.wait_for(f"riderlive.session !== {first!r}", timeout=5)
+        assert p.page.locator("#gone").is_hidden()
+        p.page.close()
+    finally:
+        s.stop()
