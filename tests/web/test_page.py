@@ -147,3 +147,53 @@ def test_page_shows_a_vanished_service_and_reconnects(browser: Any, tmp_path: An
         p.page.close()
     finally:
         s.stop()
+
+
+def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
+    """A status message shaped like the rig's ``RigStatus.to_dict()`` fills the servo table."""
+    assert live_page.page.locator("#rig").is_hidden()  # no rig attached to this service
+    rig = {
+        "state": "running",
+        "fault": None,
+        "servos": [
+            {
+                "name": "lower_back",
+                "id": 1,
+                "goal_deg": 12.5,
+                "present_deg": 11.0,
+                "tracking_error_deg": 1.5,
+                "temperature_c": 41,
+                "hardware_error": [],
+            },
+            {
+                "name": "head<b>",
+                "id": 2,
+                "goal_deg": -3.0,
+                "present_deg": None,
+                "tracking_error_deg": None,
+                "temperature_c": 77,
+                "hardware_error": ["overheating"],
+            },
+        ],
+    }
+    # Handle the message and read the table in the same turn, before any real status arrives.
+    shown = live_page.page.evaluate(
+        """(rig) => {
+            riderlive.link.handle({type: "status", estop: false, rig});
+            const rows = [...document.querySelectorAll("#servos tbody tr")];
+            return {
+                visible: !document.getElementById("rig").hidden,
+                rows: rows.map((r) => [...r.cells].map((c) => c.textContent)),
+                classes: rows.map((r) => r.className),
+                state: document.getElementById("rigstate").textContent,
+            };
+        }""",
+        rig,
+    )
+    assert shown["visible"]
+    assert shown["rows"] == [
+        ["lower_back", "12.5", "11.0", "41.0", "—"],
+        ["head<b>", "-3.0", "—", "77.0", "overheating"],  # names are shown as text, not markup
+    ]
+    assert shown["classes"] == ["", "fault"]
+    assert shown["state"] == "rig: running"

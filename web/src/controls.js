@@ -224,20 +224,25 @@ export class Controls {
     }
   }
 
-  /** Rig status from the websocket: the servo table appears when a rig is attached. */
+  /** Status from the websocket (the tick's status; `rig` is the rig's, with its servos). */
   status(msg) {
-    const servos = msg.servos || (msg.rig && msg.rig.servos);
-    $("rigstate").textContent = msg.rig_state || msg.state || (msg.rig && msg.rig.state) || "";
+    if (typeof msg.estop === "boolean") $("estop").classList.toggle("engaged", msg.estop);
+    const rig = msg.rig || null;
+    const fault = rig && rig.fault ? ` · fault: ${rig.fault.reason || rig.fault.kind || JSON.stringify(rig.fault)}` : "";
+    $("rigstate").textContent = rig ? `rig: ${rig.state}${fault}` : "";
+    const servos = rig ? rig.servos : null;
     if (!Array.isArray(servos) || servos.length === 0) {
       $("rig").hidden = true;
       return;
     }
     $("rig").hidden = false;
-    const fmt = (v) => (typeof v === "number" ? v.toFixed(1) : v ?? "");
+    const num = (v) => (typeof v === "number" ? v.toFixed(1) : "—");
+    const text = (v) => String(v).replace(/[&<>"]/g, (c) => `&#${c.charCodeAt(0)};`);
     $("servos").tBodies[0].innerHTML = servos
-      .map((s) => {
-        const err = s.error || s.hardware_error || "";
-        return `<tr class="${err ? "fault" : ""}"><td>${s.name ?? s.id}</td><td>${fmt(s.goal)}</td><td>${fmt(s.present)}</td><td>${fmt(s.temperature)}</td><td>${err || "—"}</td></tr>`;
+      .map((sv) => {
+        const errs = Array.isArray(sv.hardware_error) ? sv.hardware_error.join(", ") : sv.hardware_error || "";
+        const track = typeof sv.tracking_error_deg === "number" ? ` title="tracking error ${num(sv.tracking_error_deg)}°"` : "";
+        return `<tr class="${errs ? "fault" : ""}"><td>${text(sv.name ?? sv.id)}</td><td>${num(sv.goal_deg)}</td><td${track}>${num(sv.present_deg)}</td><td>${num(sv.temperature_c)}</td><td>${errs ? text(errs) : "—"}</td></tr>`;
       })
       .join("");
   }
