@@ -11,6 +11,7 @@ from riderlive import __version__
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+    "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
 
