@@ -197,6 +197,11 @@ export class Controls {
     }
     this.state.service = state;
     const src = state.source || {};
+    if (!this.sourceShown && src.kind) {
+      this.sourceShown = true;
+      $("src-kind").value = src.kind;
+      this.showSourceRows();
+    }
     $("src-now").textContent = src.kind ? `now: ${src.kind}${src.gait ? ` ${src.gait}` : ""}${src.take ? ` ${src.take}` : ""}` : "";
     const rec = state.recording;
     $("rec-now").textContent = rec ? `recording ${rec.name} (${rec.rows} rows)` : "";

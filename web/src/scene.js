@@ -26,9 +26,9 @@ import { qmul, rotate } from "./rig.js";
 
 const UP = new Vector3(0, 1, 0);
 const VIEWS = {
-  side: { pos: [0.2, 1.3, 5.4], target: [0.1, 1.1, 0] },
-  front: { pos: [5.2, 1.5, 0.0], target: [0, 1.1, 0] },
-  perspective: { pos: [3.4, 2.6, 3.8], target: [0, 1.1, 0] },
+  side: { pos: [0.15, 1.2, 4.4], target: [0.15, 1.05, 0] },
+  front: { pos: [4.4, 1.4, 0.0], target: [0, 1.05, 0] },
+  perspective: { pos: [2.9, 2.2, 3.3], target: [0, 1.05, 0] },
 };
 const CHAIN_SEGMENT = 0.07;
 
