@@ -63,7 +63,9 @@ def start_server(workdir: Path) -> tuple[subprocess.Popen[bytes], str]:
     root = Path(riderlive.__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": str(root)}
     log = (workdir / "serve.log").open("wb")
-    proc = subprocess.Popen([sys.executable, "-m", "riderlive", "serve", "--config", str(config)], env=env, stdout=log, stderr=log)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "riderlive", "serve", "--config", str(config)], env=env, stdout=log, stderr=log
+    )
     url = f"http://127.0.0.1:{port}"
     for _ in range(200):
         try:
