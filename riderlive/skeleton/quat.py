@@ -128,3 +128,19 @@ def to_unity(q: Quat) -> Quat:
     rotation's axis maps like a pseudo-vector: ``(-z, -y, -x, w)``.
     """
     return (-q[2], -q[1], -q[0], q[3])
+
+
+def to_unreal(q: Quat) -> Quat:
+    """The same rotation in Unreal's axes (x forward, y right, z up; left-handed): ``(-x, -z, -y, w)``.
+
+    Positions map as ``(x, z, y)`` and metres to centimetres (x 100).
+    """
+    return (-q[0], -q[2], -q[1], q[3])
+
+
+def to_godot(q: Quat) -> Quat:
+    """The same rotation in Godot's axes (x right, y up, -z forward; right-handed): ``(z, y, -x, w)``.
+
+    Positions map as ``(z, y, -x)``.
+    """
+    return (q[2], q[1], -q[0], q[3])

@@ -33,7 +33,7 @@ def _side(prefix: str, rows: list[tuple[str, str, Vec3]]) -> list[tuple[str, str
     def named(n: str) -> str:
         return n.replace("lf_", prefix)
 
-    return [(named(n), named(p), (o[0], o[1], o[2] * mirror)) for n, p, o in rows]
+    return [(named(n), named(p), (o[0], o[1], o[2] * mirror + 0.0)) for n, p, o in rows]
 
 
 _LEFT_LIMBS: list[tuple[str, str, Vec3]] = [

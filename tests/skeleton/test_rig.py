@@ -238,20 +238,22 @@ def test_hello_is_strict_json_with_a_complete_humanoid_map() -> None:
     assert {"hips", "leftHand", "rightUpperLeg"} <= vrm
 
 
+ENGINE_AXES = {
+    "unity": (quat.to_unity, lambda a: (a[2], a[1], a[0])),
+    "unreal": (quat.to_unreal, lambda a: (a[0], a[2], a[1])),
+    "godot": (quat.to_godot, lambda a: (a[2], a[1], -a[0])),
+}
+
+
+@pytest.mark.parametrize("engine", sorted(ENGINE_AXES))
 @settings(max_examples=50, deadline=None)
 @given(
-    st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(lambda a: quat.norm(a) > 0.1),
-    st.floats(-180.0, 180.0),
-    st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)),
+    axis=st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(lambda a: quat.norm(a) > 0.1),
+    angle=st.floats(-180.0, 180.0),
+    v=st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)),
 )
-def test_unity_conversion_commutes_with_rotation(axis: quat.Vec3, angle: float, v: quat.Vec3) -> None:
+def test_engine_conversions_commute_with_rotation(engine: str, axis: quat.Vec3, angle: float, v: quat.Vec3) -> None:
+    """Converting then rotating equals rotating then converting (engines rotate with q v q*)."""
+    convert, position = ENGINE_AXES[engine]
     q = quat.from_axis_angle(quat.unit(axis), angle)
-
-    def swap(a: quat.Vec3) -> quat.Vec3:
-        return (a[2], a[1], a[0])
-
-    # In a left-handed frame a quaternion rotates with the mirrored sense; the Unity
-    # convention (Quaternion * Vector3) matches the same formula on the swapped axes
-    # with the conjugate handedness, which to_unity encodes.
-    uq = quat.to_unity(q)
-    assert np.allclose(quat.rotate(uq, swap(v)), swap(quat.rotate(q, v)), atol=1e-9)
+    assert np.allclose(quat.rotate(convert(q), position(v)), position(quat.rotate(q, v)), atol=1e-9)
