@@ -1,14 +1,14 @@
 """The default horse skeleton and how the horse channels drive it.
 
-Channels are metres and degrees in the horse's body frame (origin on the ground under
-the middle of the body, ``+x`` forward, ``+y`` up, ``+z`` right). The hoof channels
-are hoof positions relative to the body: ``tx`` forward from the middle, ``ty``
-height above the ground, ``tz`` sideways from the leg's rest line; the rear pivot's
-``tx ty tz`` are its position (``ty`` its height above the ground). The rear pivot turns
-by ``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last), like ``riderlive.physics``' frame
-of the hindquarters; the tail root sits where its dock is. :data:`HORSE_NEUTRAL` is the standing horse,
-whose pose is the rest pose. ``rearPivot.rz`` > 0 lifts the front (pitch up),
-``rearPivot.rx`` > 0 rolls the right side down, ``root.ry`` > 0 turns left.
+Channels are metres and degrees, as :mod:`riderlive.horse` emits them: every channel is
+0 for the square-standing horse, which is this skeleton's rest pose. Hoof ``tx`` is
+forward of the hoof's standing spot, ``ty`` its height above the ground, ``tz`` to the
+horse's left; ``rearPivot.t*`` displace the hips from standing (``tz`` + left);
+``rearPivot.rz`` > 0 lifts the front (pitch up), ``rearPivot.rx`` > 0 rolls to the left
+(left side down), ``root.ry`` > 0 turns left. The rear pivot turns by
+``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last). The skeleton's own axes are those of
+:mod:`riderlive.skeleton.rig` (``+z`` is the horse's right), so the ``+ left`` channels
+drive with a negative sign.
 """
 
 from __future__ import annotations
@@ -24,16 +24,18 @@ def _leg(hoof: str, parent: str, right: bool, knee: Vec3, fetlock: Vec3) -> list
     side = _SIDE if right else -_SIDE
     middle = "Knee" if hoof[1] == "f" else "Hock"
     return [
-        (f"{hoof}Leg", parent, (0.0, 0.0, side)),
+        (f"{hoof}Leg", parent, (0.0, _LEG_ROOT_HEIGHT, side)),
         (f"{hoof}{middle}", f"{hoof}Leg", knee),
         (f"{hoof}Fetlock", f"{hoof}{middle}", fetlock),
         (f"{hoof}Hoof", f"{hoof}Fetlock", (0.02, -0.18, 0.0)),
     ]
 
 
-_FRONT_KNEE: Vec3 = (0.10, -0.62, 0.0)
-_FRONT_CANNON: Vec3 = (-0.07, -0.34, 0.0)
-_HIND_HOCK: Vec3 = (-0.17, -0.50, 0.0)
+_LEG_ROOT_HEIGHT = 0.3
+"""The legs hang from the top of the shoulder blade and the croup, above the joints."""
+_FRONT_KNEE: Vec3 = (0.12, -0.92, 0.0)
+_FRONT_CANNON: Vec3 = (-0.09, -0.34, 0.0)
+_HIND_HOCK: Vec3 = (-0.17, -0.80, 0.0)
 _HIND_CANNON: Vec3 = (0.05, -0.32, 0.0)
 
 _ROWS: list[tuple[str, str | None, Vec3]] = [
@@ -64,26 +66,12 @@ def _bones() -> tuple[Bone, ...]:
 
 
 BONES = _bones()
-_REST = {b.name: b for b in BONES}
-
-
-def _rest_x(name: str) -> float:
-    """Rest forward position of a joint relative to the body middle, metres."""
-    x = 0.0
-    i = next(k for k, b in enumerate(BONES) if b.name == name)
-    while i >= 0:
-        x += BONES[i].offset[0]
-        i = BONES[i].parent
-    return x
 
 
 HOOVES: tuple[str, ...] = ("lf", "rf", "lb", "rb")
 
-HORSE_NEUTRAL: dict[str, float] = {
-    **{f"{h}Hoof.tx": round(_rest_x(f"{h}Hoof"), 9) for h in HOOVES},
-    "rearPivot.ty": _REST["rearPivot"].offset[1],
-}
-"""Horse channel values of the standing horse (the rest pose); other channels are 0."""
+HORSE_NEUTRAL: dict[str, float] = {}
+"""Horse channel values of the standing horse (the rest pose): all 0."""
 
 HORSE_RIG = Rig(
     name="horse",
@@ -91,7 +79,7 @@ HORSE_RIG = Rig(
     neutral=HORSE_NEUTRAL,
     rotations=(
         Drive("root.ry", "root", Y),
-        Drive("rearPivot.rx", "rearPivot", X),
+        Drive("rearPivot.rx", "rearPivot", X, -1.0),
         Drive("rearPivot.rz", "rearPivot", Z),
         Drive("rearPivot.ry", "rearPivot", Y),
         Drive("backMid.rz", "backMid", Z),
@@ -99,10 +87,10 @@ HORSE_RIG = Rig(
     translations=(
         Drive("root.tx", "root", X),
         Drive("root.ty", "root", Y),
-        Drive("root.tz", "root", Z),
+        Drive("root.tz", "root", Z, -1.0),
         Drive("rearPivot.tx", "rearPivot", X),
         Drive("rearPivot.ty", "rearPivot", Y),
-        Drive("rearPivot.tz", "rearPivot", Z),
+        Drive("rearPivot.tz", "rearPivot", Z, -1.0),
     ),
     chains=tuple(
         Chain(
@@ -110,7 +98,7 @@ HORSE_RIG = Rig(
             lower=f"{h}{'Knee' if h[1] == 'f' else 'Hock'}",
             end=f"{h}Fetlock",
             frame="root",
-            target=(Offset(f"{h}Hoof.tx", X), Offset(f"{h}Hoof.ty", Y), Offset(f"{h}Hoof.tz", Z)),
+            target=(Offset(f"{h}Hoof.tx", X), Offset(f"{h}Hoof.ty", Y), Offset(f"{h}Hoof.tz", Z, -1.0)),
         )
         for h in HOOVES
     ),

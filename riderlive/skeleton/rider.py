@@ -4,7 +4,7 @@ The skeleton's origin is the seat point on the saddle (the horse's ``saddle`` bo
 axes as in :mod:`riderlive.skeleton.rig` (``+x`` forward, ``+y`` up, ``+z`` right).
 The rest pose is the rider sitting on the standing horse: the rider channels given by
 the default rules for :data:`~riderlive.skeleton.horse.HORSE_NEUTRAL` are the rig's
-neutral values, and every channel acts as a delta from them.
+neutral values (the rules for an all-zero horse frame), and every channel acts as a delta from them.
 
 Signs: ``*.rz`` > 0 bends forward (chest or nose down) for the back, waist, hips and
 head, and lifts the toes for the feet; ``*.ry`` > 0 leans to the right for the back,

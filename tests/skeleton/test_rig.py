@@ -151,16 +151,16 @@ def test_hooves_land_on_their_targets(moves: list[float]) -> None:
     rest = dict(zip(HORSE_RIG.names, HORSE_RIG.rest_world(), strict=True))
     for k, hoof in enumerate(("lf", "rf", "lb", "rb")):
         dx, dy, dz = moves[3 * k : 3 * k + 3]
-        values[f"{hoof}Hoof.tx"] = HORSE_NEUTRAL[f"{hoof}Hoof.tx"] + dx
+        values[f"{hoof}Hoof.tx"] = HORSE_NEUTRAL.get(f"{hoof}Hoof.tx", 0.0) + dx
         values[f"{hoof}Hoof.ty"] = abs(dy)
         values[f"{hoof}Hoof.tz"] = dz
     pose = horse_pose(values)
     world = dict(zip(HORSE_RIG.names, pose.world_positions, strict=True))
     bones = {b.name: b for b in HORSE_RIG.bones}
     for hoof in ("lf", "rf", "lb", "rb"):
-        want = np.array(
-            (values[f"{hoof}Hoof.tx"], values[f"{hoof}Hoof.ty"], rest[f"{hoof}Hoof"][2] + values[f"{hoof}Hoof.tz"])
-        )
+        # tx forward of the standing spot, ty above the ground, tz to the horse's left (-z).
+        r = rest[f"{hoof}Hoof"]
+        want = np.array((r[0] + values[f"{hoof}Hoof.tx"], values[f"{hoof}Hoof.ty"], r[2] - values[f"{hoof}Hoof.tz"]))
         middle = f"{hoof}Knee" if hoof[1] == "f" else f"{hoof}Hock"
         reach = quat.norm(bones[middle].offset) + quat.norm(bones[f"{hoof}Fetlock"].offset)
         fetlock_want = want - np.array(bones[f"{hoof}Hoof"].offset)
@@ -210,6 +210,8 @@ def test_signs_follow_the_documented_convention() -> None:
     rest_nose = HORSE_RIG.rest_world()[nose]
     up = horse_pose({**HORSE_NEUTRAL, "rearPivot.rz": 10.0}).world_positions[nose]
     assert up[1] > rest_nose[1] + 0.1  # pitch up lifts the front
+    rolled = horse_pose({**HORSE_NEUTRAL, "rearPivot.rx": 10.0}).world_positions[HORSE_RIG.index["saddle"]]
+    assert rolled[2] < -0.05  # + rolls to the left: the body above the pivot leans to -z
     toes = rig.index["lf_toes"]
     lifted = rider_pose({**RIDER_NEUTRAL, "lf_foot.rz": RIDER_NEUTRAL["lf_foot.rz"] + 20.0})
     assert lifted.world_positions[toes][1] > rig.rest_world()[toes][1] + 0.02
