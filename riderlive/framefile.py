@@ -102,46 +102,58 @@ def _first_bad_cell(source: str, text: str, names: Sequence[str]) -> FrameFileEr
             except ValueError:
                 return FrameFileError(source, f"not a number: {cell!r}", line=line_no, column=name)
             if not np.isfinite(value):
-                return FrameFileError(source, f"not finite: {cell!r}", line=line_no, column=name)
+                return FrameFileError(source, f"not finite: {cell.strip()}", line=line_no, column=name)
     return FrameFileError(source, "could not be parsed as CSV")
 
 
-def _read_text(path: str) -> str:
+def _read_bytes(path: str) -> bytes:
     if path == "-":
-        return sys.stdin.read()
+        return sys.stdin.buffer.read()
     try:
-        return Path(path).read_text(encoding="utf-8")
+        return Path(path).read_bytes()
     except FileNotFoundError:
         raise FrameFileError(path, "file not found") from None
+    except IsADirectoryError:
+        raise FrameFileError(path, "is a directory") from None
+
+
+def _decode(source: str, data: bytes) -> str:
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise FrameFileError(path, f"not UTF-8 text ({exc.reason})") from None
+        raise FrameFileError(source, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
-def _read_csv(source: str, text: str, required: Iterable[str]) -> FrameTable:
+def _text(source: str, data: bytes | Path) -> str:
+    return _decode(source, data.read_bytes() if isinstance(data, Path) else data)
+
+
+def _read_csv(source: str, data: bytes | Path, required: Iterable[str]) -> FrameTable:
+    """Parse with polars (fast, memory-mapped for files); on any doubt, walk the text."""
     import polars as pl
 
-    header = next(csv.reader(io.StringIO(text)), None)
+    if isinstance(data, Path):
+        with data.open("rb") as fh:
+            first_line = fh.readline()
+    else:
+        first_line = data.split(b"\n", 1)[0]
+    header = next(csv.reader([_decode(source, first_line).strip("\r\ufeff")]), None)
     if not header:
         raise FrameFileError(source, "empty file: expected a header of channel names", line=1)
     names = [h.strip() for h in header]
     _check_names(source, names, required)
     try:
-        frame = pl.read_csv(
-            io.StringIO(text),
-            schema={n: pl.Float64 for n in names},
-            has_header=True,
-            new_columns=names,
-        )
-        data = frame.to_numpy(order="c").astype(np.float64, copy=False)
+        frame = pl.read_csv(data, schema={n: pl.Float64 for n in names}, has_header=True, new_columns=names)
     except Exception:  # any parse failure gets an exact location below
-        raise _first_bad_cell(source, text, names) from None
-    if data.ndim != 2 or data.shape[1] != len(names):
-        raise _first_bad_cell(source, text, names)
-    finite = np.isfinite(data)
-    if not finite.all():
-        row, col = np.argwhere(~finite)[0]
-        raise FrameFileError(source, f"not finite: {data[row, col]!r}", line=int(row) + 2, column=names[col])
-    return _split_time(names, data)
+        raise _first_bad_cell(source, _text(source, data), names) from None
+    channels = [n for n in names if n != TIME]
+    values = frame.select(channels).to_numpy(order="c").astype(np.float64, copy=False)
+    times = frame[TIME].to_numpy().astype(np.float64) if TIME in names else None
+    del frame
+    finite = np.isfinite(values).all() and (times is None or np.isfinite(times).all())
+    if not finite:  # NaN, inf, or an empty cell read as null
+        raise _first_bad_cell(source, _text(source, data), names)
+    return FrameTable(tuple(channels), values, times)
 
 
 def _split_time(names: list[str], data: FloatArray) -> FrameTable:
@@ -187,10 +199,13 @@ def _read_jsonl(source: str, text: str, required: Iterable[str]) -> FrameTable:
 def read_frames(path: str, required: Iterable[str] = (), fmt: str | None = None) -> FrameTable:
     """Read a whole frame file, validated; see the module docstring."""
     kind = file_format(path, fmt)
-    text = _read_text(path)
     source = "<stdin>" if path == "-" else path
     required = tuple(required)
-    return _read_csv(source, text, required) if kind == "csv" else _read_jsonl(source, text, required)
+    if kind == "csv":
+        if path != "-" and not Path(path).is_file():
+            raise FrameFileError(path, "file not found")
+        return _read_csv(source, _read_bytes(path) if path == "-" else Path(path), required)
+    return _read_jsonl(source, _decode(source, _read_bytes(path)), required)
 
 
 @contextmanager
