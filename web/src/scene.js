@@ -26,9 +26,9 @@ import { qmul, rotate } from "./rig.js";
 
 const UP = new Vector3(0, 1, 0);
 const VIEWS = {
-  side: { pos: [0.15, 1.2, 4.4], target: [0.15, 1.05, 0] },
-  front: { pos: [4.4, 1.4, 0.0], target: [0, 1.05, 0] },
-  perspective: { pos: [2.9, 2.2, 3.3], target: [0, 1.05, 0] },
+  side: { pos: [0.15, 1.3, 4.9], target: [0.15, 1.15, 0] },
+  front: { pos: [4.9, 1.5, 0.0], target: [0, 1.15, 0] },
+  perspective: { pos: [3.2, 2.4, 3.6], target: [0, 1.1, 0] },
 };
 const CHAIN_SEGMENT = 0.07;
 
@@ -108,7 +108,7 @@ export class View {
     body.scale.set(0.8, 0.3, 0.26);
     this.scene.add(body);
     this.body = body;
-    const head = new Mesh(new BoxGeometry(0.16, 0.5, 0.18), horseMat);
+    const head = new Mesh(new CylinderGeometry(0.06, 0.1, 0.52, 10), horseMat);
     this.scene.add(head);
     this.horseHead = head;
     this.hooves = ["lf", "rf", "lb", "rb"].map((h) => {
