@@ -26,6 +26,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+from PIL import Image
 from playwright.sync_api import sync_playwright
 from websockets.sync.client import connect
 
@@ -150,7 +151,10 @@ def main() -> int:
                     for view in ("side", "front", "perspective"):
                         page.evaluate(f"() => riderlive.setView('{view}')")
                         time.sleep(0.6)
-                        page.screenshot(path=str(args.screenshots / f"page_{view}.png"))
+                        shot = args.screenshots / f"page_{view}.png"
+                        page.screenshot(path=str(shot))
+                        small = Image.open(shot).convert("RGB").quantize(colors=96)
+                        small.save(shot, optimize=True)
                 browser.close()
         finally:
             stop.set()

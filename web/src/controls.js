@@ -211,6 +211,8 @@ export class Controls {
     try {
       const takes = await api("GET", "/api/takes");
       const list = (Array.isArray(takes) ? takes : takes.takes || []).map((t) => (typeof t === "string" ? t : t.name));
+      if (list.join("\n") === this.shownTakes) return;
+      this.shownTakes = list.join("\n");
       const ul = $("takes");
       ul.innerHTML = "";
       for (const name of list) {

@@ -113,6 +113,7 @@ async function start() {
   let rafCount = 0;
   let lastSecond = performance.now();
   let lastLatest = null;
+  let lastPlot = 0;
   function tick(now) {
     rafCount += 1;
     if (now - lastSecond >= 1000) {
@@ -161,7 +162,10 @@ async function start() {
       const si = horseRig.index.saddle;
       view.update(horseW, placed(solve(riderRig, {}), horseW.rotations[si], horseW.positions[si]), 0);
     }
-    plots.draw();
+    if (now - lastPlot >= 33) {
+      lastPlot = now; // plots at <= 30 Hz: enough for the eye, half the canvas work
+      plots.draw();
+    }
     requestAnimationFrame(tick);
   }
   requestAnimationFrame(tick);

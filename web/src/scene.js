@@ -108,7 +108,7 @@ export class View {
     body.scale.set(0.8, 0.3, 0.26);
     this.scene.add(body);
     this.body = body;
-    const head = new Mesh(new CylinderGeometry(0.06, 0.1, 0.52, 10), horseMat);
+    const head = new Mesh(new CylinderGeometry(0.1, 0.06, 0.52, 10), horseMat);
     this.scene.add(head);
     this.horseHead = head;
     this.hooves = ["lf", "rf", "lb", "rb"].map((h) => {
