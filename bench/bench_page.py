@@ -102,16 +102,18 @@ def _feed(url: str, stop: threading.Event, rate: float) -> None:
                 time.sleep(delay)
 
 
-def sample(page: object, seconds: float) -> tuple[list[float], list[float]]:
+def sample(page: object, seconds: float) -> tuple[list[float], list[float], list[float]]:
     fps: list[float] = []
     rate: list[float] = []
+    scale: list[float] = []
     time.sleep(1.5)
     for _ in range(int(seconds)):
         time.sleep(1.0)
-        f, r = page.evaluate("() => [riderlive.fps, riderlive.frameRate || 0]")  # type: ignore[attr-defined]
+        f, r, s = page.evaluate("() => [riderlive.fps, riderlive.frameRate || 0, riderlive.renderScale || 1]")  # type: ignore[attr-defined]
         fps.append(f)
         rate.append(r)
-    return fps, rate
+        scale.append(s)
+    return fps, rate, scale
 
 
 def main() -> int:
@@ -134,14 +136,14 @@ def main() -> int:
                 viewport = {"width": args.width, "height": args.height}
                 blank = browser.new_page(viewport=viewport)
                 blank.set_content(BLANK)
-                base_fps, _ = sample(blank, min(args.seconds, 8))
+                base_fps, _, _ = sample(blank, min(args.seconds, 8))
                 blank.close()
 
                 page = browser.new_page(viewport=viewport)
                 page.goto(url + "/")
                 page.wait_for_function("() => window.riderlive && riderlive.connected && riderlive.frames > 10")
                 page.evaluate("() => riderlive.setView('perspective')")
-                fps, rate = sample(page, args.seconds)
+                fps, rate, scale = sample(page, args.seconds)
                 driver = page.evaluate("() => riderlive.driver")
                 state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
                 fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
@@ -169,6 +171,8 @@ def main() -> int:
     print(f"viewport {args.width}x{args.height}, {len(fps)} one-second samples")
     print(f"page fps      median {med:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
     print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
+    print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")
+    print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
     print(f"baseline fps  (empty page, same browser) median {base:.1f}")
     print(f"ratio page/baseline {med / base:.2f}")
     print(f"bundle {static_size() / 1e6:.3f} MB in {STATIC_DIR.name}/ (budget 1.5 MB)")

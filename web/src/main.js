@@ -110,6 +110,24 @@ async function start() {
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
 
+  // Dynamic resolution: render fewer pixels while the page runs below 40 fps (a busy
+  // machine, software WebGL), go back up after 3 s above 55 fps.
+  const SCALES = [1, 0.75, 0.5];
+  let scaleStep = 0;
+  let goodSeconds = 0;
+  page.renderScale = 1;
+  function adaptScale() {
+    if (page.fps < 40 && scaleStep < SCALES.length - 1) {
+      scaleStep += 1;
+      goodSeconds = 0;
+    } else if (page.fps > 55 && scaleStep > 0 && ++goodSeconds >= 3) {
+      scaleStep -= 1;
+      goodSeconds = 0;
+    } else return;
+    page.renderScale = SCALES[scaleStep];
+    view.setScale(page.renderScale);
+  }
+
   let rafCount = 0;
   let lastSecond = performance.now();
   let lastLatest = null;
@@ -122,6 +140,7 @@ async function start() {
       rafCount = 0;
       frameCount = 0;
       lastSecond = now;
+      adaptScale();
       $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
       $("driver").textContent = page.driver ? `driver: ${page.driver}` : "";
     }

@@ -10,8 +10,10 @@ import {
   CylinderGeometry,
   DirectionalLight,
   GridHelper,
+  InstancedMesh,
   Line,
   LineBasicMaterial,
+  Matrix4,
   Mesh,
   MeshLambertMaterial,
   PerspectiveCamera,
@@ -32,37 +34,46 @@ const VIEWS = {
 };
 const CHAIN_SEGMENT = 0.07;
 
-/** Bone segments: a cylinder from each joint's parent to the joint. */
+/** Bone segments: one instanced cylinder (a single draw call) from each joint's parent to the joint. */
 class Bones {
   constructor(scene, rig, material, radius) {
     this.rig = rig;
     const geom = new CylinderGeometry(1, 1, 1, 8, 1);
     geom.translate(0, 0.5, 0);
-    this.meshes = rig.bones.map((b) => {
-      if (b.parent < 0 || rig.bones[b.parent].parent < 0) return null; // the root's placement is no bone
-      const m = new Mesh(geom, material);
-      const r = typeof radius === "function" ? radius(b) : radius;
-      m.userData.r = r;
-      scene.add(m);
-      return m;
+    // The root's placement is no bone; nor is the step from the root to its first joint.
+    this.drawn = rig.bones.map((b, i) => i).filter((i) => {
+      const b = rig.bones[i];
+      return b.parent >= 0 && rig.bones[b.parent].parent >= 0;
     });
+    this.radius = this.drawn.map((i) => (typeof radius === "function" ? radius(rig.bones[i]) : radius));
+    this.mesh = new InstancedMesh(geom, material, this.drawn.length);
+    this.mesh.frustumCulled = false;
+    scene.add(this.mesh);
+    this.m = new Matrix4();
+    this.q = new Quaternion();
+    this.a = new Vector3();
+    this.d = new Vector3();
+    this.s = new Vector3();
   }
 
   update(world) {
-    const a = new Vector3();
-    const d = new Vector3();
-    this.rig.bones.forEach((b, i) => {
-      const m = this.meshes[i];
-      if (!m) return;
-      a.fromArray(world.positions[b.parent]);
+    const { a, d, q, s, m } = this;
+    this.drawn.forEach((i, k) => {
+      const parent = this.rig.bones[i].parent;
+      a.fromArray(world.positions[parent]);
       d.fromArray(world.positions[i]).sub(a);
       const len = d.length();
-      m.visible = len > 1e-4;
-      if (!m.visible) return;
-      m.position.copy(a);
-      m.quaternion.setFromUnitVectors(UP, d.multiplyScalar(1 / len));
-      m.scale.set(m.userData.r, len, m.userData.r);
+      if (len < 1e-6) {
+        s.set(0, 0, 0);
+        q.identity();
+      } else {
+        q.setFromUnitVectors(UP, d.multiplyScalar(1 / len));
+        s.set(this.radius[k], len, this.radius[k]);
+      }
+      m.compose(a, q, s);
+      this.mesh.setMatrixAt(k, m);
     });
+    this.mesh.instanceMatrix.needsUpdate = true;
   }
 }
 
@@ -137,9 +148,16 @@ export class View {
     this.viewName = name;
   }
 
+  /** Render at `scale` x the canvas' CSS size (fewer pixels when the machine is busy). */
+  setScale(scale) {
+    this.scale = scale;
+    this.resize();
+  }
+
   resize() {
-    const w = this.canvas.clientWidth || 640;
-    const h = this.canvas.clientHeight || 360;
+    const scale = this.scale || 1;
+    const w = Math.round((this.canvas.clientWidth || 640) * scale);
+    const h = Math.round((this.canvas.clientHeight || 360) * scale);
     if (this.canvas.width !== w || this.canvas.height !== h) {
       this.renderer.setSize(w, h, false);
       this.camera.aspect = w / h;
