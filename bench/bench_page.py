@@ -116,6 +116,28 @@ def sample(page: object, seconds: float) -> tuple[list[float], list[float], list
     return fps, rate, scale
 
 
+def solver_cost(n: int = 2000) -> tuple[float, float, float]:
+    """Median microseconds: one rider pose, one horse pose, and (baseline) one rules frame."""
+    from riderlive.horse import DEFAULT_SCALE
+    from riderlive.rules import RiderModel
+    from riderlive.skeleton import bone_quaternions, horse_pose
+
+    horse = ProceduralHorse("trot", 4.0, seed=1)
+    frames = [horse.sample(k / 120) for k in range(n)]
+    model = RiderModel(scale=DEFAULT_SCALE)
+    riders = [model.evaluate(f) for f in frames]
+
+    def per_call(fn: object, items: list[list[float]]) -> float:
+        times = []
+        for item in items:
+            t = time.perf_counter()
+            fn(item)  # type: ignore[operator]
+            times.append(time.perf_counter() - t)
+        return statistics.median(times) * 1e6
+
+    return per_call(bone_quaternions, riders), per_call(horse_pose, frames), per_call(model.evaluate, frames)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
@@ -163,6 +185,7 @@ def main() -> int:
             proc.send_signal(signal.SIGINT)
             proc.wait(10)
 
+    rider_us, horse_us, rules_us = solver_cost()
     med = statistics.median(fps)
     base = statistics.median(base_fps)
     print(f"input: procedural trot streamed into /ws/horse at 120 Hz ({fed} frames accepted); page driver: {driver}")
@@ -175,6 +198,8 @@ def main() -> int:
     print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
     print(f"baseline fps  (empty page, same browser) median {base:.1f}")
     print(f"ratio page/baseline {med / base:.2f}")
+    print(f"python solver: rider pose {rider_us:.0f} us, horse pose {horse_us:.0f} us per frame")
+    print(f"  (baseline: the rules, one frame {rules_us:.1f} us; ratio rider/rules {rider_us / rules_us:.0f})")
     print(f"bundle {static_size() / 1e6:.3f} MB in {STATIC_DIR.name}/ (budget 1.5 MB)")
     print("PASS" if min(fps) >= 30.0 else "FAIL: below 30 fps")
     return 0
