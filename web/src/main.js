@@ -4,7 +4,7 @@
 import { Controls } from "./controls.js";
 import { RiderLink } from "./link.js";
 import { Plots } from "./plots.js";
-import { compileRig, rotate, solve } from "./rig.js";
+import { compileRig, solve } from "./rig.js";
 import { chainPoints, placed, View } from "./scene.js";
 
 const $ = (id) => document.getElementById(id);
@@ -164,13 +164,11 @@ async function start() {
         horse: Object.fromEntries(horseRig.bones.map((b, i) => [b.name, horsePose.localRotations[i]])),
         riderWorld: Object.fromEntries(riderRig.bones.map((b, i) => [b.name, riderW.positions[i]])),
       };
-      // Chain positions are in the horse's root frame.
-      const ri0 = horseRig.index.root;
-      const toHorse = (p) => {
-        const r = rotate(horseW.rotations[ri0], p);
-        const o = horseW.positions[ri0];
-        return [r[0] + o[0], r[1] + o[1], r[2] + o[2]];
-      };
+      // Chain positions (tail_NN.t*, braid_NN.t*) are world positions; on the treadmill the
+      // horse's travel (root.tx, root.tz) is taken out as it is for the horse.
+      const rootTx = follow ? values["root.tx"] || 0 : 0;
+      const rootTz = follow ? values["root.tz"] || 0 : 0;
+      const toHorse = (p) => [p[0] - rootTx, p[1], p[2] - rootTz];
       const ti = horseRig.index.tailRoot;
       view.chain("tail", chainPoints(values, chains.tail, horseW.positions[ti], horseW.rotations[ti], toHorse));
       const hi = riderRig.index.head;

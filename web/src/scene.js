@@ -223,7 +223,7 @@ export class View {
   }
 }
 
-/** Points of a chain from channels `${prefix}_NN.{tx,ty,tz}` (world) or `.{rx,ry,rz}` (local). */
+/** Points of a chain: from `${prefix}_NN.{tx,ty,tz}` (world positions, riderlive.physics) or else `.{rx,ry,rz}` (local). */
 export function chainPoints(values, names, root, rootRot, toWorld) {
   if (names.length === 0) return null;
   const pts = [root];
