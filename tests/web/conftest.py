@@ -45,6 +45,8 @@ class Server:
 
     port: int
     workdir: Path
+    extra_config: str = ""
+    """More TOML sections for the service's config."""
     process: subprocess.Popen[bytes] | None = None
     log: list[Path] = field(default_factory=list)
 
@@ -54,7 +56,9 @@ class Server:
 
     def start(self, timeout: float = 20.0) -> None:
         config = self.workdir / "service.toml"
-        config.write_text(f'[server]\nport = {self.port}\n\n[takes]\ndirectory = "{self.workdir / "takes"}"\n')
+        config.write_text(
+            f'[server]\nport = {self.port}\n\n[takes]\ndirectory = "{self.workdir / "takes"}"\n\n{self.extra_config}'
+        )
         log = self.workdir / f"serve-{len(self.log)}.log"
         self.log.append(log)
         env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")])}
@@ -138,12 +142,12 @@ class PageUnderTest:
         return self.state(expr)
 
 
-def open_page(browser: Any, url: str) -> PageUnderTest:
+def open_page(browser: Any, url: str, path: str = "/") -> PageUnderTest:
     page = browser.new_page(viewport={"width": 1280, "height": 760})
     errors: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(f"uncaught: {e}"))
-    page.goto(url + "/")
+    page.goto(url + path)
     return PageUnderTest(page, errors)
 
 

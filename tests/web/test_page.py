@@ -202,3 +202,28 @@ def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
     ]
     assert shown["classes"] == ["", "fault"]
     assert shown["state"] == "rig: running"
+
+
+def test_page_sends_the_control_token_when_the_service_wants_one(browser: Any, tmp_path: Any) -> None:
+    token = "page-test-token-0123"
+    s = Server(free_port(), tmp_path, extra_config=f'[security]\ntoken = "{token}"\nrequire_token = true\n')
+    s.start()
+    try:
+        without = open_page(browser, s.url)
+        without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
+        without.page.locator("#estop").click()
+        without.wait_for("document.getElementById('message').textContent.includes('control token')", timeout=5)
+        assert s.get("/api/state")["tick"]["estop"] is False
+        without.page.close()
+
+        p = open_page(browser, s.url, f"/#token={token}")
+        p.wait_for("riderlive.connected && riderlive.frames > 5")
+        assert p.state("location.hash") == ""  # the token leaves the address bar
+        p.page.locator("#estop").click()
+        deadline = time.monotonic() + 5
+        while not s.get("/api/state")["tick"]["estop"]:
+            assert time.monotonic() < deadline, "the e-stop with a token never reached the service"
+            time.sleep(0.05)
+        p.page.close()
+    finally:
+        s.stop()

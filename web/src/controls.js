@@ -3,15 +3,36 @@
 
 const $ = (id) => document.getElementById(id);
 
+/**
+ * The control token, when the service requires one (bound beyond loopback): opened as
+ * `/#token=...` (a fragment never reaches the server or its logs), kept for the tab.
+ */
+export function controlToken() {
+  const m = location.hash.match(/token=([^&]+)/);
+  if (m) {
+    sessionStorage.setItem("riderlive.token", decodeURIComponent(m[1]));
+    history.replaceState(null, "", location.pathname + location.search);
+  }
+  return sessionStorage.getItem("riderlive.token");
+}
+
 export async function api(method, path, body) {
   const init = { method, headers: {} };
+  const token = controlToken();
+  if (token) init.headers.authorization = `Bearer ${token}`;
   if (body !== undefined) {
     init.headers["content-type"] = "application/json";
     init.body = JSON.stringify(body);
   }
   const res = await fetch(path, init);
   const text = await res.text();
-  const data = text ? JSON.parse(text) : null;
+  let data = null;
+  try {
+    data = text ? JSON.parse(text) : null;
+  } catch {
+    data = null;
+  }
+  if (res.status === 401 || res.status === 403) throw new Error(`${method} ${path}: the service wants a control token (open the page as /#token=...)`);
   if (!res.ok) throw new Error(`${method} ${path}: ${res.status} ${data && data.detail ? JSON.stringify(data.detail) : text}`);
   return data;
 }

@@ -6,7 +6,8 @@ export class RiderLink {
    * @param {string} url ws:// URL of /ws/rider
    * @param {object} on callbacks: hello(msg), frame(frame), status(msg), state(name, why)
    */
-  constructor(url, on, rate = 120) {
+  constructor(url, on, rate = 120, token = null) {
+    this.token = token;
     this.url = url;
     this.on = on;
     this.rate = rate;
@@ -30,7 +31,9 @@ export class RiderLink {
   connect() {
     let ws;
     try {
-      ws = new WebSocket(this.url);
+      // The token (if any) travels as a subprotocol: browsers cannot set headers here.
+      const protocols = ["riderlive.v1", ...(this.token ? [`riderlive.token.${this.token}`] : [])];
+      ws = new WebSocket(this.url, protocols);
     } catch (err) {
       this.scheduleReconnect(String(err));
       return;

@@ -1,7 +1,7 @@
 // riderlive previs page: wires the link (websocket), the rigs, the 3D view, the plots
 // and the controls. Page state for tests and the curious: window.riderlive.
 
-import { Controls } from "./controls.js";
+import { Controls, controlToken } from "./controls.js";
 import { RiderLink } from "./link.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
@@ -106,7 +106,7 @@ async function start() {
       $("gone").hidden = state !== "gone";
       $("gone-why").textContent = why || "no connection";
     },
-  });
+  }, 120, controlToken());
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
 
