@@ -8,8 +8,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from riderlive.channels import HORSE_NAMES
 from riderlive.horse import DEFAULT_SCALE
-from riderlive.skeleton import bone_quaternions, rider_rig
+from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_rig
 from tests.web.conftest import PageUnderTest, Server, free_port, open_page
 
 pytestmark = pytest.mark.browser
@@ -34,12 +35,18 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
     names = list(rider_rig().names)
     poses = []
     for _ in range(2):
-        seq, values, pose = live_page.state("[riderlive.seq, riderlive.values, riderlive.pose.rider]")
+        seq, values, pose, horse = live_page.state(
+            "[riderlive.seq, riderlive.values, riderlive.pose.rider, riderlive.pose.horse]"
+        )
         poses.append((seq, values, pose))
         # The page's pose is the Python skeleton's pose of the same frame.
         expected = np.array(bone_quaternions(values)).reshape(-1, 4)
         got = np.array([pose[n] for n in names])
         assert np.allclose(got, expected, atol=1e-9)
+        horse_values = {n: v for n, v in values.items() if n in HORSE_NAMES}
+        assert len(horse_values) == len(HORSE_NAMES)  # the page subscribed to the horse too
+        want = horse_pose(horse_values).local_rotations
+        assert np.allclose([horse[b.name] for b in HORSE_RIG.bones], want, atol=1e-9)
         time.sleep(0.4)
     (seq0, _, pose0), (seq1, _, pose1) = poses
     assert seq1 > seq0

@@ -38,8 +38,9 @@ function groupChain(names, prefix) {
 
 async function start() {
   const skeletons = await (await fetch("skeletons.json")).json();
-  let horseRig = compileRig(skeletons.horse);
-  let riderRig = compileRig(skeletons.rider);
+  // Served by the same service as the frames, so always the skeletons it poses with.
+  const horseRig = compileRig(skeletons.horse);
+  const riderRig = compileRig(skeletons.rider);
   const view = new View($("scene"), horseRig, riderRig);
   const plots = new Plots($("plot"));
   const controls = new Controls(page);
@@ -73,10 +74,6 @@ async function start() {
     hello(msg) {
       page.session = msg.session;
       page.tickRate = msg.tick_rate;
-      if (msg.skeletons) {
-        horseRig = compileRig(msg.skeletons.horse);
-        riderRig = compileRig(msg.skeletons.rider);
-      }
       const all = [...(msg.channels || []), ...(msg.horse_channels || [])].map((c) => c.name);
       chains = { tail: groupChain(all, "tail"), braid: groupChain(all, "braid") };
       $("plot-add").innerHTML = `<option value="">add a channel…</option>${all.map((n) => `<option>${n}</option>`).join("")}`;
