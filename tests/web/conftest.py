@@ -151,8 +151,9 @@ def open_page(browser: Any, url: str, path: str = "/") -> PageUnderTest:
     return PageUnderTest(page, errors)
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def live_page(browser: Any, server: Server) -> Iterator[PageUnderTest]:
+    """One page for the module's tests (each leaves the service as it found it)."""
     p = open_page(browser, server.url)
     p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5")
     yield p

@@ -54,16 +54,16 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
 
 
 def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Server) -> None:
-    assert server.get("/api/state")["tick"]["estop"] is False
+    assert server.get("/api/state")["tick"].get("estop") is not True
     live_page.page.locator("#estop").click()
     deadline = time.monotonic() + 5
-    while not server.get("/api/state")["tick"]["estop"]:
+    while not server.get("/api/state")["tick"].get("estop"):
         assert time.monotonic() < deadline, "the e-stop never reached the service"
         time.sleep(0.05)
     live_page.wait_for("document.getElementById('estop').classList.contains('engaged')", timeout=5)
     live_page.page.locator("#reset").click()
     deadline = time.monotonic() + 5
-    while server.get("/api/state")["tick"]["estop"]:
+    while server.get("/api/state")["tick"].get("estop"):
         assert time.monotonic() < deadline, "reset did not clear the e-stop"
         time.sleep(0.05)
 
@@ -112,14 +112,14 @@ def test_recorded_take_replays_on_the_page(live_page: PageUnderTest, server: Ser
     page: Any = live_page.page
     page.locator("#rec-start").click()
     live_page.wait_for("document.getElementById('rec-now').textContent.startsWith('recording')", timeout=5)
-    time.sleep(1.0)
+    time.sleep(0.6)
     page.locator("#rec-stop").click()
     live_page.wait_for("document.querySelectorAll('#takes li').length > 0", timeout=5)
     name = page.locator("#takes li").first.inner_text()
     assert name in [t["name"] for t in server.get("/api/takes")["takes"]]
     seq = live_page.state("riderlive.seq")
     page.locator("#takes li").first.click()
-    deadline = time.monotonic() + 5
+    deadline = time.monotonic() + 3
     while server.get("/api/state")["source"].get("kind") != "replay":
         assert time.monotonic() < deadline, "clicking the take did not start its replay"
         time.sleep(0.05)
@@ -139,26 +139,6 @@ def test_views_switch_the_camera(live_page: PageUnderTest) -> None:
     side, front = np.array(spots["side"]), np.array(spots["front"])
     assert abs(side[2]) > 3 * abs(side[0])  # looks along z: at the horse's flank
     assert abs(front[0]) > 3 * abs(front[2])  # looks along x: at the horse's chest
-
-
-def test_page_shows_a_vanished_service_and_reconnects(browser: Any, tmp_path: Any) -> None:
-    s = Server(free_port(), tmp_path)
-    s.start()
-    try:
-        p = open_page(browser, s.url)
-        p.wait_for("riderlive.connected && riderlive.frames > 5")
-        first = p.state("riderlive.session")
-        s.stop()
-        p.wait_for("riderlive.state === 'gone'", timeout=5)
-        assert p.page.locator("#gone").is_visible()
-        assert p.page.locator("#conn").inner_text() == "service gone"
-        s.start()
-        p.wait_for("riderlive.connected && riderlive.session !== null", timeout=15)
-        p.wait_for(f"riderlive.session !== {first!r}", timeout=5)
-        assert p.page.locator("#gone").is_hidden()
-        p.page.close()
-    finally:
-        s.stop()
 
 
 def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
@@ -211,7 +191,7 @@ def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
     assert shown["state"] == "rig: running"
 
 
-def test_page_sends_the_control_token_when_the_service_wants_one(browser: Any, tmp_path: Any) -> None:
+def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(browser: Any, tmp_path: Any) -> None:
     token = "page-test-token-0123"
     s = Server(free_port(), tmp_path, extra_config=f'[security]\ntoken = "{token}"\nrequire_token = true\n')
     s.start()
@@ -220,15 +200,27 @@ def test_page_sends_the_control_token_when_the_service_wants_one(browser: Any, t
         without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
         without.page.locator("#estop").click()
         without.wait_for("document.getElementById('message').textContent.includes('control token')", timeout=5)
-        assert s.get("/api/state")["tick"]["estop"] is False
+        assert s.get("/api/state")["tick"].get("estop") is not True
         without.page.close()
 
         p = open_page(browser, s.url, f"/#token={token}")
         p.wait_for("riderlive.connected && riderlive.frames > 5")
         assert p.state("location.hash") == ""  # the token leaves the address bar
+        first = p.state("riderlive.session")
+
+        # The service goes away: the page says so, then finds the restarted one by itself.
+        s.stop()
+        p.wait_for("riderlive.state === 'gone'", timeout=5)
+        assert p.page.locator("#gone").is_visible()
+        assert p.page.locator("#conn").inner_text() == "service gone"
+        s.start()
+        p.wait_for(f"riderlive.connected && riderlive.session !== {first!r}", timeout=15)
+        assert p.page.locator("#gone").is_hidden()
+
+        # The token survived the reconnect: the e-stop reaches the new service.
         p.page.locator("#estop").click()
         deadline = time.monotonic() + 5
-        while not s.get("/api/state")["tick"]["estop"]:
+        while not s.get("/api/state")["tick"].get("estop"):
             assert time.monotonic() < deadline, "the e-stop with a token never reached the service"
             time.sleep(0.05)
         p.page.close()
