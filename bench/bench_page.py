@@ -192,7 +192,8 @@ def main() -> int:
     if feed_errors:
         print(f"producer failed: {feed_errors[0]}")
     print(f"viewport {args.width}x{args.height}, {len(fps)} one-second samples")
-    print(f"page fps      median {med:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
+    p10 = sorted(fps)[len(fps) // 10]
+    print(f"page fps      median {med:.1f}  p10 {p10:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
     print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
     print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")
     print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
@@ -201,7 +202,8 @@ def main() -> int:
     print(f"python solver: rider pose {rider_us:.0f} us, horse pose {horse_us:.0f} us per frame")
     print(f"  (baseline: the rules, one frame {rules_us:.1f} us; ratio rider/rules {rider_us / rules_us:.0f})")
     print(f"bundle {static_size() / 1e6:.3f} MB in {STATIC_DIR.name}/ (budget 1.5 MB)")
-    print("PASS" if min(fps) >= 30.0 else "FAIL: below 30 fps")
+    slow = sum(f < 30.0 for f in fps)
+    print("PASS: >= 30 fps every second" if slow == 0 else f"below 30 fps in {slow} of {len(fps)} seconds")
     return 0
 
 
