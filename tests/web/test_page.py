@@ -53,19 +53,30 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
     assert not np.allclose(pose0["lower_back"], pose1["lower_back"], atol=1e-6), "the rider did not move"
 
 
+def _wait_estop(server: Server, engaged: bool, what: str) -> None:
+    deadline = time.monotonic() + 5
+    while bool(server.get("/api/state")["tick"].get("estop")) is not engaged:
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
 def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Server) -> None:
     assert server.get("/api/state")["tick"].get("estop") is not True
     live_page.page.locator("#estop").click()
-    deadline = time.monotonic() + 5
-    while not server.get("/api/state")["tick"].get("estop"):
-        assert time.monotonic() < deadline, "the e-stop never reached the service"
-        time.sleep(0.05)
+    _wait_estop(server, True, "the e-stop never reached the service")
     live_page.wait_for("document.getElementById('estop').classList.contains('engaged')", timeout=5)
     live_page.page.locator("#reset").click()
-    deadline = time.monotonic() + 5
-    while server.get("/api/state")["tick"].get("estop"):
-        assert time.monotonic() < deadline, "reset did not clear the e-stop"
-        time.sleep(0.05)
+    _wait_estop(server, False, "reset did not clear the e-stop")
+
+
+def test_space_bar_is_an_estop_and_never_presses_the_focused_button(live_page: PageUnderTest, server: Server) -> None:
+    live_page.page.locator("#rec-start").focus()
+    live_page.page.keyboard.press("Space")
+    _wait_estop(server, True, "the space bar did not e-stop")
+    time.sleep(0.3)
+    assert server.get("/api/state")["recording"] is None, "the space bar also pressed the focused Record button"
+    live_page.page.locator("#reset").click()
+    _wait_estop(server, False, "reset did not clear the e-stop")
 
 
 def _move_slider(p: PageUnderTest, key: str, value: float) -> None:

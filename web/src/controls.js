@@ -93,6 +93,28 @@ function rangeFor(v) {
   return v > 0 ? [0, 3 * a] : [-3 * a, 0];
 }
 
+/**
+ * The e-stop: bound first, before anything else on the page can fail. Click, or the
+ * space bar anywhere but in a text field (a focused button loses focus first, so the
+ * space bar never presses it as well).
+ */
+export function bindEstop() {
+  const fire = async () => {
+    $("estop").classList.add("engaged");
+    await attempt("E-STOP", () => api("POST", "/api/estop"));
+  };
+  $("estop").addEventListener("click", fire);
+  document.addEventListener("keydown", (ev) => {
+    if (ev.code !== "Space" || ev.repeat) return;
+    const t = ev.target;
+    if (t instanceof HTMLInputElement && t.type !== "range" && t.type !== "checkbox") return;
+    if (t instanceof HTMLSelectElement || t instanceof HTMLTextAreaElement) return;
+    ev.preventDefault();
+    if (document.activeElement instanceof HTMLElement) document.activeElement.blur();
+    fire();
+  });
+}
+
 export class Controls {
   constructor(state) {
     this.state = state;
@@ -118,13 +140,6 @@ export class Controls {
   }
 
   bind() {
-    $("estop").addEventListener("click", () => this.estop());
-    document.addEventListener("keydown", (ev) => {
-      if (ev.code === "Space" && !(ev.target instanceof HTMLInputElement || ev.target instanceof HTMLSelectElement)) {
-        ev.preventDefault();
-        this.estop();
-      }
-    });
     $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
     $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
     $("src-kind").addEventListener("change", () => this.showSourceRows());
@@ -143,12 +158,6 @@ export class Controls {
       attempt("animator", () => api("PUT", "/api/animator", { offsets: this.offsets, gains: this.gains }));
     });
     this.showSourceRows();
-  }
-
-  async estop() {
-    $("estop").classList.add("engaged");
-    await attempt("E-STOP", () => api("POST", "/api/estop"));
-    this.refresh();
   }
 
   showSourceRows() {

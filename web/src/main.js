@@ -1,7 +1,7 @@
 // riderlive previs page: wires the link (websocket), the rigs, the 3D view, the plots
 // and the controls. Page state for tests and the curious: window.riderlive.
 
-import { Controls, controlToken } from "./controls.js";
+import { bindEstop, Controls, controlToken } from "./controls.js";
 import { RiderLink } from "./link.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
@@ -185,6 +185,7 @@ async function start() {
   requestAnimationFrame(tick);
 }
 
+bindEstop();
 window.addEventListener("error", (ev) => page.errors.push(String(ev.message)));
 start().catch((err) => {
   page.errors.push(String(err));
