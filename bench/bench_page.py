@@ -167,11 +167,13 @@ def main() -> int:
                 page.evaluate("() => riderlive.setView('perspective')")
                 fps, rate, scale = sample(page, args.seconds)
                 driver = page.evaluate("() => riderlive.driver")
+                tick_ms = page.evaluate("() => riderlive.tickMs")
                 state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
                 fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
                 if args.screenshots:
                     args.screenshots.mkdir(parents=True, exist_ok=True)
                     page.set_viewport_size({"width": 960, "height": 600})
+                    page.evaluate("() => riderlive.setRenderScale(1)")
                     for view in ("side", "front", "perspective"):
                         page.evaluate(f"() => riderlive.setView('{view}')")
                         time.sleep(0.6)
@@ -195,6 +197,7 @@ def main() -> int:
     p10 = sorted(fps)[len(fps) // 10]
     print(f"page fps      median {med:.1f}  p10 {p10:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
     print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
+    print(f"JS per animation frame {tick_ms:.2f} ms (pose both skeletons, update the scene, submit GL, plots)")
     print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")
     print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
     print(f"baseline fps  (empty page, same browser) median {base:.1f}")

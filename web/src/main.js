@@ -113,7 +113,13 @@ async function start() {
   let scaleStep = 0;
   let goodSeconds = 0;
   page.renderScale = 1;
+  let scaleLocked = false;
+  page.setRenderScale = (scale) => {
+    scaleLocked = scale !== null;
+    if (scaleLocked) view.setScale((page.renderScale = scale));
+  };
   function adaptScale() {
+    if (scaleLocked) return;
     if (page.fps < 40 && scaleStep < SCALES.length - 1) {
       scaleStep += 1;
       goodSeconds = 0;
@@ -130,6 +136,7 @@ async function start() {
   let lastLatest = null;
   let lastPlot = 0;
   function tick(now) {
+    const t0 = performance.now();
     rafCount += 1;
     if (now - lastSecond >= 1000) {
       page.fps = (rafCount * 1000) / (now - lastSecond);
@@ -180,6 +187,7 @@ async function start() {
       lastPlot = now; // plots at <= 30 Hz: enough for the eye, half the canvas work
       plots.draw();
     }
+    page.tickMs = 0.95 * (page.tickMs || 0) + 0.05 * (performance.now() - t0); // JS time per animation frame
     requestAnimationFrame(tick);
   }
   requestAnimationFrame(tick);
