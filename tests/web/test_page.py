@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import BY_NAME, HORSE_NAMES, RIDER_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.rules import RiderModel
 from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_rig
@@ -220,8 +220,10 @@ def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
 
 
 def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(browser: Any, tmp_path: Any) -> None:
+    """A service set up otherwise: a control token, and lengths in thesis units (length_scale 1)."""
     token = "page-test-token-0123"
-    s = Server(free_port(), tmp_path, extra_config=f'[security]\ntoken = "{token}"\nrequire_token = true\n')
+    config = f'[security]\ntoken = "{token}"\nrequire_token = true\n\n[tick]\nlength_scale = 1.0\n'
+    s = Server(free_port(), tmp_path, extra_config=config)
     s.start()
     try:
         without = open_page(browser, s.url)
@@ -234,6 +236,11 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         p = open_page(browser, s.url, f"/#token={token}")
         p.wait_for("riderlive.connected && riderlive.frames > 5")
         assert p.state("location.hash") == ""  # the token leaves the address bar
+        # Lengths arrive in thesis units; the page poses the metre skeleton with value / 25.
+        values, pose = p.state("[riderlive.values, riderlive.pose.rider]")
+        metres = {n: v / DEFAULT_SCALE if BY_NAME[n].kind is Kind.TRANSLATION else v for n, v in values.items()}
+        want = np.array(bone_quaternions({n: metres[n] for n in RIDER_NAMES})).reshape(-1, 4)
+        assert np.allclose([pose[n] for n in rider_rig().names], want, atol=1e-9)
         first = p.state("riderlive.session")
 
         # The service goes away: the page says so, then finds the restarted one by itself.

@@ -9,6 +9,7 @@ import { chainPoints, placed, View } from "./scene.js";
 
 const $ = (id) => document.getElementById(id);
 const DEFAULT_PLOTS = ["lower_back.rz", "cog.ty", "head.rz", "lfHoof.ty"];
+const METRE_SCALE = 25; // thesis rig units per metre: the service speaks metres at this length_scale
 
 const page = {
   connected: false,
@@ -51,6 +52,8 @@ async function start() {
   for (const b of document.querySelectorAll("[data-view]")) b.addEventListener("click", () => view.setView(b.dataset.view));
 
   let chains = { tail: [], braid: [] };
+  let toMetres = 1;
+  let lengthChannels = [];
   let latest = null;
   let frameCount = 0;
   const chips = () => {
@@ -73,6 +76,11 @@ async function start() {
   const link = new RiderLink(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws/rider`, {
     hello(msg) {
       page.session = msg.session;
+      // The skeletons are in metres; a service with another length_scale speaks other units.
+      toMetres = (msg.length_scale || METRE_SCALE) / METRE_SCALE;
+      lengthChannels = [...(msg.channels || []), ...(msg.horse_channels || [])]
+        .filter((c) => c.unit === "length")
+        .map((c) => c.name);
       page.tickRate = msg.tick_rate;
       const all = [...(msg.channels || []), ...(msg.horse_channels || [])].map((c) => c.name);
       chains = { tail: groupChain(all, "tail"), braid: groupChain(all, "braid") };
@@ -150,8 +158,12 @@ async function start() {
     }
     if (latest && latest !== lastLatest) {
       lastLatest = latest;
-      const values = latest.values;
-      page.values = values;
+      page.values = latest.values;
+      let values = latest.values;
+      if (toMetres !== 1) {
+        values = { ...values };
+        for (const n of lengthChannels) if (n in values) values[n] *= toMetres;
+      }
       const hv = { ...values };
       const follow = $("follow").checked;
       if (follow) {
