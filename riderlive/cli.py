@@ -11,6 +11,9 @@ from riderlive import __version__
 
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
+    "horse": ("riderlive.horse.cli", "write a procedural horse take (gait or shot script)"),
+    "plot": ("riderlive.plot", "plot channels of a frame file over time"),
+    "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
     "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""

@@ -1,47 +1,135 @@
-"""The procedural horse (placeholder until the gait generator lands).
+"""The procedural horse: gaits and movements on demand, live or as a whole take.
 
-Contract kept by the real generator:
+- ``DEFAULT_SCALE``: thesis rig units per metre. With it the foot-height clamps of
+  Appendix B (hoof height sums 15, 18, 20) stay idle in the walk and the trot and
+  engage in the jump and the rear (``docs/horse.md``).
+- ``GAITS`` (walk, trot, canter, gallop) and ``MOVES`` (jump, rear, stop, buck); the
+  API takes names (strings) and also accepts ``halt`` (standing).
+- ``ProceduralHorse(gait="trot", speed=None, seed=None)``: a live source.
+  ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres, degrees) for
+  ``t`` in seconds, non-decreasing; ``set_gait(gait, speed=None)`` changes gait or
+  speed at any time, ``perform(move)`` starts a movement from the current state,
+  ``play(script)`` follows a :class:`ShotScript` from now on; ``gait``, ``move`` and
+  ``speed`` (m/s) report what it is doing. Every channel stays C1
+  across every change. A seed turns on seeded stride-to-stride variation.
+- ``generate(script, rate)`` / ``generate_gait(gait, seconds, rate)``: a whole take as
+  a :class:`riderlive.framefile.FrameTable` (NumPy, same numbers as the live path).
+- The pure core is :mod:`riderlive.horse.model` (Model / State / step, no clocks).
 
-- ``DEFAULT_SCALE``: thesis rig units per metre, the default length scale for a
-  horse produced here.
-- ``GAITS``: the gait names; ``ProceduralHorse(gait, speed, seed)`` is a live source
-  whose ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres,
-  degrees) for time ``t`` in seconds (non-decreasing), and whose
-  ``set_gait(gait, speed)`` changes gait at any time without a jump.
+Frames: hoof ``tx`` forward (+) of the hoof's square-standing spot, ``ty`` height above
+the ground, ``tz`` side (+ left); ``rearPivot.t*`` the hips' displacement from standing,
+``rearPivot.rz`` pitch (+ nose up), ``rx`` roll (+ left), ``ry`` yaw; ``backMid.rz`` the
+back's bend; ``root.tx`` distance travelled, ``root.ty/tz/ry`` 0 (straight, flat ground).
 """
 
 from __future__ import annotations
 
-import math
-
-from riderlive.channels import HORSE_INDEX, HORSE_NAMES
+from riderlive.framefile import FrameTable
+from riderlive.horse.curves import SCALAR
+from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
+from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, unschedule
+from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
+from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
 
 DEFAULT_SCALE = 25.0
-GAITS: tuple[str, ...] = ("walk", "trot", "canter", "gallop")
+"""Thesis rig units per metre (a 1.6 m horse is 40 units tall at the withers)."""
+
+__all__ = [
+    "DEFAULT_SCALE",
+    "GAITS",
+    "GAIT_TABLE",
+    "MOVES",
+    "MOVE_TABLE",
+    "WITHERS_HEIGHT",
+    "Gait",
+    "Move",
+    "ProceduralHorse",
+    "ShotScript",
+    "generate",
+    "generate_gait",
+    "load_script",
+]
+
+
+def generate_gait(
+    gait: str, seconds: float, rate: float = 120.0, speed: float | None = None, seed: int | None = None
+) -> FrameTable:
+    """``gait`` held for ``seconds`` at ``rate`` Hz, as a FrameTable."""
+    return generate(gait_script(gait, seconds, speed, seed), rate)
 
 
 class ProceduralHorse:
-    """A live horse source: one frame per call of :meth:`sample`."""
+    """A live horse source: one frame per :meth:`sample`; commands take effect at the last sample's time."""
 
-    def __init__(self, gait: str = "trot", speed: float | None = None, seed: int | None = None) -> None:
-        self.gait = gait
-        self.speed = speed if speed is not None else 4.0
-        self.seed = seed
+    def __init__(
+        self, gait: str = "trot", speed: float | None = None, seed: int | None = None, variation: float | None = None
+    ) -> None:
+        if variation is None:
+            variation = DEFAULT_VARIATION if seed is not None else 0.0
+        self.model = Model(variation=variation, seed=seed or 0)
+        self._start = (parse_gait(gait), speed)
+        initial(self.model, *self._start)  # validates gait and speed now
+        self._state: State | None = None
+        self._t = 0.0  # time of the last sample (s)
+        self._queued: list[SetGait | Perform | ShotScript] = []
 
-    def set_gait(self, gait: str, speed: float | None = None) -> None:
-        if gait not in GAITS:
-            raise ValueError(f"unknown gait {gait!r}; choose one of {', '.join(GAITS)}")
-        self.gait = gait
-        if speed is not None:
-            self.speed = speed
+    @property
+    def state(self) -> State | None:
+        """The pure core's state (None before the first sample)."""
+        return self._state
+
+    @property
+    def gait(self) -> str:
+        return (self._state.gait if self._state else self._start[0]).value
+
+    @property
+    def speed(self) -> float:
+        """Ground speed (m/s) at the last sample."""
+        if self._state is None:
+            return initial(self.model, *self._start).gait_speed
+        v, _, _ = self._state.ramp.at(self._t, SCALAR)
+        return float(v)
+
+    @property
+    def move(self) -> str | None:
+        return self._state.move.value if self._state and self._state.move else None
 
     def sample(self, t: float) -> list[float]:
-        frame = [0.0] * len(HORSE_NAMES)
-        phase = 2.0 * math.pi * 1.2 * t
-        for hoof, offset, base in (("lf", 0.0, 0.6), ("rb", 0.0, -0.6), ("rf", math.pi, 0.6), ("lb", math.pi, -0.6)):
-            frame[HORSE_INDEX[f"{hoof}Hoof.tx"]] = base + 0.35 * math.sin(phase + offset)
-            frame[HORSE_INDEX[f"{hoof}Hoof.ty"]] = max(0.0, 0.12 * math.sin(phase + offset))
-        frame[HORSE_INDEX["rearPivot.ty"]] = 1.0 + 0.03 * math.cos(2.0 * phase)
-        frame[HORSE_INDEX["rearPivot.rz"]] = 2.0 * math.sin(phase)
-        frame[HORSE_INDEX["root.tx"]] = self.speed * t
-        return frame
+        """The frame at ``t`` (s): ``len(channels.HORSE)`` floats, metres and degrees."""
+        t = float(t)
+        if self._state is None:
+            self._state = initial(self.model, *self._start, t=t)
+            self._t = t
+            for queued in self._queued:
+                self._apply(queued)
+            self._queued.clear()
+        elif not t >= self._t:
+            raise ValueError(f"time went backwards or is not finite: {t!r} after {self._t!r}")
+        self._t = t
+        self._state, out = step(self.model, self._state, t)
+        return out
+
+    def set_gait(self, gait: str, speed: float | None = None) -> None:
+        """Change gait and/or speed (m/s, within the gait's range) from now, C1; ends a playing script."""
+        g = parse_gait(gait)
+        self._apply(SetGait(g, None if speed is None else float(speed)), validate=True)
+
+    def perform(self, move: str) -> None:
+        """Start a movement (jump, rear, stop, buck) from the current state; ends a playing script."""
+        self._apply(Perform(parse_move(move)))
+
+    def play(self, script: ShotScript) -> None:
+        """Follow ``script`` from now: its segments replace whatever was queued."""
+        self._apply(script)
+
+    def _apply(self, cmd: SetGait | Perform | ShotScript, validate: bool = False) -> None:
+        if validate and isinstance(cmd, SetGait) and cmd.speed is not None and cmd.gait in GAIT_TABLE:
+            GAIT_TABLE[cmd.gait].check_speed(cmd.speed)
+        if self._state is None:
+            self._queued.append(cmd)
+            return
+        state = unschedule(self._state)  # a new command or script replaces a script in progress
+        if isinstance(cmd, ShotScript):
+            self._state = cmd.start(self.model, self._t, state)
+        else:
+            self._state = command(self.model, state, cmd, self._t)

@@ -87,6 +87,7 @@ class TickCore:
         self.mode = mode
         self.resampler = Resampler(delay=timing.delay, hold=timing.hold)
         self.producer = -1
+        self._gone: set[int] = set()
         self.driver = Driver.PROCEDURAL if timing.fallback_procedural or mode is Mode.PROCEDURAL else Driver.NEUTRAL
         self.driver_since = 0.0
         self._blend_from: list[float] | None = None
@@ -110,7 +111,13 @@ class TickCore:
         self.mode = mode
 
     def push_input(self, producer: int, t: float, received: float, values: list[float]) -> bool:
-        """Buffer one input frame; a new producer replaces the old one's buffer."""
+        """Buffer one input frame; a new producer replaces the old one's buffer.
+
+        Frames of a producer that has gone are ignored: its last frames may still be
+        in the ring when the tick learns that it left.
+        """
+        if producer in self._gone:
+            return False
         if producer != self.producer:
             self.resampler.clear()
             if self.driver is Driver.INPUT and self.last_rider is not None:
@@ -120,6 +127,9 @@ class TickCore:
 
     def producer_gone(self, producer: int) -> None:
         """The producer disconnected: its stream is stale from now on."""
+        self._gone.add(producer)
+        if len(self._gone) > 4096:
+            self._gone = set(sorted(self._gone)[-1024:])
         if producer == self.producer:
             self.resampler.clear()
 

@@ -19,7 +19,8 @@ Output ring (tick -> web), one row per tick::
     4 producer   producer id for input, -1 otherwise
     5 input_rx   engine receive time of the newest input frame taken this tick, or -1
     6 done       engine time the tick finished computing
-    7..          horse channels (channels.HORSE order), then rider channels (channels.RIDER)
+    7 lateness   seconds the tick woke after its deadline
+    8..          horse channels (channels.HORSE order), then rider channels (channels.RIDER)
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ N_RIDER = len(RIDER_NAMES)
 IN_PRODUCER, IN_T, IN_RECEIVED, IN_VALUES = 0, 1, 2, 3
 INPUT_WIDTH = IN_VALUES + N_HORSE
 
-(OUT_SEQ, OUT_ENGINE_T, OUT_SOURCE_T, OUT_DRIVER, OUT_PRODUCER, OUT_INPUT_RX, OUT_DONE) = range(7)
-OUT_HORSE = 7
+(OUT_SEQ, OUT_ENGINE_T, OUT_SOURCE_T, OUT_DRIVER, OUT_PRODUCER, OUT_INPUT_RX, OUT_DONE, OUT_LATENESS) = range(8)
+OUT_HORSE = 8
 OUT_RIDER = OUT_HORSE + N_HORSE
 OUTPUT_WIDTH = OUT_RIDER + N_RIDER
 

@@ -6,6 +6,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import threading
 import time
 from typing import Any
 
@@ -38,12 +39,16 @@ class TickLink:
         notify_read, notify_write = context.Pipe(duplex=False)
         self._notify = notify_read
         self.notify_fd = notify_read.fileno()
-        self.process = context.Process(
-            target=tick_main, args=(self.setup, child_commands, notify_write), name="riderlive-tick", daemon=True
-        )
-        self.process.start()
-        child_commands.close()
-        notify_write.close()
+        args = (self.setup, child_commands, notify_write)
+        self.process: multiprocessing.process.BaseProcess | threading.Thread
+        if setup.isolation == "thread":
+            self.process = threading.Thread(target=tick_main, args=args, name="riderlive-tick", daemon=True)
+            self.process.start()
+        else:
+            self.process = context.Process(target=tick_main, args=args, name="riderlive-tick", daemon=True)
+            self.process.start()
+            child_commands.close()
+            notify_write.close()
         os.set_blocking(self.notify_fd, False)
         self.outputs.read_next = 0
         self._status_version = -1
@@ -98,6 +103,8 @@ class TickLink:
             with contextlib.suppress(BrokenPipeError, OSError):
                 self.send(cmd.Stop())
             self.process.join(timeout)
+        if isinstance(self.process, threading.Thread):
+            return
         if self.process.is_alive():
             self.process.terminate()
             self.process.join(1.0)

@@ -24,11 +24,6 @@ def token_matches(expected: str | None, given: object) -> bool:
     return hmac.compare_digest(expected.encode(), given.encode())
 
 
-def subprotocols(header: str | None) -> list[str]:
-    """The offered subprotocols of a ``Sec-WebSocket-Protocol`` header."""
-    return [p.strip() for p in (header or "").split(",") if p.strip()]
-
-
 def token_from_subprotocols(offered: list[str]) -> str | None:
     for proto in offered:
         if proto.startswith(TOKEN_PREFIX):

@@ -22,6 +22,8 @@ class ServerSection(StrictModel):
     cors_origins: list[str] = pydantic.Field(default_factory=list)
     log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
     shutdown_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+    nice: int = pydantic.Field(default=0, ge=-20, le=19)
+    """Scheduling niceness of the web process (negative needs privileges; falls back with a warning)."""
 
 
 class SecuritySection(StrictModel):
@@ -42,6 +44,11 @@ class SecuritySection(StrictModel):
 class TickSection(StrictModel):
     rate: float = pydantic.Field(default=120.0, ge=30.0, le=1000.0)
     realtime_priority: bool = True
+    spin: float | None = pydantic.Field(default=None, ge=0.0, le=0.005)
+    """Seconds the tick spins before each deadline; unset: 0.25 ms at SCHED_FIFO, else 1 ms."""
+    isolation: Literal["process", "thread"] = "process"
+    """``process``: the tick in its own process (the design). ``thread``: in the web
+    process, sharing its GIL; only as a baseline for benchmarks."""
     length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
     """Thesis rig units per service length unit (25 = the service speaks metres)."""
     preset: str = "kuhnel2003"
@@ -84,6 +91,8 @@ class PublishSection(StrictModel):
     send_timeout: float = pydantic.Field(default=2.0, gt=0.0, le=60.0)
     """A client whose send takes longer than this is cut off."""
     max_clients: int = pydantic.Field(default=256, ge=1)
+    send_buffer_bytes: int = pydantic.Field(default=65536, ge=4096, le=16 * 1024 * 1024)
+    """Kernel send buffer per client (SO_SNDBUF): how much may queue for a slow reader."""
 
 
 class TakesSection(StrictModel):

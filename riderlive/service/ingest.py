@@ -134,7 +134,7 @@ class IngestEndpoint:
     async def __call__(self, websocket: WebSocket) -> None:
         service = self.service
         config = service.config
-        offered = auth.subprotocols(websocket.headers.get("sec-websocket-protocol"))
+        offered = list(websocket.scope.get("subprotocols", []))
         await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
         try:
             first = await self.authenticate(websocket, offered)

@@ -55,7 +55,7 @@ class ServiceMetrics:
     """Accepted horse frames per producer name."""
     ticks_published: int = 0
     ticks_coalesced: int = 0
-    """Output records not sent to clients because a newer one was already there."""
+    """Ticks that arrived together with a newer one (the web process was late)."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
 
@@ -152,7 +152,7 @@ def render(
     metric(
         "riderlive_ticks_coalesced_total",
         "counter",
-        "Ticks not fanned out because a newer one was ready.",
+        "Ticks that reached the web process together with a newer one.",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
     metric(

@@ -1,11 +1,16 @@
-"""``/ws/rider``: every client gets its own sender task and a latest-only frame slot.
+"""``/ws/rider``: fan-out of tick records, latest-only per client, never waiting on one.
 
-The tick's record is encoded once per subscription key (encoding and channel
-subset) and offered to each client's slot. The client's sender task sends whatever
-is in its slots; a frame still in the slot when the next one arrives is replaced
-and counted as dropped. A send that takes longer than ``publish.send_timeout`` cuts
-the client off. Nothing here waits on a client from the tick's callback, so a slow
-client never delays the tick or the others.
+The tick's record is encoded once per subscription key (encoding and channel subset)
+and, on uvicorn with :mod:`~riderlive.service.wsprotocol`, turned once into wire
+bytes that are written straight to each client's transport. A client whose
+transport still holds more than one unsent frame is behind: the new frame is dropped
+for it (counted), so it gets the newest frame when it catches up and never a
+backlog; behind for longer than ``publish.send_timeout``, it is cut off (aborted).
+
+Other messages (hello, status, acknowledgements, errors, goodbye) go through ASGI
+from the client's own sender task, with latest-only slots for status and, on other
+servers, for frames too. Nothing here waits on a client from the tick's callback,
+so a slow client never delays the tick or the others.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -34,6 +40,7 @@ from riderlive.service.codecs import (
     encode_frame,
     parse_message,
 )
+from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -41,6 +48,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
 CONTROL_QUEUE = 64
+CONTROL_BUFFER_LIMIT = 1 << 20
+"""A client that neither reads nor stops asking gets no more answers past this backlog."""
 
 
 @dataclass(eq=False)
@@ -57,6 +66,9 @@ class Subscriber:
     sent: int = 0
     dropped: int = 0
     closed: bool = False
+    transport: Any = None
+    """The raw transport (fast path), or None: frames then go through the slot."""
+    behind_since: float | None = None
 
     def offer_frame(self, data: str | bytes, input_rx: float) -> None:
         if self.frame is not None:
@@ -69,8 +81,21 @@ class Subscriber:
         self.wake.set()
 
     def offer_control(self, message: dict[str, Any]) -> None:
-        self.control.append(orjson.dumps(message).decode())
-        self.wake.set()
+        """Acknowledgements, errors, goodbye: in order with the frames around them."""
+        text = orjson.dumps(message).decode()
+        transport = self.transport
+        if transport is None:
+            self.control.append(text)
+            self.wake.set()
+        elif not transport.is_closing() and transport.get_write_buffer_size() < CONTROL_BUFFER_LIMIT:
+            transport.write(wire_frame(text))
+
+
+def abort_transport(websocket: WebSocket) -> None:
+    """Drop a stuck connection at once (see :mod:`riderlive.service.wsprotocol`)."""
+    abort = websocket.scope.get("extensions", {}).get(ABORT)
+    if abort is not None:
+        abort()
 
 
 async def _send(websocket: WebSocket, data: str | bytes) -> None:
@@ -108,24 +133,72 @@ class Hub:
             "drivers": ["procedural", "input", "neutral"],
         }
 
-    def publish(self, record: np.ndarray) -> None:
-        """Offer one tick record to every client whose decimation wants it."""
-        seq = int(record[L.OUT_SEQ])
-        input_rx = float(record[L.OUT_INPUT_RX])
-        if input_rx <= self._seen_input_rx:
-            input_rx = -1.0
-        else:
-            self._seen_input_rx = input_rx
-        encoded: dict[tuple[Any, ...], str | bytes] = {}
-        for client in self.clients.values():
-            sub = client.subscription
-            if client.closed or seq % sub.decimation:
+    def publish(self, records: list[np.ndarray]) -> None:
+        """Offer the newest of ``records`` (new ticks, oldest first) to every client.
+
+        A client with decimation N gets the newest record whose ``seq % N == 0``, so
+        its frames stay evenly spaced even when the web process was late and several
+        ticks arrived at once. Each (subscription, record) is encoded once.
+        """
+        rx_so_far = []
+        newest_rx = self._seen_input_rx
+        for record in records:
+            newest_rx = max(newest_rx, float(record[L.OUT_INPUT_RX]))
+            rx_so_far.append(newest_rx)
+        chosen: dict[int, int | None] = {}
+        encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+        now = time.perf_counter()
+        timeout = self.service.config.publish.send_timeout
+        fresh_rx = -1.0
+        for client in list(self.clients.values()):
+            if client.closed:
                 continue
-            data = encoded.get(sub.key)
+            sub = client.subscription
+            decimation = sub.decimation
+            if decimation not in chosen:
+                chosen[decimation] = next(
+                    (i for i in range(len(records) - 1, -1, -1) if int(records[i][L.OUT_SEQ]) % decimation == 0),
+                    None,
+                )
+            index = chosen[decimation]
+            if index is None:
+                continue
+            key = (*sub.key, index)
+            data = encoded.get(key)
             if data is None:
-                data = encode_frame(sub, record)
-                encoded[sub.key] = data
-            client.offer_frame(data, input_rx)
+                message = encode_frame(sub, records[index])
+                data = (message, wire_frame(message))
+                encoded[key] = data
+            input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
+            if client.transport is None:
+                client.offer_frame(data[0], input_rx)
+                continue
+            fresh_rx = max(fresh_rx, input_rx)
+            self._write(client, data[1], now, timeout)
+        self._seen_input_rx = newest_rx
+        if fresh_rx >= 0.0:
+            self.service.metrics.input_to_send.observe(self.service.link.engine_time() - fresh_rx)
+
+    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> None:
+        """The fast path: write a frame's wire bytes, or drop it if the client is behind."""
+        transport = client.transport
+        if transport.is_closing():
+            client.closed = True
+            return
+        if transport.get_write_buffer_size() > len(wire):
+            client.dropped += 1
+            if client.behind_since is None:
+                client.behind_since = now
+            elif now - client.behind_since > timeout:
+                self.service.metrics.clients_cut_off += 1
+                log.warning("client %s has not read for %.1f s: cut off", client.id, timeout)
+                client.closed = True
+                client.wake.set()
+                transport.abort()
+            return
+        client.behind_since = None
+        transport.write(wire)
+        client.sent += 1
 
     def publish_status(self, status: dict[str, Any]) -> None:
         text = orjson.dumps({"type": "status", **status}).decode()
@@ -172,13 +245,15 @@ class Hub:
 
     @staticmethod
     async def _close(client: Subscriber, code: int, reason: str) -> None:
-        with contextlib.suppress(Exception):  # a stuck transport is dropped by the close timeout
-            await asyncio.wait_for(client.websocket.close(code=code, reason=reason), 1.0)
+        """Close a client that does not read: try a close frame, then drop the connection."""
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(client.websocket.close(code=code, reason=reason), 0.5)
+        abort_transport(client.websocket)
 
     async def __call__(self, websocket: WebSocket) -> None:
         service = self.service
         config = service.config
-        offered = auth.subprotocols(websocket.headers.get("sec-websocket-protocol"))
+        offered = list(websocket.scope.get("subprotocols", []))
         if len(self.clients) >= config.publish.max_clients:
             await websocket.close(code=1013, reason="too many clients")
             return
@@ -197,6 +272,7 @@ class Hub:
                 await websocket.close(code=4401, reason="unauthorized")
                 return
         client = Subscriber(websocket, f"rider-{next(_ids)}", Subscription())
+        client.transport = websocket.scope.get("extensions", {}).get(TRANSPORT)
         await websocket.send_text(orjson.dumps(self.hello()).decode())
         status = service.link.status()
         if status:

@@ -50,6 +50,8 @@ def make_setup(config: ServiceConfig, params: RuleParams) -> TickSetup:
         seed=source.seed,
         mode=Mode.PROCEDURAL if source.kind == "procedural" else Mode.INPUT,
         realtime_priority=config.tick.realtime_priority,
+        isolation=config.tick.isolation,
+        spin=config.tick.spin,
         rig_file=config.rig.file,
         rig_port=config.rig.port,
         park_timeout=config.rig.park_timeout,
@@ -108,7 +110,7 @@ class Service:
         if records:
             self.metrics.ticks_coalesced += len(records) - 1
             self.metrics.ticks_published += 1
-            self.hub.publish(records[-1])
+            self.hub.publish(records)
         version = link.status_blob.version
         if version != self._status_version:
             self._status_version = version

@@ -60,8 +60,8 @@ class TakeRecorder:
         if self._t0 is None:
             self._t0 = engine_t
             self.meta["engine_t0"] = engine_t
-        cells = [repr(engine_t - self._t0), *map(repr, horse), *map(repr, rider)]
-        self._lines.append(",".join(cells))
+        row = [engine_t - self._t0, *horse, *rider]
+        self._lines.append(",".join(map(repr, map(float, row))))
         self.rows += 1
         if time.monotonic() - self._last_flush >= self.flush_interval:
             self.flush()

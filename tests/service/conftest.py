@@ -13,7 +13,7 @@ realtime_priority = false
 
 [input]
 delay = 0.03
-hold = 0.2
+hold = 0.5
 ease_time = 0.4
 blend_time = 0.0
 producer_timeout = 0.3
@@ -26,7 +26,7 @@ send_timeout = 0.5
 """
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live

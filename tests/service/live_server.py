@@ -19,14 +19,14 @@ ROOT = Path(__file__).resolve().parents[2]
 class LiveServer:
     """``riderlive serve --config FILE --port 0``; its stderr is kept in ``log``."""
 
-    def __init__(self, config_text: str, workdir: Path, host: str = "127.0.0.1") -> None:
+    def __init__(self, config_text: str, workdir: Path, host: str = "127.0.0.1", port: int = 0) -> None:
         self.workdir = workdir
         self.host = host
         config = workdir / "service.toml"
         config.write_text(config_text)
         env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--host", host, "--port", "0"],
+            [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--host", host, "--port", str(port)],
             cwd=workdir,
             env=env,
             stdout=subprocess.DEVNULL,

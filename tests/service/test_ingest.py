@@ -111,24 +111,28 @@ def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, fo
         producer.sending.clear()
         stopped = time.perf_counter()
         first = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
-        assert 0.1 < first["at"] - stopped < 0.6, "held for about `hold` (0.2 s) before easing"
+        assert 0.3 < first["at"] - stopped < 1.2, "held for about `hold` (0.5 s) before easing"
         back = follower.wait_for(lambda f: f["driver"] == "procedural", timeout=3)
-        easing = [np.array(f["values"]) for f in follower.frames if first["seq"] <= f["seq"] < back["seq"]]
+        window = [f for f in follower.frames if first["seq"] <= f["seq"] < back["seq"]]
+        easing = [np.array(f["values"]) for f in window]
         distance = [np.abs(v - neutral).max() for v in easing]
         assert distance[0] <= np.abs(posed - neutral).max() + 1e-9
         assert all(b <= a + 1e-9 for a, b in itertools.pairwise(distance)), "eases monotonically"
         assert distance[-1] < 1e-9, "reaches the neutral pose"
-        steps = np.abs(np.diff(np.array(easing), axis=0)).max()
-        assert steps < np.abs(posed - neutral).max() / 10, "no jump while easing (0.4 s at 200 Hz)"
-        assert 0.8 < (back["seq"] - first["seq"]) / 200.0 < 1.3, "procedural resumes after ease 0.4 + resume 0.5 s"
+        per_tick = np.abs(np.diff(np.array(easing), axis=0)).max(axis=1) / np.diff([f["seq"] for f in window])
+        assert per_tick.max() < 0.05 * np.abs(posed - neutral).max(), "no jump while easing (0.4 s = 80 ticks)"
+        assert 0.85 < (back["seq"] - first["seq"]) / 200.0 < 1.0, "procedural resumes after ease 0.4 + resume 0.5 s"
     finally:
         producer.close()
 
 
 def test_disconnect_eases_at_once(server: LiveServer, follower: Follower) -> None:
-    producer = Producer(server.ws, constant(POSE))
-    follower.wait_for(lambda f: f["driver"] == "input")
+    producer = Producer(server.ws, lambda t: {"t": t, "values": {"rearPivot.rz": t}})
+    first = follower.wait_for(lambda f: f["driver"] == "input")
+    time.sleep(0.1)
     producer.close()
-    closed = time.perf_counter()
-    frame = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
-    assert frame["at"] - closed < 0.15, "a disconnect does not wait for the hold time"
+    neutral = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
+    frames = [f for f in follower.since(first) if f["seq"] < neutral["seq"]]
+    last_source = frames[-1]["source_t"]
+    held = [f for f in frames if f["source_t"] == last_source]
+    assert len(held) < 0.6 * 0.5 * 200, "a disconnect does not wait for the hold time (0.5 s)"

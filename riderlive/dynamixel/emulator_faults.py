@@ -1,0 +1,120 @@
+"""Fault injection for the emulated bus: what can go wrong, as data, and a text form.
+
+Text form (the CLI's ``--fault``, also usable from tests)::
+
+    KIND[:ID[:AMOUNT[:SEED]]][@SECONDS]
+
+    drop:3:5          the next 5 replies of servo 3 are lost
+    drop:3:0.1:7      each reply of servo 3 is lost with probability 0.1 (seed 7)
+    corrupt:3:2       the next 2 replies of servo 3 arrive with a bad CRC
+    vanish:3@2.5      servo 3 stops answering (and hearing) 2.5 s after start
+    reappear:3        servo 3 is back
+    overheat:3        servo 3's temperature jumps above its limit (Overheating error)
+    overload:3        servo 3 reports an Overload hardware error
+    voltage:3         servo 3 reports an Input Voltage hardware error
+    close@10          the pseudo-terminal disappears 10 s after start
+    clear[:3]         remove reply faults (of one servo, or all)
+
+An AMOUNT with a decimal point is a probability; otherwise a count.
+"""
+
+from __future__ import annotations
+
+import enum
+import random
+from dataclasses import dataclass, field
+
+
+class FaultKind(enum.StrEnum):
+    DROP = "drop"
+    CORRUPT = "corrupt"
+    VANISH = "vanish"
+    REAPPEAR = "reappear"
+    OVERHEAT = "overheat"
+    OVERLOAD = "overload"
+    VOLTAGE = "voltage"
+    CLOSE = "close"
+    CLEAR = "clear"
+
+
+NEEDS_ID = frozenset(FaultKind) - {FaultKind.CLOSE, FaultKind.CLEAR}
+REPLY_FAULTS = frozenset({FaultKind.DROP, FaultKind.CORRUPT})
+
+
+@dataclass(frozen=True)
+class FaultSpec:
+    """One fault to inject, ``at_s`` seconds after the emulator starts (CLI) or now (tests)."""
+
+    kind: FaultKind
+    servo_id: int | None = None
+    count: int | None = None
+    probability: float | None = None
+    seed: int = 0
+    at_s: float = 0.0
+
+
+def parse_fault(text: str) -> FaultSpec:
+    """Parse the text form above; ValueError with the reason and the grammar on bad input."""
+    grammar = "expected KIND[:ID[:AMOUNT[:SEED]]][@SECONDS], KIND one of " + ", ".join(k.value for k in FaultKind)
+    body, _, when = text.strip().partition("@")
+    parts = body.split(":")
+    try:
+        kind = FaultKind(parts[0].lower())
+        at_s = float(when) if when else 0.0
+        servo_id = int(parts[1]) if len(parts) > 1 else None
+        count = probability = None
+        if len(parts) > 2:
+            if "." in parts[2]:
+                probability = float(parts[2])
+            else:
+                count = int(parts[2])
+        seed = int(parts[3]) if len(parts) > 3 else 0
+    except ValueError:
+        raise ValueError(f"bad fault {text!r}: {grammar}") from None
+    if len(parts) > 4 or at_s < 0:
+        raise ValueError(f"bad fault {text!r}: {grammar}")
+    if kind in NEEDS_ID and servo_id is None:
+        raise ValueError(f"bad fault {text!r}: {kind.value} needs a servo id")
+    if probability is not None and not 0.0 <= probability <= 1.0:
+        raise ValueError(f"bad fault {text!r}: probability must be within 0..1")
+    if kind in REPLY_FAULTS and count is None and probability is None:
+        count = 1
+    return FaultSpec(kind, servo_id, count, probability, seed, at_s)
+
+
+@dataclass
+class ReplyFault:
+    """Affects the next ``remaining`` replies, or each reply with ``probability``."""
+
+    remaining: int | None = None
+    probability: float = 0.0
+    rng: random.Random = field(default_factory=random.Random)
+
+    def fires(self) -> bool:
+        if self.remaining is not None:
+            if self.remaining <= 0:
+                return False
+            self.remaining -= 1
+            return True
+        return self.rng.random() < self.probability
+
+
+@dataclass
+class ServoFaults:
+    """The reply faults currently set on one servo."""
+
+    drop: ReplyFault | None = None
+    corrupt: ReplyFault | None = None
+    vanished: bool = False
+
+    def set_reply_fault(self, spec: FaultSpec) -> None:
+        fault = ReplyFault(spec.count, spec.probability or 0.0, random.Random(spec.seed))
+        if spec.kind is FaultKind.DROP:
+            self.drop = fault
+        else:
+            self.corrupt = fault
+
+
+def corrupt(chunk: bytes) -> bytes:
+    """``chunk`` with its last byte (a CRC byte) inverted: the receiver's CRC check fails."""
+    return chunk[:-1] + bytes((chunk[-1] ^ 0xFF,)) if chunk else chunk

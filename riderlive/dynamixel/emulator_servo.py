@@ -1,0 +1,427 @@
+"""One emulated X-series servo: register memory, access rules, watchdog and shutdown.
+
+No I/O and no clock of its own: the bus passes ``now`` (seconds, monotonic) to every
+call. Register semantics follow the ROBOTIS e-manual:
+
+- EEPROM items (address < 64) are writable only with Torque Enable 0 (Access error).
+- Read-only items, bytes outside any item: Access error; part of an item: Data Length.
+- Values outside an item's range: Data Range; outside a range set by another register
+  (Goal Position vs the position limits, goals vs PWM/current/velocity limits): Data Limit.
+- A hardware error whose bit is in Shutdown (63) turns torque off; every status then
+  carries the Alert bit and torque cannot be enabled again until REBOOT.
+- Bus Watchdog (98, 20 ms units): with torque on, no instruction for longer than the
+  set time stops the servo and sets the register to -1; goal writes then fail with Data
+  Range until 0 is written to it.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, replace
+
+from riderlive.dynamixel import emulator_motion as motion
+from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS
+from riderlive.dynamixel.tables import (
+    ALERT_BIT,
+    BUS_WATCHDOG_UNIT_S,
+    EXTENDED_POSITION_RANGE,
+    MODELS,
+    POSITION_MODES,
+    RETURN_DELAY_UNIT_S,
+    VELOCITY_UNIT_RPM,
+    Access,
+    Area,
+    FactoryResetOption,
+    HardwareError,
+    Item,
+    ItemSpec,
+    ModelSpec,
+    OperatingMode,
+    StatusError,
+    model_spec,
+)
+
+CONTROL_PERIOD_S = motion.SUBSTEP_S
+"""The emulated servo's control loop period: its state changes in whole cycles."""
+THERMAL_CHUNK_CYCLES = 10
+"""Longest stretch integrated at once (control cycles) before checking the temperature."""
+_OVERHEATING = int(HardwareError.OVERHEATING)
+_WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
+
+GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
+"""Items that become read-only while the Bus Watchdog has tripped."""
+
+
+@dataclass(frozen=True)
+class ServoSetup:
+    """How an emulated servo starts: its ID, model and where its horn is (pulses)."""
+
+    id: int
+    model: str
+    position: int = 2048
+    fast_read: bool | None = None
+    """Whether it answers FAST_SYNC/BULK_READ; None: as the model's firmware does.
+    False emulates an older firmware, which ignores those instructions."""
+
+
+class EmulatedServo:
+    """Register memory and behaviour of one servo. Not thread-safe: the bus locks."""
+
+    def __init__(self, setup: ServoSetup, baud: int, now: float = 0.0) -> None:
+        self.spec: ModelSpec = model_spec(setup.model)
+        self.fast_read = self.spec.fast_sync_read if setup.fast_read is None else setup.fast_read
+        self.memory = bytearray(self.spec.table_size)
+        self._layout = LAYOUTS[self.spec.model]
+        self._torque_address = self.spec.items[Item.TORQUE_ENABLE].address
+        self._goal_address = self.spec.items[Item.GOAL_POSITION].address
+        self._boot_time = now
+        self._last_advance = now
+        self._last_instruction = now
+        self.watchdog_tripped = False
+        self.registered: tuple[int, bytes] | None = None
+        self._external_load = 0.0
+        self._profile_cache: motion.Profile | None = None
+        self._synced: tuple[object, ...] = ()
+        self._outputs_stale = True
+        self._output_limits = (0, 0, 0, 0)
+        self.deaf_until = 0.0
+        """The servo ignores the bus until this time (rebooting)."""
+        self.thermal = motion.ThermalParams()
+        self.state = motion.MotionState(position=float(setup.position), temperature=self.thermal.ambient_c)
+        self.voltage = self.spec.nominal_voltage
+        self._reset_registers(keep_eeprom=False)
+        self.set(Item.ID, setup.id)
+        self.set(Item.BAUD_RATE, self.spec.baud_code(baud))
+        self._sync_outputs(now)
+
+    # -- raw register access (no checks; for the bus, tests and fault injection) --------
+
+    def get(self, item: Item) -> int:
+        address, read_format, _, _ = self._layout[item]
+        value: int = struct.unpack_from(read_format, self.memory, address)[0]
+        return value
+
+    def set(self, item: Item, value: int) -> None:
+        self._put(item, value)
+        self._profile_cache = None
+        self._synced = ()
+        self._outputs_stale = True
+
+    def _put(self, item: Item, value: int) -> None:
+        """Store without invalidating the cached profile (for the model's own outputs)."""
+        address, _, write_format, mask = self._layout[item]
+        struct.pack_into(write_format, self.memory, address, value & mask)
+
+    @property
+    def external_load(self) -> float:
+        """Extra effort from outside (something pushing on the horn), 0..1; heats the servo."""
+        return self._external_load
+
+    @external_load.setter
+    def external_load(self, value: float) -> None:
+        self._external_load = value
+        self._profile_cache = None
+
+    @property
+    def id(self) -> int:
+        return self.get(Item.ID)
+
+    @property
+    def torque_on(self) -> bool:
+        return self.memory[self._torque_address] == 1
+
+    @property
+    def hardware_error(self) -> int:
+        return self.get(Item.HARDWARE_ERROR_STATUS)
+
+    @property
+    def return_delay_s(self) -> float:
+        return self.get(Item.RETURN_DELAY_TIME) * RETURN_DELAY_UNIT_S
+
+    def status_error(self, error: StatusError = StatusError.NONE) -> int:
+        """The ERR byte for a reply: ``error`` plus the Alert bit while a hardware error stands."""
+        return int(error) | (ALERT_BIT if self.hardware_error else 0)
+
+    def _reset_registers(self, *, keep_eeprom: bool) -> None:
+        for spec in self.spec:
+            if keep_eeprom and spec.area is Area.EEPROM:
+                continue
+            self.set(spec.item, spec.default)
+        self.registered = None
+        self.watchdog_tripped = False
+        self.set(Item.GOAL_POSITION, round(self.state.position))
+
+    # -- time ----------------------------------------------------------------------------
+
+    def feed_watchdog(self, now: float) -> None:
+        """An instruction packet for this servo (or broadcast) arrived at ``now``."""
+        watchdog = self.memory[_WATCHDOG_ADDRESS]
+        if 0 < watchdog < 0x80 and now > self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S:
+            self.advance(now)  # the deadline passed before this packet: trip first
+        self._last_instruction = now
+
+    def advance(self, now: float, *, outputs: bool = True) -> None:
+        """Run the motion and thermal model up to ``now``; trip the watchdog on time.
+
+        ``outputs=False`` leaves the present-value registers stale (a write needs only the
+        model state); anything that reads registers advances with outputs.
+        """
+        watchdog = self.get(Item.BUS_WATCHDOG)
+        if self.torque_on and watchdog > 0 and not self.watchdog_tripped:
+            deadline = self._last_instruction + watchdog * BUS_WATCHDOG_UNIT_S
+            if now > deadline:
+                self._integrate(max(deadline, self._last_advance))
+                self.watchdog_tripped = True
+                self.set(Item.BUS_WATCHDOG, -1)
+                self.state = replace(self.state, velocity=0.0)
+                self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
+                self.set(Item.GOAL_VELOCITY, 0)
+        self._integrate(now)
+        if outputs and self._outputs_stale:
+            self._sync_outputs(self._last_advance)
+
+    def _integrate(self, now: float) -> None:
+        """Run whole control cycles (1 kHz, like the servo's own loop) up to ``now``."""
+        cycles = int((now - self._last_advance) / CONTROL_PERIOD_S)
+        if cycles <= 0:
+            return
+        limit = self.get(Item.TEMPERATURE_LIMIT)
+        while cycles > 0:  # in pieces, so overheating shuts the servo down when it happens
+            chunk = cycles
+            if not self.hardware_error & _OVERHEATING:
+                effort = motion.holding_effort(self._profile())
+                crossing = motion.seconds_until_temperature(self.state, effort, limit, self.thermal)
+                if crossing is not None:
+                    chunk = min(cycles, max(1, math.ceil(crossing / CONTROL_PERIOD_S)))
+                if self.state.moving:  # acceleration adds heat the estimate does not see
+                    chunk = min(chunk, THERMAL_CHUNK_CYCLES)
+            cycles -= chunk
+            dt = chunk * CONTROL_PERIOD_S
+            self._last_advance += dt
+            self.state = motion.step(self.state, self._profile(), dt, self.thermal)
+            if self.state.temperature >= limit and not self.hardware_error & _OVERHEATING:
+                self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._outputs_stale = True
+
+    def _profile(self) -> motion.Profile:
+        if self._profile_cache is None:
+            self._profile_cache = self._make_profile()
+        return self._profile_cache
+
+    def _make_profile(self) -> motion.Profile:
+        goals_block, limits_block, _ = BLOCKS[self.spec.model]
+        goals = goals_block.read(self.memory)
+        limits = limits_block.read(self.memory)
+        cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
+        velocity_cap = motion.velocity_from_register(round(min(goals[Item.PROFILE_VELOCITY] or cap, cap)))
+        accel = goals[Item.PROFILE_ACCELERATION]
+        mode = self.get(Item.OPERATING_MODE)
+        goal_velocity = None
+        if mode == OperatingMode.VELOCITY:
+            goal_velocity = motion.velocity_from_register(goals[Item.GOAL_VELOCITY])
+        elif mode not in POSITION_MODES:
+            goal_velocity = 0.0
+        self._output_limits = (
+            limits[Item.HOMING_OFFSET],
+            limits[Item.MOVING_THRESHOLD],
+            limits.get(Item.CURRENT_LIMIT, 0),
+            limits[Item.PWM_LIMIT],
+        )
+        return motion.Profile(
+            torque_on=self.memory[self._torque_address] == 1 and not self.watchdog_tripped,
+            goal_position=float(goals[Item.GOAL_POSITION] - limits[Item.HOMING_OFFSET]),
+            max_velocity=velocity_cap,
+            max_acceleration=motion.acceleration_from_register(accel) if accel else math.inf,
+            goal_velocity=goal_velocity,
+            external_load=self.external_load,
+        )
+
+    def _sync_outputs(self, now: float) -> None:
+        """Write the model state into the read-only present-value registers."""
+        state = self.state
+        self._put(Item.REALTIME_TICK, int((now - self._boot_time) * 1000) % 32768)
+        profile = self._profile()
+        key = (state, profile, self.voltage)
+        if key == self._synced:
+            self._outputs_stale = False
+            return  # nothing the registers show has changed
+        self._synced = key
+        self._outputs_stale = False
+        offset, threshold, current_limit, pwm_limit = self._output_limits
+        position = round(state.position) + offset
+        velocity = motion.velocity_to_register(state.velocity)
+        moving = abs(velocity) > threshold or (profile.torque_on and state.velocity != 0.0)
+        signed_effort = math.copysign(state.effort, state.acceleration or 1.0)
+        _, _, outputs = BLOCKS[self.spec.model]
+        outputs.write(
+            self.memory,
+            {
+                Item.MOVING: int(moving),
+                Item.MOVING_STATUS: 0x01 if not moving and profile.torque_on else 0x00,
+                Item.PRESENT_PWM: round(signed_effort * pwm_limit),
+                Item.PRESENT_CURRENT: round(signed_effort * current_limit),
+                Item.PRESENT_LOAD: round(signed_effort * 1000),
+                Item.PRESENT_VELOCITY: velocity,
+                Item.PRESENT_POSITION: position,
+                Item.VELOCITY_TRAJECTORY: velocity,
+                Item.POSITION_TRAJECTORY: position,
+                Item.PRESENT_INPUT_VOLTAGE: round(self.voltage * 10),
+                Item.PRESENT_TEMPERATURE: min(255, max(0, round(state.temperature))),
+            },
+        )
+
+    # -- hardware errors -----------------------------------------------------------------
+
+    def heat_to(self, temperature_c: float) -> None:
+        """Set the winding temperature (fault injection); over the limit it overheats."""
+        self.state = replace(self.state, temperature=temperature_c)
+        if temperature_c >= self.get(Item.TEMPERATURE_LIMIT):
+            self.raise_hardware_error(HardwareError.OVERHEATING)
+        self._synced = ()
+        self._sync_outputs(self._last_advance)
+
+    def raise_hardware_error(self, bits: int) -> None:
+        """Latch hardware error ``bits``; those enabled in Shutdown (63) turn torque off."""
+        self.set(Item.HARDWARE_ERROR_STATUS, self.hardware_error | bits)
+        if self.hardware_error & self.get(Item.SHUTDOWN):
+            self.set(Item.TORQUE_ENABLE, 0)
+
+    @property
+    def shut_down(self) -> bool:
+        return bool(self.hardware_error & self.get(Item.SHUTDOWN))
+
+    # -- instructions ----------------------------------------------------------------------
+
+    def read(self, address: int, length: int, now: float) -> tuple[StatusError, bytes]:
+        """READ at ``now``: ``length`` bytes from ``address`` (gaps between items read as 0)."""
+        if length < 1 or address + length > len(self.memory):
+            return StatusError.ACCESS, b""
+        self.advance(now)
+        return StatusError.NONE, bytes(self.memory[address : address + length])
+
+    def check_write(self, address: int, data: bytes) -> StatusError:
+        """Why a WRITE of ``data`` at ``address`` would be refused (NONE if allowed)."""
+        end = address + len(data)
+        if not data or end > len(self.memory):
+            return StatusError.ACCESS
+        owner = self.spec.byte_owner
+        covered: list[ItemSpec] = []
+        position = address
+        while position < end:
+            spec = owner[position]
+            if spec is None:
+                return StatusError.ACCESS
+            if spec.address != position or spec.end > end:
+                return StatusError.DATA_LENGTH
+            covered.append(spec)
+            position = spec.end
+        for spec in covered:
+            if spec.access is Access.R:
+                return StatusError.ACCESS
+            if spec.area is Area.EEPROM and self.torque_on:
+                return StatusError.ACCESS
+        for spec in covered:
+            raw = data[spec.address - address : spec.end - address]
+            value = int.from_bytes(raw, "little", signed=spec.signed)
+            error = self._check_value(spec, value)
+            if error is not StatusError.NONE:
+                return error
+        return StatusError.NONE
+
+    def _check_value(self, spec: ItemSpec, value: int) -> StatusError:
+        item = spec.item
+        if self.watchdog_tripped and (item in GOAL_ITEMS or (item is Item.BUS_WATCHDOG and value != 0)):
+            return StatusError.DATA_RANGE
+        if item is Item.TORQUE_ENABLE and value == 1 and self.shut_down:
+            return StatusError.RESULT_FAIL
+        if item is Item.OPERATING_MODE and value not in {int(m) for m in OperatingMode}:
+            return StatusError.DATA_RANGE
+        if item is Item.GOAL_POSITION and self.get(Item.OPERATING_MODE) != OperatingMode.POSITION:
+            low, high = EXTENDED_POSITION_RANGE
+            return StatusError.NONE if low <= value <= high else StatusError.DATA_RANGE
+        if spec.low is not None and spec.high is not None and not spec.low <= value <= spec.high:
+            return StatusError.DATA_RANGE
+        if spec.limit_low is not None and value < self.get(spec.limit_low):
+            return StatusError.DATA_LIMIT
+        if spec.limit_high is not None and value > self.get(spec.limit_high):
+            return StatusError.DATA_LIMIT
+        if spec.symmetric_limit is not None and abs(value) > self.get(spec.symmetric_limit):
+            return StatusError.DATA_LIMIT
+        return StatusError.NONE
+
+    def write(self, address: int, data: bytes, now: float) -> StatusError:
+        """WRITE: check, then store ``data`` and apply side effects. Nothing changes on error."""
+        error = self.check_write(address, data)
+        if error is not StatusError.NONE:
+            return error
+        self.advance(now, outputs=False)
+        cache = self._profile_cache
+        if address == self._goal_address and len(data) == 4 and cache is not None:
+            # The common case, a new goal position: patch the cached profile.
+            self.memory[address : address + 4] = data
+            goal = int.from_bytes(data, "little", signed=True) - self._output_limits[0]
+            self._profile_cache = replace(cache, goal_position=float(goal))
+            self._outputs_stale = True
+            return StatusError.NONE
+        torque_before = self.torque_on
+        mode_before = self.get(Item.OPERATING_MODE)
+        self.memory[address : address + len(data)] = data
+        self._profile_cache = None
+        self._synced = ()
+        self._outputs_stale = True
+        if self.torque_on and not torque_before:
+            # Torque on holds where the horn is: the goal becomes the present position.
+            self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
+            self.state = replace(self.state, velocity=0.0)
+        if self.get(Item.OPERATING_MODE) != mode_before:
+            self.set(Item.GOAL_VELOCITY, 0)
+        if self.watchdog_tripped and self.get(Item.BUS_WATCHDOG) == 0:
+            self.watchdog_tripped = False
+        return StatusError.NONE
+
+    def reg_write(self, address: int, data: bytes) -> StatusError:
+        """REG_WRITE: check and hold the write until ACTION."""
+        error = self.check_write(address, data)
+        if error is StatusError.NONE:
+            self.registered = (address, bytes(data))
+            self.set(Item.REGISTERED_INSTRUCTION, 1)
+        return error
+
+    def action(self, now: float) -> StatusError:
+        """ACTION: apply the held REG_WRITE (Instruction error if there is none)."""
+        if self.registered is None:
+            return StatusError.INSTRUCTION
+        address, data = self.registered
+        self.registered = None
+        self.set(Item.REGISTERED_INSTRUCTION, 0)
+        return self.write(address, data, now)
+
+    def reboot(self, now: float, duration_s: float) -> None:
+        """REBOOT: RAM back to defaults (torque off), errors cleared, EEPROM kept."""
+        self.advance(now)
+        self._reset_registers(keep_eeprom=True)
+        self._boot_time = now
+        self.deaf_until = now + duration_s
+        self._last_instruction = now
+        self._sync_outputs(now)
+
+    def factory_reset(self, option: int, now: float) -> StatusError:
+        """FACTORY_RESET: every item to its default, keeping ID (and baud) if asked."""
+        if option not in {int(o) for o in FactoryResetOption}:
+            return StatusError.DATA_RANGE
+        keep_id, keep_baud = self.id, self.get(Item.BAUD_RATE)
+        self._reset_registers(keep_eeprom=False)
+        if option in (FactoryResetOption.KEEP_ID, FactoryResetOption.KEEP_ID_AND_BAUD):
+            self.set(Item.ID, keep_id)
+        if option == FactoryResetOption.KEEP_ID_AND_BAUD:
+            self.set(Item.BAUD_RATE, keep_baud)
+        self._sync_outputs(now)
+        return StatusError.NONE
+
+    def ping_params(self) -> bytes:
+        return self.get(Item.MODEL_NUMBER).to_bytes(2, "little") + bytes((self.get(Item.FIRMWARE_VERSION),))
+
+    def listens_at(self, baud: int) -> bool:
+        """Whether the servo's Baud Rate (8) matches the bus speed."""
+        return self.spec.baud_rates.get(self.get(Item.BAUD_RATE)) == baud

@@ -1,0 +1,458 @@
+"""Dynamixel X-series hardware facts as data: instructions, error bits, control tables.
+
+Sources: the ROBOTIS e-manual (Protocol 2.0 page; XL330-M288, XL430-W250 and XM430-W350
+control tables). Addresses are byte offsets into the servo's control table; sizes are in
+bytes; values are raw register units (positions in pulses of 1/4096 turn, velocities in
+0.229 rev/min, profile acceleration in 214.577 rev/min^2, temperatures in deg C,
+voltages in 0.1 V, Bus Watchdog in 20 ms, Return Delay Time in 2 us).
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+
+BROADCAST_ID = 0xFE
+"""Instruction ID that addresses every servo on the bus."""
+MAX_ID = 252
+"""Highest ID a servo can have."""
+PULSES_PER_TURN = 4096
+"""Encoder resolution of every X-series servo (0.088 deg per pulse)."""
+POSITION_RANGE = (0, 4095)
+"""Goal/limit range in Position Control Mode, pulses."""
+EXTENDED_POSITION_RANGE = (-1_048_575, 1_048_575)
+"""Goal range in Extended / Current-based Position Control Mode, pulses."""
+VELOCITY_UNIT_RPM = 0.229
+"""Unit of velocity registers (Profile Velocity, Present Velocity, limits), rev/min."""
+ACCELERATION_UNIT_RPM2 = 214.577
+"""Unit of Profile Acceleration (velocity-based profile), rev/min^2."""
+RETURN_DELAY_UNIT_S = 2e-6
+"""Unit of Return Delay Time (9)."""
+BUS_WATCHDOG_UNIT_S = 0.020
+"""Unit of Bus Watchdog (98)."""
+
+
+class Instruction(enum.IntEnum):
+    """Protocol 2.0 instruction codes (the INST byte)."""
+
+    PING = 0x01
+    READ = 0x02
+    WRITE = 0x03
+    REG_WRITE = 0x04
+    ACTION = 0x05
+    FACTORY_RESET = 0x06
+    REBOOT = 0x08
+    CLEAR = 0x10
+    CONTROL_TABLE_BACKUP = 0x20
+    STATUS = 0x55
+    SYNC_READ = 0x82
+    SYNC_WRITE = 0x83
+    FAST_SYNC_READ = 0x8A
+    BULK_READ = 0x92
+    BULK_WRITE = 0x93
+    FAST_BULK_READ = 0x9A
+
+
+class StatusError(enum.IntEnum):
+    """The low 7 bits of a status packet's ERR byte (a number, not a bit field)."""
+
+    NONE = 0
+    RESULT_FAIL = 1
+    INSTRUCTION = 2
+    CRC = 3
+    DATA_RANGE = 4
+    DATA_LENGTH = 5
+    DATA_LIMIT = 6
+    ACCESS = 7
+
+
+ALERT_BIT = 0x80
+"""ERR bit 7: the servo has a hardware error; read Hardware Error Status (70)."""
+
+
+class HardwareError(enum.IntFlag):
+    """Bits of Hardware Error Status (70) and of the Shutdown (63) mask."""
+
+    INPUT_VOLTAGE = 0x01
+    OVERHEATING = 0x04
+    MOTOR_ENCODER = 0x08
+    ELECTRICAL_SHOCK = 0x10
+    OVERLOAD = 0x20
+
+
+class OperatingMode(enum.IntEnum):
+    """Values of Operating Mode (11)."""
+
+    CURRENT = 0
+    VELOCITY = 1
+    POSITION = 3
+    EXTENDED_POSITION = 4
+    CURRENT_BASED_POSITION = 5
+    PWM = 16
+
+
+POSITION_MODES = frozenset(
+    {OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION}
+)
+
+
+class FactoryResetOption(enum.IntEnum):
+    """Parameter of FACTORY_RESET: what survives the reset."""
+
+    ALL = 0xFF
+    KEEP_ID = 0x01
+    KEEP_ID_AND_BAUD = 0x02
+
+
+class Access(enum.Enum):
+    """Who may write an item: R is read-only, RW read-write."""
+
+    R = "R"
+    RW = "RW"
+
+
+class Area(enum.Enum):
+    """EEPROM items keep their value across reboots and are locked while torque is on."""
+
+    EEPROM = "EEPROM"
+    RAM = "RAM"
+
+
+class Item(enum.StrEnum):
+    """Control-table item names (the same name on every X-series model)."""
+
+    MODEL_NUMBER = "model_number"
+    MODEL_INFORMATION = "model_information"
+    FIRMWARE_VERSION = "firmware_version"
+    ID = "id"
+    BAUD_RATE = "baud_rate"
+    RETURN_DELAY_TIME = "return_delay_time"
+    DRIVE_MODE = "drive_mode"
+    OPERATING_MODE = "operating_mode"
+    SECONDARY_ID = "secondary_id"
+    PROTOCOL_TYPE = "protocol_type"
+    HOMING_OFFSET = "homing_offset"
+    MOVING_THRESHOLD = "moving_threshold"
+    TEMPERATURE_LIMIT = "temperature_limit"
+    MAX_VOLTAGE_LIMIT = "max_voltage_limit"
+    MIN_VOLTAGE_LIMIT = "min_voltage_limit"
+    PWM_LIMIT = "pwm_limit"
+    CURRENT_LIMIT = "current_limit"
+    VELOCITY_LIMIT = "velocity_limit"
+    MAX_POSITION_LIMIT = "max_position_limit"
+    MIN_POSITION_LIMIT = "min_position_limit"
+    STARTUP_CONFIGURATION = "startup_configuration"
+    SHUTDOWN = "shutdown"
+    TORQUE_ENABLE = "torque_enable"
+    LED = "led"
+    STATUS_RETURN_LEVEL = "status_return_level"
+    REGISTERED_INSTRUCTION = "registered_instruction"
+    HARDWARE_ERROR_STATUS = "hardware_error_status"
+    VELOCITY_I_GAIN = "velocity_i_gain"
+    VELOCITY_P_GAIN = "velocity_p_gain"
+    POSITION_D_GAIN = "position_d_gain"
+    POSITION_I_GAIN = "position_i_gain"
+    POSITION_P_GAIN = "position_p_gain"
+    FEEDFORWARD_2ND_GAIN = "feedforward_2nd_gain"
+    FEEDFORWARD_1ST_GAIN = "feedforward_1st_gain"
+    BUS_WATCHDOG = "bus_watchdog"
+    GOAL_PWM = "goal_pwm"
+    GOAL_CURRENT = "goal_current"
+    GOAL_VELOCITY = "goal_velocity"
+    PROFILE_ACCELERATION = "profile_acceleration"
+    PROFILE_VELOCITY = "profile_velocity"
+    GOAL_POSITION = "goal_position"
+    REALTIME_TICK = "realtime_tick"
+    MOVING = "moving"
+    MOVING_STATUS = "moving_status"
+    PRESENT_PWM = "present_pwm"
+    PRESENT_LOAD = "present_load"
+    PRESENT_CURRENT = "present_current"
+    PRESENT_VELOCITY = "present_velocity"
+    PRESENT_POSITION = "present_position"
+    VELOCITY_TRAJECTORY = "velocity_trajectory"
+    POSITION_TRAJECTORY = "position_trajectory"
+    PRESENT_INPUT_VOLTAGE = "present_input_voltage"
+    PRESENT_TEMPERATURE = "present_temperature"
+
+
+@dataclass(frozen=True)
+class ItemSpec:
+    """One control-table item.
+
+    ``low``/``high`` is the static write range (None for read-only items). ``limit_low``
+    /``limit_high`` name items whose present value bounds the write (Goal Position
+    between the position limits); ``symmetric_limit`` bounds to +-that item's value.
+    """
+
+    item: Item
+    address: int
+    size: int
+    access: Access
+    default: int = 0
+    low: int | None = None
+    high: int | None = None
+    signed: bool = False
+    limit_low: Item | None = None
+    limit_high: Item | None = None
+    symmetric_limit: Item | None = None
+
+    @property
+    def area(self) -> Area:
+        return Area.EEPROM if self.address < 64 else Area.RAM
+
+    @property
+    def end(self) -> int:
+        return self.address + self.size
+
+
+class Model(enum.StrEnum):
+    """Supported servo models, by their ROBOTIS name."""
+
+    XL330_M288 = "XL330-M288"
+    XL430_W250 = "XL430-W250"
+    XM430_W350 = "XM430-W350"
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Static facts about one servo model: its control table and physical figures."""
+
+    model: Model
+    model_number: int
+    items: Mapping[Item, ItemSpec]
+    fast_sync_read: bool
+    """Whether the firmware answers FAST_SYNC_READ / FAST_BULK_READ (0x8A / 0x9A)."""
+    table_size: int
+    """Bytes of addressable control table (reads beyond are an Access error)."""
+    no_load_speed_rpm: float
+    """Output speed at the nominal voltage, rev/min: the cap when Profile Velocity is 0."""
+    nominal_voltage: float
+    """Supply voltage the emulator reports, V."""
+    current_unit_ma: float | None
+    """Unit of Goal/Present Current, mA; None when the model reports Present Load."""
+    baud_rates: Mapping[int, int] = field(default_factory=dict)
+    """Baud Rate (8) register value -> bits per second."""
+
+    def __iter__(self) -> Iterator[ItemSpec]:
+        return iter(self.ordered)
+
+    @functools.cached_property
+    def ordered(self) -> tuple[ItemSpec, ...]:
+        """Items by address."""
+        return tuple(sorted(self.items.values(), key=lambda s: s.address))
+
+    @functools.cached_property
+    def byte_owner(self) -> tuple[ItemSpec | None, ...]:
+        """For each control-table address, the item that byte belongs to (None in gaps)."""
+        owner: list[ItemSpec | None] = [None] * self.table_size
+        for spec in self.items.values():
+            owner[spec.address : spec.end] = [spec] * spec.size
+        return tuple(owner)
+
+    def spec(self, item: Item) -> ItemSpec:
+        return self.items[item]
+
+    def has(self, item: Item) -> bool:
+        return item in self.items
+
+    def baud_code(self, baud: int) -> int:
+        """The Baud Rate (8) value for ``baud`` bits per second (ValueError if none)."""
+        for code, bps in self.baud_rates.items():
+            if bps == baud:
+                return code
+        raise ValueError(f"{self.model.value} has no baud rate {baud}; allowed: {sorted(self.baud_rates.values())}")
+
+
+_BAUD_X = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000, 5: 3_000_000, 6: 4_000_000, 7: 4_500_000}
+_BAUD_XL330 = {code: bps for code, bps in _BAUD_X.items() if code <= 6}
+
+R, RW = Access.R, Access.RW
+
+
+def _common_items(
+    *,
+    model_number: int,
+    temperature_limit: int,
+    voltage_range: tuple[int, int],
+    voltage_defaults: tuple[int, int],
+    velocity_limit: tuple[int, int],
+    shutdown: int,
+    gains: tuple[int, int, int, int, int],
+    baud_max: int,
+    drive_mode_max: int,
+) -> list[ItemSpec]:
+    """Items every supported X-series model shares (defaults and ranges vary)."""
+    v_low, v_high = voltage_range
+    vel_default, vel_max = velocity_limit
+    vi, vp, pd, pi, pp = gains
+    return [
+        ItemSpec(Item.MODEL_NUMBER, 0, 2, R, model_number),
+        ItemSpec(Item.MODEL_INFORMATION, 2, 4, R),
+        ItemSpec(Item.FIRMWARE_VERSION, 6, 1, R, 52),
+        ItemSpec(Item.ID, 7, 1, RW, 1, 0, 252),
+        ItemSpec(Item.BAUD_RATE, 8, 1, RW, 1, 0, baud_max),
+        ItemSpec(Item.RETURN_DELAY_TIME, 9, 1, RW, 250, 0, 254),
+        ItemSpec(Item.DRIVE_MODE, 10, 1, RW, 0, 0, drive_mode_max),
+        ItemSpec(Item.OPERATING_MODE, 11, 1, RW, 3, 0, 16),
+        ItemSpec(Item.SECONDARY_ID, 12, 1, RW, 255, 0, 255),
+        ItemSpec(Item.PROTOCOL_TYPE, 13, 1, RW, 2, 1, 2),
+        ItemSpec(Item.HOMING_OFFSET, 20, 4, RW, 0, -1_044_479, 1_044_479, signed=True),
+        ItemSpec(Item.MOVING_THRESHOLD, 24, 4, RW, 10, 0, 1023),
+        ItemSpec(Item.TEMPERATURE_LIMIT, 31, 1, RW, temperature_limit, 0, 100),
+        ItemSpec(Item.MAX_VOLTAGE_LIMIT, 32, 2, RW, voltage_defaults[1], v_low, v_high),
+        ItemSpec(Item.MIN_VOLTAGE_LIMIT, 34, 2, RW, voltage_defaults[0], v_low, v_high),
+        ItemSpec(Item.PWM_LIMIT, 36, 2, RW, 885, 0, 885),
+        ItemSpec(Item.VELOCITY_LIMIT, 44, 4, RW, vel_default, 0, vel_max),
+        ItemSpec(Item.MAX_POSITION_LIMIT, 48, 4, RW, 4095, 0, 4095),
+        ItemSpec(Item.MIN_POSITION_LIMIT, 52, 4, RW, 0, 0, 4095),
+        ItemSpec(Item.STARTUP_CONFIGURATION, 60, 1, RW, 0, 0, 3),
+        ItemSpec(Item.SHUTDOWN, 63, 1, RW, shutdown, 0, 0x3F),
+        ItemSpec(Item.TORQUE_ENABLE, 64, 1, RW, 0, 0, 1),
+        ItemSpec(Item.LED, 65, 1, RW, 0, 0, 1),
+        ItemSpec(Item.STATUS_RETURN_LEVEL, 68, 1, RW, 2, 0, 2),
+        ItemSpec(Item.REGISTERED_INSTRUCTION, 69, 1, R),
+        ItemSpec(Item.HARDWARE_ERROR_STATUS, 70, 1, R),
+        ItemSpec(Item.VELOCITY_I_GAIN, 76, 2, RW, vi, 0, 16383),
+        ItemSpec(Item.VELOCITY_P_GAIN, 78, 2, RW, vp, 0, 16383),
+        ItemSpec(Item.POSITION_D_GAIN, 80, 2, RW, pd, 0, 16383),
+        ItemSpec(Item.POSITION_I_GAIN, 82, 2, RW, pi, 0, 16383),
+        ItemSpec(Item.POSITION_P_GAIN, 84, 2, RW, pp, 0, 16383),
+        ItemSpec(Item.FEEDFORWARD_2ND_GAIN, 88, 2, RW, 0, 0, 16383),
+        ItemSpec(Item.FEEDFORWARD_1ST_GAIN, 90, 2, RW, 0, 0, 16383),
+        ItemSpec(Item.BUS_WATCHDOG, 98, 1, RW, 0, 0, 127, signed=True),
+        ItemSpec(Item.GOAL_PWM, 100, 2, RW, 0, signed=True, symmetric_limit=Item.PWM_LIMIT),
+        ItemSpec(Item.GOAL_VELOCITY, 104, 4, RW, 0, signed=True, symmetric_limit=Item.VELOCITY_LIMIT),
+        ItemSpec(Item.PROFILE_ACCELERATION, 108, 4, RW, 0, 0, 32767),
+        ItemSpec(Item.PROFILE_VELOCITY, 112, 4, RW, 0, 0, 32767),
+        ItemSpec(
+            Item.GOAL_POSITION,
+            116,
+            4,
+            RW,
+            0,
+            signed=True,
+            limit_low=Item.MIN_POSITION_LIMIT,
+            limit_high=Item.MAX_POSITION_LIMIT,
+        ),
+        ItemSpec(Item.REALTIME_TICK, 120, 2, R),
+        ItemSpec(Item.MOVING, 122, 1, R),
+        ItemSpec(Item.MOVING_STATUS, 123, 1, R),
+        ItemSpec(Item.PRESENT_PWM, 124, 2, R, signed=True),
+        ItemSpec(Item.PRESENT_VELOCITY, 128, 4, R, signed=True),
+        ItemSpec(Item.PRESENT_POSITION, 132, 4, R, signed=True),
+        ItemSpec(Item.VELOCITY_TRAJECTORY, 136, 4, R, signed=True),
+        ItemSpec(Item.POSITION_TRAJECTORY, 140, 4, R, signed=True),
+        ItemSpec(Item.PRESENT_INPUT_VOLTAGE, 144, 2, R),
+        ItemSpec(Item.PRESENT_TEMPERATURE, 146, 1, R),
+    ]
+
+
+def _table(items: list[ItemSpec]) -> dict[Item, ItemSpec]:
+    return {spec.item: spec for spec in items}
+
+
+XL330_M288 = ModelSpec(
+    model=Model.XL330_M288,
+    model_number=1200,
+    items=_table(
+        [
+            *_common_items(
+                model_number=1200,
+                temperature_limit=70,
+                voltage_range=(31, 70),
+                voltage_defaults=(35, 70),
+                velocity_limit=(445, 2047),
+                shutdown=0x35,
+                gains=(1600, 180, 0, 0, 400),
+                baud_max=6,
+                drive_mode_max=5,
+            ),
+            ItemSpec(Item.CURRENT_LIMIT, 38, 2, RW, 1750, 0, 1750),
+            ItemSpec(Item.GOAL_CURRENT, 102, 2, RW, 0, signed=True, symmetric_limit=Item.CURRENT_LIMIT),
+            ItemSpec(Item.PRESENT_CURRENT, 126, 2, R, signed=True),
+        ]
+    ),
+    fast_sync_read=True,
+    table_size=228,
+    no_load_speed_rpm=103.0,
+    nominal_voltage=5.0,
+    current_unit_ma=1.0,
+    baud_rates=_BAUD_XL330,
+)
+
+XL430_W250 = ModelSpec(
+    model=Model.XL430_W250,
+    model_number=1060,
+    items=_table(
+        [
+            *_common_items(
+                model_number=1060,
+                temperature_limit=72,
+                voltage_range=(60, 140),
+                voltage_defaults=(60, 140),
+                velocity_limit=(265, 1023),
+                shutdown=0x34,
+                gains=(1000, 100, 4000, 0, 640),
+                baud_max=7,
+                drive_mode_max=13,
+            ),
+            ItemSpec(Item.PRESENT_LOAD, 126, 2, R, signed=True),
+        ]
+    ),
+    fast_sync_read=True,
+    table_size=662,
+    no_load_speed_rpm=57.0,
+    nominal_voltage=11.1,
+    current_unit_ma=None,
+    baud_rates=_BAUD_X,
+)
+
+XM430_W350 = ModelSpec(
+    model=Model.XM430_W350,
+    model_number=1020,
+    items=_table(
+        [
+            *_common_items(
+                model_number=1020,
+                temperature_limit=80,
+                voltage_range=(95, 160),
+                voltage_defaults=(95, 160),
+                velocity_limit=(350, 1023),
+                shutdown=0x34,
+                gains=(1920, 100, 0, 0, 800),
+                baud_max=7,
+                drive_mode_max=5,
+            ),
+            ItemSpec(Item.CURRENT_LIMIT, 38, 2, RW, 1193, 0, 1193),
+            ItemSpec(Item.GOAL_CURRENT, 102, 2, RW, 0, signed=True, symmetric_limit=Item.CURRENT_LIMIT),
+            ItemSpec(Item.PRESENT_CURRENT, 126, 2, R, signed=True),
+        ]
+    ),
+    fast_sync_read=True,
+    table_size=662,
+    no_load_speed_rpm=46.0,
+    nominal_voltage=12.0,
+    current_unit_ma=2.69,
+    baud_rates=_BAUD_X,
+)
+
+MODELS: dict[Model, ModelSpec] = {spec.model: spec for spec in (XL330_M288, XL430_W250, XM430_W350)}
+"""Every supported model, by name."""
+MODEL_NUMBERS: dict[int, Model] = {spec.model_number: spec.model for spec in MODELS.values()}
+"""Model Number (0) register value -> model."""
+
+
+def model_spec(model: Model | str) -> ModelSpec:
+    """The spec for a model name such as ``"XL430-W250"`` (ValueError naming the choices)."""
+    try:
+        return MODELS[Model(model)]
+    except ValueError:
+        raise ValueError(f"unknown servo model {model!r}; known: {', '.join(m.value for m in Model)}") from None
+
+
+def decode_hardware_error(value: int) -> list[HardwareError]:
+    """The individual bits set in a Hardware Error Status (70) value, lowest first."""
+    return [bit for bit in HardwareError if value & bit]

@@ -1,0 +1,41 @@
+"""``riderlive horse``: write a procedural take (a gait, or a shot script) to a frame file."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from riderlive.configfile import ConfigError
+from riderlive.framefile import FrameFileError, write_frames
+from riderlive.horse.gaits import GAITS
+from riderlive.horse.script import ShotScript, gait_script, generate, load_script
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--gait", choices=(*GAITS, "halt"), help="hold one gait")
+    source.add_argument("--script", help="shot script (TOML) of gait and move segments")
+    parser.add_argument("--seconds", type=float, default=10.0, help="length of a --gait take (default 10)")
+    parser.add_argument("--speed", type=float, help="m/s for --gait (default: the gait's)")
+    parser.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
+    parser.add_argument("--seed", type=int, help="turn on seeded stride-to-stride variation")
+    parser.add_argument("-o", "--output", required=True, help="frame file to write (.csv, .jsonl, or -)")
+    parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        if not (30.0 <= args.rate <= 1000.0):
+            raise ValueError(f"--rate must be within 30-1000 Hz, got {args.rate}")
+        script: ShotScript
+        if args.script:
+            script = load_script(args.script)
+            if args.seed is not None:
+                script = script.model_copy(update={"seed": args.seed})
+        else:
+            script = gait_script(args.gait, args.seconds, args.speed, args.seed)
+        write_frames(args.output, generate(script, args.rate), args.format)
+    except (ConfigError, FrameFileError, ValueError) as exc:
+        print(f"riderlive horse: {exc}", file=sys.stderr)
+        return 2
+    return 0
