@@ -6,7 +6,8 @@ forward of the hoof's standing spot, ``ty`` its height above the ground, ``tz`` 
 horse's left; ``rearPivot.t*`` displace the hips from standing (``tz`` + left);
 ``rearPivot.rz`` > 0 lifts the front (pitch up), ``rearPivot.rx`` > 0 rolls to the left
 (left side down), ``root.ry`` > 0 turns left. The rear pivot turns by
-``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last). The skeleton's own axes are those of
+``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last) about the hips, where
+``riderlive.physics`` has it (``pivot_rest``); the tail root is its dock. The skeleton's own axes are those of
 :mod:`riderlive.skeleton.rig` (``+z`` is the horse's right), so the ``+ left`` channels
 drive with a negative sign.
 """
@@ -35,14 +36,14 @@ _LEG_ROOT_HEIGHT = 0.3
 """The legs hang from the top of the shoulder blade and the croup, above the joints."""
 _FRONT_KNEE: Vec3 = (0.12, -0.92, 0.0)
 _FRONT_CANNON: Vec3 = (-0.09, -0.34, 0.0)
-_HIND_HOCK: Vec3 = (-0.17, -0.80, 0.0)
+_HIND_HOCK: Vec3 = (-0.12, -0.85, 0.0)
 _HIND_CANNON: Vec3 = (0.05, -0.32, 0.0)
 
 _ROWS: list[tuple[str, str | None, Vec3]] = [
     ("root", None, (0.0, 0.0, 0.0)),
-    ("rearPivot", "root", (0.0, 1.0, 0.0)),
-    ("backMid", "rearPivot", (0.0, 0.28, 0.0)),
-    ("saddle", "backMid", (0.1, 0.18, 0.0)),
+    ("rearPivot", "root", (-0.55, 1.05, 0.0)),
+    ("backMid", "rearPivot", (0.55, 0.23, 0.0)),
+    ("saddle", "backMid", (0.05, 0.18, 0.0)),
     ("shoulders", "backMid", (0.55, -0.14, 0.0)),
     ("neck", "shoulders", (0.25, 0.2, 0.0)),
     ("head", "neck", (0.35, 0.42, 0.0)),
@@ -50,7 +51,7 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
     ("tailRoot", "rearPivot", (-0.5, 0.42, 0.0)),
     *_leg("lf", "shoulders", False, _FRONT_KNEE, _FRONT_CANNON),
     *_leg("rf", "shoulders", True, _FRONT_KNEE, _FRONT_CANNON),
-    ("hips", "rearPivot", (-0.5, 0.0, 0.0)),
+    ("hips", "rearPivot", (-0.05, 0.0, 0.0)),
     *_leg("lb", "hips", False, _HIND_HOCK, _HIND_CANNON),
     *_leg("rb", "hips", True, _HIND_HOCK, _HIND_CANNON),
 ]

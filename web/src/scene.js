@@ -116,7 +116,7 @@ export class View {
       ["lower_back", "waist", "spine_c", "spine_d", "spine_f"].includes(b.name) ? 0.09 : 0.035,
     );
     const body = new Mesh(new SphereGeometry(1, 20, 12), horseMat);
-    body.scale.set(0.8, 0.3, 0.26);
+    body.scale.set(0.92, 0.3, 0.26);
     this.scene.add(body);
     this.body = body;
     const head = new Mesh(new CylinderGeometry(0.1, 0.06, 0.52, 10), horseMat);
@@ -196,8 +196,8 @@ export class View {
     const q = new Quaternion();
     const back = horse.positions[hi.backMid];
     q.fromArray(horse.rotations[hi.backMid]);
-    this.body.position.set(back[0], back[1] - 0.14, back[2]);
     this.body.quaternion.copy(q);
+    this.body.position.set(-0.15, -0.14, 0).applyQuaternion(q).add(new Vector3(back[0], back[1], back[2]));
     const hp = horse.positions[hi.head];
     const mp = horse.positions[hi.muzzle];
     this.horseHead.position.set((hp[0] + mp[0]) / 2, (hp[1] + mp[1]) / 2, (hp[2] + mp[2]) / 2);
