@@ -23,7 +23,7 @@ A rig drives a skeleton from named channels, all taken as deltas from the rig's
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -98,9 +98,16 @@ class Rig:
     translations: tuple[Drive, ...] = ()
     chains: tuple[Chain, ...] = ()
     index: dict[str, int] = field(init=False)
+    subtree: tuple[tuple[int, ...], ...] = field(init=False)
+    """Per bone: itself and its descendants, parents first."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "index", {b.name: i for i, b in enumerate(self.bones)})
+        below: list[list[int]] = [[i] for i in range(len(self.bones))]
+        for i in range(len(self.bones) - 1, -1, -1):
+            p = self.bones[i].parent
+            if p >= 0:
+                below[p] = [p, *sorted(set(below[p][1:]) | set(below[i]))]
         for i, b in enumerate(self.bones):
             if not -1 <= b.parent < i:
                 raise ValueError(f"{self.name}: bone {b.name!r} has parent {b.parent}; parents must come first")
@@ -111,6 +118,11 @@ class Rig:
             u, lo, e = (self.index[n] for n in (c.upper, c.lower, c.end))
             if self.bones[lo].parent != u or self.bones[e].parent != lo:
                 raise ValueError(f"{self.name}: chain {c.upper}->{c.lower}->{c.end} is not a parent chain")
+        object.__setattr__(self, "subtree", tuple(tuple(b) for b in below))
+        rest: list[Vec3] = []
+        for b in self.bones:
+            rest.append(b.offset if b.parent < 0 else quat.add(rest[b.parent], b.offset))
+        object.__setattr__(self, "_rest", tuple(rest))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -118,10 +130,7 @@ class Rig:
 
     def rest_world(self) -> list[Vec3]:
         """Rest joint positions in the skeleton frame, metres."""
-        pos: list[Vec3] = []
-        for b in self.bones:
-            pos.append(b.offset if b.parent < 0 else quat.add(pos[b.parent], b.offset))
-        return pos
+        return list(self._rest)  # type: ignore[attr-defined]
 
     def to_json(self) -> dict[str, Any]:
         """The rig as JSON-ready data (what the hello and the page use)."""
@@ -170,18 +179,18 @@ class Pose:
     world_positions: list[Vec3]
 
 
-def _forward(rig: Rig, local_rot: list[Quat], local_off: list[Vec3], start: int = 0) -> tuple[list[Quat], list[Vec3]]:
-    n = len(rig.bones)
-    wrot: list[Quat] = [IDENTITY] * n
-    wpos: list[Vec3] = [(0.0, 0.0, 0.0)] * n
-    for i, b in enumerate(rig.bones):
-        if b.parent < 0:
+def _forward(
+    rig: Rig, local_rot: list[Quat], local_off: list[Vec3], wrot: list[Quat], wpos: list[Vec3], *, bones: Iterable[int]
+) -> None:
+    """World transforms of ``bones`` (parents first) from local ones, in place."""
+    for i in bones:
+        p = rig.bones[i].parent
+        if p < 0:
             wrot[i], wpos[i] = local_rot[i], local_off[i]
         else:
-            pr = wrot[b.parent]
+            pr = wrot[p]
             wrot[i] = quat.mul(pr, local_rot[i])
-            wpos[i] = quat.add(wpos[b.parent], quat.rotate(pr, local_off[i]))
-    return wrot, wpos
+            wpos[i] = quat.add(wpos[p], quat.rotate(pr, local_off[i]))
 
 
 def _any_perpendicular(u: Vec3) -> Vec3:
@@ -212,7 +221,9 @@ def solve(rig: Rig, values: Mapping[str, float]) -> Pose:
         i = rig.index[d.bone]
         local_off[i] = quat.add(local_off[i], quat.scale(d.axis, d.sign * delta(d.channel)))
     end_turn = {rig.index[c.end]: local_rot[rig.index[c.end]] for c in rig.chains}
-    wrot, wpos = _forward(rig, local_rot, local_off)
+    wrot: list[Quat] = [IDENTITY] * n
+    wpos: list[Vec3] = [(0.0, 0.0, 0.0)] * n
+    _forward(rig, local_rot, local_off, wrot, wpos, bones=range(n))
     rest = rig.rest_world()
 
     for c in rig.chains:
@@ -257,7 +268,7 @@ def solve(rig: Rig, values: Mapping[str, float]) -> Pose:
         local_rot[iu] = quat.mul(quat.conj(parent_rot), upper_world)
         local_rot[il] = quat.mul(quat.conj(upper_world), lower_world)
         local_rot[ie] = quat.mul(quat.conj(lower_world), quat.mul(frot, end_turn[ie]))
-        wrot, wpos = _forward(rig, local_rot, local_off)
+        _forward(rig, local_rot, local_off, wrot, wpos, bones=rig.subtree[iu])
 
     return Pose(
         local_rotations=[quat.normalize(q) for q in local_rot],
