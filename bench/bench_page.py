@@ -196,6 +196,7 @@ def main() -> int:
     print(f"viewport {args.width}x{args.height}, {len(fps)} one-second samples")
     p10 = sorted(fps)[len(fps) // 10]
     print(f"page fps      median {med:.1f}  p10 {p10:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
+    print("fps by second " + " ".join(f"{f:.0f}" for f in fps))
     print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
     print(f"JS per animation frame {tick_ms:.2f} ms (pose both skeletons, update the scene, submit GL, plots)")
     print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")

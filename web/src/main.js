@@ -175,10 +175,18 @@ async function start() {
       const horseW = placed(horsePose, [0, 0, 0, 1], [0, 0, 0]);
       const si = horseRig.index.saddle;
       const riderW = placed(riderPose, horseW.rotations[si], horseW.positions[si]);
+      const byName = (rig, list) => Object.fromEntries(rig.bones.map((b, i) => [b.name, list[i]]));
       page.pose = {
-        rider: Object.fromEntries(riderRig.bones.map((b, i) => [b.name, riderPose.localRotations[i]])),
-        horse: Object.fromEntries(horseRig.bones.map((b, i) => [b.name, horsePose.localRotations[i]])),
-        riderWorld: Object.fromEntries(riderRig.bones.map((b, i) => [b.name, riderW.positions[i]])),
+        // Built when read (tests, the console), not every animation frame.
+        get rider() {
+          return byName(riderRig, riderPose.localRotations);
+        },
+        get horse() {
+          return byName(horseRig, horsePose.localRotations);
+        },
+        get riderWorld() {
+          return byName(riderRig, riderW.positions);
+        },
       };
       // Chain positions (tail_NN.t*, braid_NN.t*) are world positions; on the treadmill the
       // horse's travel (root.tx, root.tz) is taken out as it is for the horse.
