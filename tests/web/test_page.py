@@ -115,7 +115,7 @@ def test_weight_slider_changes_the_next_frames(live_page: PageUnderTest, server:
         server.request("PATCH", "/api/params", {key: before_param})
 
 
-def test_record_button_makes_a_take_that_the_list_shows(live_page: PageUnderTest, server: Server) -> None:
+def test_record_button_makes_a_take_that_replays_from_the_list(live_page: PageUnderTest, server: Server) -> None:
     page: Any = live_page.page
     page.locator("#rec-start").click()
     live_page.wait_for("document.getElementById('rec-now').textContent.startsWith('recording')", timeout=5)
@@ -125,6 +125,16 @@ def test_record_button_makes_a_take_that_the_list_shows(live_page: PageUnderTest
     names = [t["name"] for t in server.get("/api/takes")["takes"]]
     assert names, "no take was recorded"
     live_page.wait_for(f"[...document.querySelectorAll('#takes li')].some((li) => li.textContent === {names[0]!r})")
+    seq = live_page.state("riderlive.seq")
+    page.locator("#takes li", has_text=names[0]).click()
+    try:
+        deadline = time.monotonic() + 5
+        while server.get("/api/state")["source"].get("take") != names[0]:
+            assert time.monotonic() < deadline, "clicking the recorded take did not replay it"
+            time.sleep(0.05)
+        live_page.wait_for(f"riderlive.seq > {seq} + 30", timeout=5)  # frames keep coming
+    finally:
+        server.request("PUT", "/api/source", {"kind": "live"})
 
 
 def test_a_take_replays_on_the_page(live_page: PageUnderTest, server: Server) -> None:
