@@ -1,9 +1,10 @@
 """What the tick drives besides the rings: the ``TickOutput`` protocol and the rig hookup.
 
 A ``TickOutput`` is called once per tick with the rider frame (channels.RIDER order)
-and engine time; it returns a JSON-ready status dict to publish (or None when it has
-nothing new). It must not block longer than its share of the tick. The Dynamixel rig
-(``riderlive.dynamixel.driver.RigDriver``) is adapted by :class:`RigOutput`.
+and the tick's deadline in ``perf_counter`` seconds; it returns a JSON-ready status
+dict to publish (or None when it has nothing new). It must not block longer than its
+share of the tick. The Dynamixel rig (``riderlive.dynamixel.driver.RigDriver``) is
+adapted by :class:`RigOutput`.
 """
 
 from __future__ import annotations
@@ -44,15 +45,9 @@ class RigOutput:
     """
 
     def __init__(self, rig_file: str, port: str | None) -> None:
+        rig_module = importlib.import_module("riderlive.dynamixel.rig")
         driver_module = importlib.import_module("riderlive.dynamixel.driver")
-        config: Any = rig_file
-        loader = getattr(driver_module, "load_rig", None)
-        if loader is None:
-            rig_module = importlib.import_module("riderlive.dynamixel")
-            loader = getattr(rig_module, "load_rig", None)
-        if loader is not None:
-            config = loader(rig_file)
-        self._driver: Any = driver_module.RigDriver(config, port)
+        self._driver: Any = driver_module.RigDriver(rig_module.load_rig(rig_file), port)
         self._state = "closed"
 
     def open(self) -> None:

@@ -18,6 +18,7 @@ import os
 import signal
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
@@ -84,7 +85,7 @@ class TickLoop:
         self.stopping_since: float | None = None
         self.estopped = False
         self.realtime = "off"
-        self.events: list[str] = []
+        self.events: deque[str] = deque(maxlen=10)
         self.rig: dict[str, Any] | None = None
         self._status_dirty = True
 
@@ -148,7 +149,7 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": self.rig,
-            "events": self.events[-10:],
+            "events": list(self.events),
         }
 
     def _publish_status(self) -> None:
@@ -185,12 +186,14 @@ class TickLoop:
             result = self.core.step(now)
             if self.output is not None:
                 try:
-                    status = self.output.tick(result.rider, now)
+                    status = self.output.tick(result.rider, deadline)
                 except Exception as exc:  # the driver owns its faults; the tick goes on
                     status = None
                     self.events.append(f"rig tick failed: {exc}")
                     self._status_dirty = True
-                if status is not None and clock.tick % rig_every == 0:
+                if status is not None and (
+                    clock.tick % rig_every == 0 or self.rig is None or status.get("state") != self.rig.get("state")
+                ):
                     self.rig = status
                     self._status_dirty = True
             done = time.perf_counter() - setup.start

@@ -141,7 +141,8 @@ class IngestEndpoint:
         except auth.Unauthorized:
             service.metrics.bad_frames["unauthorized"] += 1
             await send_quietly(websocket, {"type": "error", "reason": "unauthorized", "message": "token required"}, 1.0)
-            await websocket.close(code=4401, reason="unauthorized")
+            with contextlib.suppress(Exception):  # it may have left already
+                await websocket.close(code=4401, reason="unauthorized")
             return
         producer = Producer(
             id=next_producer_id(), name=f"producer-{len(service.arbiter.producers) + 1}", websocket=websocket

@@ -268,8 +268,9 @@ class Hub:
                 token = None
             if not auth.token_matches(config.security.token, token):
                 service.metrics.bad_frames["unauthorized"] += 1
-                await websocket.send_json({"type": "error", "reason": "unauthorized", "message": "token required"})
-                await websocket.close(code=4401, reason="unauthorized")
+                with contextlib.suppress(Exception):  # it may have left already
+                    await websocket.send_json({"type": "error", "reason": "unauthorized", "message": "token required"})
+                    await websocket.close(code=4401, reason="unauthorized")
                 return
         client = Subscriber(websocket, f"rider-{next(_ids)}", Subscription())
         client.transport = websocket.scope.get("extensions", {}).get(TRANSPORT)

@@ -83,11 +83,21 @@ class Service:
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
         self.link = TickLink(make_setup(self.config, self.params))
-        asyncio.get_running_loop().add_reader(self.link.notify_fd, self.on_tick)
+        loop = asyncio.get_running_loop()
+        loop.add_reader(self.link.notify_fd, self.on_tick)
+        self._watchdog = loop.create_task(self._watch_tick())
+
+    async def _watch_tick(self) -> None:
+        """Say so loudly if the tick process dies: no frames, no rig (its servos' watchdog stops them)."""
+        while self.link.alive():
+            await asyncio.sleep(0.5)
+        log.critical("the tick process has died: no rider frames until the service restarts")
+        self.hub.publish_status({**self.link.status(), "driver": "dead", "tick_alive": False})
 
     async def stop(self) -> None:
         """Goodbye to clients, park the rig and stop the tick, close the take."""
         await self.hub.goodbye("shutdown")
+        self._watchdog.cancel()
         if self._replay_task is not None:
             self._replay_task.cancel()
         asyncio.get_running_loop().remove_reader(self.link.notify_fd)
