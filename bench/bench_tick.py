@@ -1,0 +1,118 @@
+"""Tick lateness: the tick in its own process vs the same loop in a thread of a busy process.
+
+    PYTHONPATH=. python bench/bench_tick.py --rate 500 --seconds 60
+
+Both runs use the real tick (TickLink: rules, procedural horse, shared-memory rings) at
+the same rate, with the other core kept busy by a busy-loop process and this process's
+main thread running busy Python code (standing in for the web process). Lateness is
+read per tick from the output ring. Baseline: ``isolation = "thread"``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import time
+
+import numpy as np
+
+from riderlive.realtime import layout as L
+from riderlive.realtime.core import Timing
+from riderlive.realtime.link import TickLink
+from riderlive.realtime.tick import TickSetup
+from riderlive.rules import RuleParams
+from riderlive.rules.animator import AnimatorLayer
+
+
+def burn(stop_at: float) -> None:
+    """Keep one core busy (the issue's "other core busy")."""
+    x = 0
+    while time.perf_counter() < stop_at:
+        x += 1
+
+
+def busy_python(link: TickLink, seconds: float) -> list[np.ndarray]:
+    """Busy Python work in this process (like a web process), draining the ring as it goes."""
+    records: list[np.ndarray] = []
+    payload = {"values": list(range(60)), "name": "frame"}
+    stop_at = time.perf_counter() + seconds
+    while time.perf_counter() < stop_at:
+        for _ in range(200):
+            json.loads(json.dumps(payload))
+        records.extend(link.read_outputs())
+        link.drain_notify()
+    records.extend(link.read_outputs())
+    return records
+
+
+def run(isolation: str, rate: float, seconds: float, realtime: bool) -> dict[str, float]:
+    setup = TickSetup(
+        rate=rate,
+        start=time.perf_counter(),
+        timing=Timing(),
+        params=RuleParams(),
+        animator=AnimatorLayer(),
+        length_scale=25.0,
+        realtime_priority=realtime,
+        isolation=isolation,
+    )
+    link = TickLink(setup)
+    try:
+        while link.counters.snapshot()["ticks"] < rate:  # spawned, imported, one second of ticks
+            time.sleep(0.05)
+        link.read_outputs()
+        records = busy_python(link, seconds)
+        status = link.status()
+    finally:
+        link.stop(3.0)
+        link.close()
+    data = np.array(records)
+    late = data[:, L.OUT_LATENESS] * 1e3
+    seq = data[:, L.OUT_SEQ]
+    expected = int(seq[-1] - seq[0]) + 1
+    return {
+        "ticks": float(len(data)),
+        "skipped": float(expected - len(data)),
+        "p50_ms": float(np.percentile(late, 50)),
+        "p99_ms": float(np.percentile(late, 99)),
+        "p999_ms": float(np.percentile(late, 99.9)),
+        "max_ms": float(late.max()),
+        "realtime": 1.0 if status.get("realtime") == "fifo" else 0.0,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rate", type=float, default=500.0)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--baseline-seconds", type=float, help="default: --seconds")
+    parser.add_argument("--no-burner", action="store_true")
+    parser.add_argument("--no-realtime", action="store_true")
+    args = parser.parse_args()
+    total = args.seconds + (args.baseline_seconds or args.seconds) + 10
+    burner = None
+    if not args.no_burner:
+        burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + total,))
+        burner.start()
+    try:
+        design = run("process", args.rate, args.seconds, not args.no_realtime)
+        baseline = run("thread", args.rate, args.baseline_seconds or args.seconds, not args.no_realtime)
+    finally:
+        if burner is not None:
+            burner.terminate()
+            burner.join()
+    print(f"tick at {args.rate:g} Hz, other core busy: {not args.no_burner}, SCHED_FIFO: {bool(design['realtime'])}")
+    print(f"{'':22}{'ticks':>8}{'skipped':>9}{'p50 ms':>9}{'p99 ms':>9}{'p99.9 ms':>10}{'max ms':>9}")
+    for label, r in (("own process (design)", design), ("thread (baseline)", baseline)):
+        print(
+            f"{label:22}{r['ticks']:8.0f}{r['skipped']:9.0f}{r['p50_ms']:9.3f}{r['p99_ms']:9.3f}"
+            f"{r['p999_ms']:10.3f}{r['max_ms']:9.3f}"
+        )
+    print(f"p99 ratio baseline/design: {baseline['p99_ms'] / max(design['p99_ms'], 1e-6):.1f}x")
+    ok = design["p99_ms"] <= 0.5 and design["max_ms"] <= 3.0 and design["skipped"] == 0
+    print(f"target (p99 <= 0.5 ms, max <= 3 ms, no skipped tick): {'met' if ok else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""The real-time tick: pacing, shared-memory rings, resampling, the tick process."""

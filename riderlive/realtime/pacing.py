@@ -1,0 +1,94 @@
+"""Fixed-rate pacing on ``perf_counter`` deadlines, and real-time priority.
+
+Deadline ``n`` is ``start + n * period``: it never drifts, whatever a tick costs.
+The clock sleeps until about ``spin`` seconds before the deadline, then spins on
+``perf_counter`` (a sleep alone wakes 50-100 us late, more under load). A tick that
+starts more than one period late is an overrun; the deadlines it missed entirely
+are skipped (counted) rather than run back to back.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+
+log = logging.getLogger(__name__)
+
+LATENESS_BUCKETS: tuple[float, ...] = (
+    0.00005,
+    0.0001,
+    0.00025,
+    0.0005,
+    0.001,
+    0.002,
+    0.003,
+    0.005,
+    0.01,
+    0.025,
+    0.1,
+)
+"""Upper bounds (seconds) of the tick-lateness histogram; a last bucket is +Inf."""
+
+
+def bucket_of(lateness: float) -> int:
+    """Index of the histogram bucket holding ``lateness`` (len(LATENESS_BUCKETS) = +Inf)."""
+    for i, bound in enumerate(LATENESS_BUCKETS):
+        if lateness <= bound:
+            return i
+    return len(LATENESS_BUCKETS)
+
+
+@dataclass
+class DeadlineClock:
+    """Waits for deadline after deadline; all times are ``perf_counter`` seconds."""
+
+    period: float
+    start: float
+    spin: float = 0.001
+    tick: int = 0
+    """Index of the deadline last waited for."""
+    overruns: int = 0
+    skipped: int = 0
+
+    def deadline(self, n: int) -> float:
+        return self.start + n * self.period
+
+    def wait(self) -> tuple[float, float]:
+        """Wait for the next deadline; return ``(deadline, lateness)`` in seconds."""
+        self.tick += 1
+        target = self.deadline(self.tick)
+        now = time.perf_counter()
+        if now - target > self.period:
+            self.overruns += 1
+            missed = int((now - target) / self.period)
+            self.skipped += missed
+            self.tick += missed
+            target = self.deadline(self.tick)
+        remaining = target - now - self.spin
+        if remaining > 0.0:
+            time.sleep(remaining)
+        while (now := time.perf_counter()) < target:
+            pass
+        return target, now - target
+
+
+def try_realtime_priority(priority: int = 50) -> str:
+    """Ask for SCHED_FIFO at ``priority``; return ``"fifo"`` or why not (and warn)."""
+    if not hasattr(os, "sched_setscheduler"):
+        log.warning("real-time priority is not available on this platform; the tick runs at normal priority")
+        return "unsupported"
+    try:
+        limit = os.sched_get_priority_max(os.SCHED_FIFO)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, limit)))
+    except PermissionError:
+        log.warning(
+            "SCHED_FIFO not permitted (run as root, or grant an rtprio limit in /etc/security/limits.conf); "
+            "the tick runs at normal priority and may be late under load"
+        )
+        return "denied"
+    except OSError as exc:
+        log.warning("SCHED_FIFO failed (%s); the tick runs at normal priority", exc)
+        return "failed"
+    return "fifo"

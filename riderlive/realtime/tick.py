@@ -1,0 +1,270 @@
+"""The tick process: a fixed-rate loop that owns the rules and the rig.
+
+It runs in its own process (``multiprocessing`` spawn) so no web traffic shares its
+GIL. Each tick: wait for the deadline, apply pending commands, take new input frames
+from the input ring, step :class:`~riderlive.realtime.core.TickCore`, drive the
+``TickOutput`` (the rig) when one is configured, write one record to the output
+ring and wake the web process with one byte on the notify pipe (non-blocking: a
+stalled web process cannot stall the tick). Status (driver, mode, e-stop, rig) goes
+to a shared blob as JSON when it changes and at about 30 Hz while a rig runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import logging
+import os
+import signal
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
+
+import orjson
+
+from riderlive.horse import ProceduralHorse
+from riderlive.realtime import commands as cmd
+from riderlive.realtime import layout as L
+from riderlive.realtime.core import Mode, TickCore, Timing
+from riderlive.realtime.output import RigOutput, TickOutput
+from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
+from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
+from riderlive.rules.animator import AnimatorLayer
+from riderlive.rules.engine import RiderModel
+from riderlive.rules.params import RuleParams
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TickSetup:
+    """Everything the tick process needs, picklable for a spawned process."""
+
+    rate: float
+    start: float
+    """perf_counter value that is engine time 0 (CLOCK_MONOTONIC, shared by processes)."""
+    timing: Timing
+    params: RuleParams
+    animator: AnimatorLayer
+    length_scale: float
+    gait: str = "trot"
+    speed: float = 4.0
+    seed: int | None = None
+    mode: Mode = Mode.INPUT
+    realtime_priority: bool = True
+    spin: float | None = None
+    """Seconds spun before each deadline; None: 0.25 ms at SCHED_FIFO, 1 ms otherwise."""
+    isolation: str = "process"
+    """``process`` (the design) or ``thread`` (in the web process; a baseline for benchmarks)."""
+    rig_file: str | None = None
+    rig_port: str | None = None
+    park_timeout: float = 5.0
+    shm_names: dict[str, str] = field(default_factory=dict)
+
+
+class TickLoop:
+    """The loop's state; :meth:`run` returns when stopped."""
+
+    def __init__(self, setup: TickSetup, commands: Connection, notify_fd: int, output: TickOutput | None) -> None:
+        self.setup = setup
+        self.commands = commands
+        self.notify_fd = notify_fd
+        self.output = output
+        names = setup.shm_names
+        self.inputs = SharedRing(0, 0, name=names["input"])
+        self.outputs = SharedRing(0, 0, name=names["output"])
+        self.counters = SharedCounters(L.COUNTERS, name=names["counters"])
+        self.status_blob = SharedBlob(name=names["status"])
+        model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
+        self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
+        self.core = TickCore(model, setup.timing, self.horse, setup.mode)
+        self.running = True
+        self.stopping_since: float | None = None
+        self.estopped = False
+        self.realtime = "off"
+        self.events: deque[str] = deque(maxlen=10)
+        self.rig: dict[str, Any] | None = None
+        self._status_dirty = True
+
+    # -- commands ---------------------------------------------------------------
+    def _handle(self, command: cmd.Command, now: float) -> None:
+        if isinstance(command, cmd.SetMode):
+            self.core.set_mode(command.mode, now)
+        elif isinstance(command, cmd.SetGait):
+            self.horse.set_gait(command.gait, command.speed)
+        elif isinstance(command, cmd.Perform):
+            perform = getattr(self.horse, "perform", None)
+            if perform is None:
+                self.events.append(f"this procedural horse cannot perform {command.move!r}")
+            else:
+                perform(command.move)
+        elif isinstance(command, cmd.SetModel):
+            model = RiderModel(params=command.params, scale=self.setup.length_scale, animator=command.animator)
+            self.core.set_model(model)
+        elif isinstance(command, cmd.ProducerGone):
+            self.core.producer_gone(command.producer)
+        elif isinstance(command, cmd.EStop):
+            self.estopped = True
+            if self.output is not None:
+                self.output.estop()
+        elif isinstance(command, cmd.Reset):
+            self.estopped = False
+            if self.output is not None:
+                self.output.reset()
+        elif isinstance(command, cmd.Stop):
+            self._begin_stop(now)
+        self._status_dirty = True
+
+    def _begin_stop(self, now: float) -> None:
+        if self.stopping_since is None:
+            self.stopping_since = now
+            if self.output is not None:
+                self.output.request_park()
+
+    def _poll_commands(self, now: float) -> None:
+        try:
+            while self.commands.poll():
+                self._handle(self.commands.recv(), now)
+        except (EOFError, OSError):  # the web process is gone: park and stop
+            self._begin_stop(now)
+        except Exception as exc:  # a bad command must not stop the tick
+            self.events.append(f"command failed: {exc}")
+            self._status_dirty = True
+
+    # -- status -----------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        core = self.core
+        return {
+            "driver": core.driver.name.lower(),
+            "mode": core.mode.value,
+            "producer": core.producer,
+            "gait": self.horse.gait,
+            "speed": self.horse.speed,
+            "estop": self.estopped,
+            "realtime": self.realtime,
+            "rate": self.setup.rate,
+            "preset": core.model.params.name,
+            "stopping": self.stopping_since is not None,
+            "rig": self.rig,
+            "events": list(self.events),
+        }
+
+    def _publish_status(self) -> None:
+        self.status_blob.write(orjson.dumps(self.status()))
+        self._status_dirty = False
+
+    # -- the loop ---------------------------------------------------------------
+    def run(self) -> None:
+        setup = self.setup
+        values = self.counters.values
+        index = self.counters.index
+        bucket0 = index["lateness_bucket_0"]
+        spin = setup.spin if setup.spin is not None else (0.00025 if self.realtime == "fifo" else 0.001)
+        clock = DeadlineClock(period=1.0 / setup.rate, start=time.perf_counter(), spin=spin)
+        rig_every = max(1, round(setup.rate / 30.0))
+        values[index["realtime"]] = 1.0 if self.realtime == "fifo" else 0.0
+        values[index["alive"]] = 1.0
+        last_driver = self.core.driver
+        self._publish_status()
+        while self.running:
+            deadline, lateness = clock.wait()
+            now = deadline - setup.start
+            self._poll_commands(now)
+            newest_rx = -1.0
+            for record in self.inputs.read_new():
+                values_list = record[L.IN_VALUES :].tolist()
+                rx = float(record[L.IN_RECEIVED])
+                if self.core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), rx, values_list):
+                    values[index["input_frames"]] += 1
+                else:
+                    values[index["input_out_of_order"]] += 1
+                newest_rx = max(newest_rx, rx)
+            values[index["input_lapped"]] = self.inputs.lapped
+            result = self.core.step(now)
+            if self.output is not None:
+                try:
+                    status = self.output.tick(result.rider, deadline)
+                except Exception as exc:  # the driver owns its faults; the tick goes on
+                    status = None
+                    self.events.append(f"rig tick failed: {exc}")
+                    self._status_dirty = True
+                if status is not None and (
+                    clock.tick % rig_every == 0 or self.rig is None or status.get("state") != self.rig.get("state")
+                ):
+                    self.rig = status
+                    self._status_dirty = True
+            done = time.perf_counter() - setup.start
+            record_out = [
+                float(clock.tick),
+                now,
+                result.source_time,
+                float(result.driver),
+                float(result.producer),
+                newest_rx,
+                done,
+                lateness,
+                *result.horse,
+                *result.rider,
+            ]
+            self.outputs.write(record_out)
+            with contextlib.suppress(BlockingIOError, BrokenPipeError):
+                os.write(self.notify_fd, b"\x01")
+            if result.driver is not last_driver:
+                last_driver = result.driver
+                self._status_dirty = True
+            if self._status_dirty:
+                self._publish_status()
+            values[index["ticks"]] += 1
+            values[index["overruns"]] = clock.overruns
+            values[index["skipped"]] = clock.skipped
+            values[index["lateness_sum"]] += lateness
+            values[index["lateness_max"]] = max(values[index["lateness_max"]], lateness)
+            values[index["step_max"]] = max(values[index["step_max"]], done + setup.start - deadline)
+            values[bucket0 + bucket_of(lateness)] += 1
+            if self.stopping_since is not None and (
+                self.output is None or self.output.is_parked() or now - self.stopping_since > setup.park_timeout
+            ):
+                self.running = False
+        values[index["alive"]] = 0.0
+        self._publish_status()
+
+    def close(self) -> None:
+        if self.output is not None:
+            try:
+                self.output.close()
+            except Exception as exc:
+                log.warning("closing the rig failed: %s", exc)
+        for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
+            shared.close()
+
+
+def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:
+    """Entry point of the spawned tick process."""
+    in_process = threading.current_thread() is threading.main_thread()
+    if in_process:
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
+    notify_fd = notify.fileno()
+    os.set_blocking(notify_fd, False)
+    output: TickOutput | None = None
+    if setup.rig_file:
+        output = RigOutput(setup.rig_file, setup.rig_port)
+    loop = TickLoop(setup, commands, notify_fd, output)
+    if in_process:
+        signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
+    loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
+    if in_process:
+        # The loop makes no reference cycles: refcounting frees everything, and a
+        # collection of the whole heap would stall a tick for milliseconds.
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+    try:
+        if output is not None:
+            output.open()
+        loop.run()
+    finally:
+        loop.close()

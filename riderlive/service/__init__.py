@@ -1,0 +1,1 @@
+"""The live service: the web process (FastAPI on uvicorn) around the tick process."""

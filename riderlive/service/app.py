@@ -1,0 +1,221 @@
+"""The FastAPI application: websockets, REST control, metrics and the page.
+
+REST paths are stable (the browser page calls them); every body is described in the
+OpenAPI schema at ``/openapi.json`` (browsable at ``/docs``). Mutating calls need
+``Authorization: Bearer <token>`` when a token is required (see ``auth``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import pydantic
+from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import HTMLResponse, PlainTextResponse
+from fastapi.staticfiles import StaticFiles
+
+from riderlive import __version__
+from riderlive.configfile import ConfigError
+from riderlive.horse import GAITS
+from riderlive.realtime import commands as cmd
+from riderlive.rules.animator import AnimatorLayer
+from riderlive.rules.params import load_preset, shipped_presets
+from riderlive.service import auth
+from riderlive.service.config import ServiceConfig
+from riderlive.service.metrics import render
+from riderlive.service.runtime import Service
+from riderlive.takes.recorder import list_takes
+
+STATIC_DIR = Path(__file__).resolve().parent.parent / "web" / "static"
+
+
+class ProceduralSource(pydantic.BaseModel):
+    kind: Literal["procedural"]
+    gait: str | None = None
+    speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
+
+    @pydantic.field_validator("gait")
+    @classmethod
+    def _gait(cls, value: str | None) -> str | None:
+        if value is not None and value not in GAITS:
+            raise ValueError(f"unknown gait; choose one of {', '.join(GAITS)}")
+        return value
+
+
+class ReplaySource(pydantic.BaseModel):
+    kind: Literal["replay"]
+    take: str
+    loop: bool = False
+
+
+class LiveSource(pydantic.BaseModel):
+    kind: Literal["live"]
+
+
+SourceRequest = Annotated[ProceduralSource | ReplaySource | LiveSource, pydantic.Field(discriminator="kind")]
+
+
+class PerformRequest(pydantic.BaseModel):
+    move: str = pydantic.Field(min_length=1, max_length=64)
+
+
+class PresetRequest(pydantic.BaseModel):
+    name: str = pydantic.Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+
+
+class AnimatorBody(pydantic.BaseModel):
+    offsets: dict[str, float] = pydantic.Field(default_factory=dict)
+    gains: dict[str, float] = pydantic.Field(default_factory=dict)
+
+
+class RecordStart(pydantic.BaseModel):
+    name: str | None = pydantic.Field(default=None, max_length=100)
+
+
+def create_app(config: ServiceConfig | None = None) -> FastAPI:
+    """The app; the lifespan starts the tick process and stops it (parking the rig)."""
+    config = config or ServiceConfig()
+    service = Service(config)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        await service.start()
+        try:
+            yield
+        finally:
+            await service.stop()
+
+    app = FastAPI(title="riderlive", version=__version__, lifespan=lifespan)
+    app.state.service = service
+    if config.server.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=config.server.cors_origins,
+            allow_methods=["GET", "PUT", "PATCH", "POST"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
+
+    def control(request: Request) -> None:
+        if config.token_required and not auth.token_matches(
+            config.security.token, auth.bearer(request.headers.get("authorization"))
+        ):
+            service.metrics.bad_frames["unauthorized"] += 1
+            raise HTTPException(401, "token required: Authorization: Bearer <token>")
+
+    def observe(request: Request) -> None:
+        if config.security.publish_requires_token:
+            control(request)
+
+    ctl = [Depends(control)]
+    obs = [Depends(observe)]
+    app.add_api_websocket_route("/ws/horse", service.ingest)
+    app.add_api_websocket_route("/ws/rider", service.hub)
+
+    @app.get("/api/state", dependencies=obs, summary="Everything about the running service")
+    async def get_state() -> dict[str, Any]:
+        return service.state()
+
+    @app.put("/api/source", dependencies=ctl, summary="Choose the source: procedural, replay of a take, or live")
+    async def put_source(body: SourceRequest) -> dict[str, Any]:
+        try:
+            return await service.set_source(body.model_dump())
+        except (ValueError, OSError) as exc:
+            raise HTTPException(400, str(exc)) from None
+
+    @app.post("/api/horse/perform", dependencies=ctl, summary="Ask the procedural horse for a move")
+    async def perform(body: PerformRequest) -> dict[str, Any]:
+        service.link.send(cmd.Perform(body.move))
+        return {"move": body.move, "queued": True}
+
+    @app.get("/api/presets", dependencies=obs, summary="The shipped rule presets and the current one")
+    async def presets() -> dict[str, Any]:
+        return {"presets": shipped_presets(), "current": service.params.name}
+
+    @app.put("/api/preset", dependencies=ctl, summary="Load a preset by name (animator offsets are kept)")
+    async def put_preset(body: PresetRequest) -> dict[str, Any]:
+        try:
+            params = load_preset(body.name)
+        except ConfigError as exc:
+            raise HTTPException(400, str(exc)) from None
+        service.set_model(params=params)
+        return {"current": params.name}
+
+    @app.get("/api/params", dependencies=obs, summary="All rule parameters as dotted keys")
+    async def get_params() -> dict[str, float]:
+        return service.params.flat()
+
+    @app.patch("/api/params", dependencies=ctl, summary='Change parameters live: {"head.lift_gain": 10.0}')
+    async def patch_params(changes: dict[str, float]) -> dict[str, float]:
+        if any(not math.isfinite(v) for v in changes.values()):
+            raise HTTPException(422, "parameters must be finite numbers")
+        try:
+            params = service.params.with_values(changes)
+        except (KeyError, ConfigError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        service.set_model(params=params)
+        return params.flat()
+
+    @app.get("/api/animator", dependencies=obs, summary="Animator offsets and gains per rider channel")
+    async def get_animator() -> AnimatorBody:
+        return AnimatorBody(offsets=service.animator.offsets, gains=service.animator.gains)
+
+    @app.put("/api/animator", dependencies=ctl, summary="Replace the animator offsets and gains")
+    async def put_animator(body: AnimatorBody) -> AnimatorBody:
+        try:
+            animator = AnimatorLayer(offsets=dict(body.offsets), gains=dict(body.gains))
+        except (KeyError, ValueError) as exc:
+            raise HTTPException(422, str(exc)) from None
+        service.set_model(animator=animator)
+        return body
+
+    @app.post("/api/record/start", dependencies=ctl, summary="Start recording a take")
+    async def record_start(body: RecordStart | None = None) -> dict[str, Any]:
+        try:
+            name = service.start_recording(body.name if body else None)
+        except ValueError as exc:
+            raise HTTPException(400, str(exc)) from None
+        return {"recording": name}
+
+    @app.post("/api/record/stop", dependencies=ctl, summary="Stop recording; the take is complete on disk")
+    async def record_stop() -> dict[str, Any]:
+        return {"take": service.stop_recording()}
+
+    @app.get("/api/takes", dependencies=obs, summary="Recorded takes, newest first")
+    async def takes() -> dict[str, Any]:
+        return {"takes": list_takes(config.takes.directory)}
+
+    @app.post("/api/estop", dependencies=ctl, summary="Emergency stop: the rig goes to torque off")
+    async def estop() -> dict[str, Any]:
+        service.link.send(cmd.EStop())
+        return {"estop": True}
+
+    @app.post("/api/reset", dependencies=ctl, summary="Clear an e-stop or a rig fault")
+    async def reset() -> dict[str, Any]:
+        service.link.send(cmd.Reset())
+        return {"estop": False}
+
+    @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
+    async def metrics() -> PlainTextResponse:
+        text = render(
+            service.metrics, service.link.counters.snapshot(), service.hub.snapshot(), len(service.arbiter.producers)
+        )
+        return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
+
+    if STATIC_DIR.is_dir():
+        app.mount("/", StaticFiles(directory=STATIC_DIR, html=True), name="page")
+    else:
+
+        @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+        async def placeholder() -> str:
+            return (
+                "<!doctype html><title>riderlive</title><h1>riderlive</h1>"
+                "<p>The service runs. Frames: <code>/ws/rider</code>; API: <a href='/docs'>/docs</a>; "
+                "<a href='/metrics'>/metrics</a>.</p>"
+            )
+
+    return app

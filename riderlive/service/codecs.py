@@ -1,0 +1,227 @@
+"""Wire formats of the websockets: horse frames in, rider frames out (see docs/protocol.md).
+
+Decoding is pure and validates once at the edge: a bad frame raises
+:class:`BadFrame` with a ``reason`` (counted in metrics) and a message for the client.
+Encoding turns one output record into the bytes a subscription asks for, JSON text or
+the little-endian binary layout :data:`BINARY_HEADER`.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+import numpy as np
+import orjson
+
+from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER_NAMES
+from riderlive.realtime import layout as L
+
+PROTOCOL_VERSION = 1
+
+BINARY_MAGIC = b"RLF1"
+BINARY_HEADER = struct.Struct("<4sHBBQddHHI")
+"""magic, header size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, reserved."""
+FLAG_HORSE = 1
+
+DRIVERS = ("procedural", "input", "neutral")
+
+
+class BadFrame(ValueError):
+    """A rejected message; ``reason`` is a short metric label."""
+
+    def __init__(self, reason: str, message: str) -> None:
+        self.reason = reason
+        super().__init__(message)
+
+
+def parse_message(data: str | bytes, max_bytes: int) -> dict[str, Any]:
+    """JSON text or msgpack binary -> a dict, or :class:`BadFrame`."""
+    if len(data) > max_bytes:
+        raise BadFrame("oversize", f"message of {len(data)} bytes exceeds {max_bytes}")
+    try:
+        obj = orjson.loads(data) if isinstance(data, str) else msgpack.unpackb(data, raw=False, strict_map_key=True)
+    except (orjson.JSONDecodeError, ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as exc:
+        raise BadFrame("malformed", f"cannot decode message: {exc}") from None
+    if not isinstance(obj, dict):
+        raise BadFrame("malformed", "a message must be an object (a JSON object or a msgpack map)")
+    return obj
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BadFrame("wrong_type", f"{what} must be a number, got {type(value).__name__}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise BadFrame("not_finite", f"{what} must be finite, got {value!r}")
+    return number
+
+
+@dataclass(frozen=True)
+class HorseFrame:
+    """A decoded horse frame: producer time and {channel index: value} in the producer's units."""
+
+    t: float
+    values: dict[int, float]
+
+
+def decode_horse_frame(obj: dict[str, Any], order: Sequence[int] | None = None) -> HorseFrame:
+    """A frame message: ``t`` plus ``values`` (a map by name) or ``v`` (a list in ``order``)."""
+    if "t" not in obj:
+        raise BadFrame("missing_t", "a frame needs its time 't' in seconds")
+    t = _number(obj["t"], "t")
+    out: dict[int, float] = {}
+    if "values" in obj:
+        values = obj["values"]
+        if not isinstance(values, dict):
+            raise BadFrame("wrong_type", "'values' must be an object of channel: number")
+        for name, value in values.items():
+            index = HORSE_INDEX.get(name) if isinstance(name, str) else None
+            if index is None:
+                raise BadFrame("unknown_channel", f"unknown horse channel {name!r}")
+            out[index] = _number(value, name)
+    elif "v" in obj:
+        array = obj["v"]
+        columns = tuple(range(len(HORSE_NAMES))) if order is None else tuple(order)
+        if not isinstance(array, list) or len(array) != len(columns):
+            raise BadFrame("wrong_type", f"'v' must be a list of {len(columns)} numbers (the declared channels)")
+        for index, value in zip(columns, array, strict=True):
+            out[index] = _number(value, HORSE_NAMES[index])
+    else:
+        raise BadFrame("missing_values", "a frame needs 'values' (object) or 'v' (list)")
+    return HorseFrame(t, out)
+
+
+def channel_order(names: Any) -> tuple[int, ...]:
+    """Validate a declared list of horse channel names (the order of ``v``)."""
+    if not isinstance(names, list) or not names:
+        raise BadFrame("wrong_type", "'channels' must be a non-empty list of horse channel names")
+    out = []
+    for name in names:
+        if not isinstance(name, str) or name not in HORSE_INDEX:
+            raise BadFrame("unknown_channel", f"unknown horse channel {name!r}")
+        out.append(HORSE_INDEX[name])
+    if len(set(out)) != len(out):
+        raise BadFrame("wrong_type", "'channels' lists a channel twice")
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Subscription:
+    """What one /ws/rider client receives."""
+
+    rider: tuple[int, ...] = tuple(range(len(RIDER_NAMES)))
+    horse: tuple[int, ...] = ()
+    decimation: int = 1
+    encoding: str = "json"
+
+    @property
+    def key(self) -> tuple[Any, ...]:
+        """Clients with the same key share one encoded frame per tick."""
+        return (self.encoding, self.rider, self.horse)
+
+    def describe(self, tick_rate: float) -> dict[str, Any]:
+        return {
+            "type": "subscribed",
+            "channels": [RIDER_NAMES[i] for i in self.rider],
+            "horse_channels": [HORSE_NAMES[i] for i in self.horse],
+            "decimation": self.decimation,
+            "rate": tick_rate / self.decimation,
+            "encoding": self.encoding,
+        }
+
+
+def _pick(names: Any, table: dict[str, int], what: str) -> tuple[int, ...]:
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise BadFrame("wrong_type", f"'{what}' must be a list of channel names")
+    unknown = [n for n in names if n not in table]
+    if unknown:
+        raise BadFrame("unknown_channel", f"unknown {what} {unknown[0]!r}")
+    return tuple(table[n] for n in names)
+
+
+def decode_subscription(obj: dict[str, Any], current: Subscription, tick_rate: float) -> Subscription:
+    """Apply a ``subscribe`` message; omitted fields keep their current value."""
+    from riderlive.channels import RIDER_INDEX
+
+    rider = _pick(obj["channels"], RIDER_INDEX, "channels") if "channels" in obj else current.rider
+    horse = _pick(obj["horse_channels"], HORSE_INDEX, "horse_channels") if "horse_channels" in obj else current.horse
+    decimation = current.decimation
+    if "decimation" in obj:
+        value = obj["decimation"]
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 1000:
+            raise BadFrame("wrong_type", "'decimation' must be an integer 1..1000")
+        decimation = value
+    if "rate" in obj:
+        rate = _number(obj["rate"], "rate")
+        if rate <= 0.0:
+            raise BadFrame("wrong_type", "'rate' must be > 0")
+        decimation = max(1, round(tick_rate / rate))
+    encoding = obj.get("encoding", current.encoding)
+    if encoding not in ("json", "binary"):
+        raise BadFrame("wrong_type", "'encoding' must be 'json' or 'binary'")
+    return Subscription(rider, horse, decimation, encoding)
+
+
+def encode_frame(sub: Subscription, record: np.ndarray) -> str | bytes:
+    """One output-ring record as a frame for ``sub``: JSON text or the binary layout (docs/protocol.md)."""
+    seq = int(record[L.OUT_SEQ])
+    engine_t = float(record[L.OUT_ENGINE_T])
+    source_t = float(record[L.OUT_SOURCE_T])
+    driver = int(record[L.OUT_DRIVER])
+    horse = record[L.OUT_HORSE : L.OUT_RIDER]
+    rider = record[L.OUT_RIDER :]
+    rider_values = rider[list(sub.rider)] if len(sub.rider) != len(rider) else rider
+    horse_values = horse[list(sub.horse)] if sub.horse else None
+    if sub.encoding == "binary":
+        flags = FLAG_HORSE if horse_values is not None else 0
+        header = BINARY_HEADER.pack(
+            BINARY_MAGIC,
+            BINARY_HEADER.size,
+            driver,
+            flags,
+            seq,
+            engine_t,
+            source_t,
+            len(rider_values),
+            0 if horse_values is None else len(horse_values),
+            0,
+        )
+        body = rider_values.astype("<f8").tobytes()
+        if horse_values is not None:
+            body += horse_values.astype("<f8").tobytes()
+        return header + body
+    message: dict[str, Any] = {
+        "type": "frame",
+        "seq": seq,
+        "t": engine_t,
+        "source_t": source_t,
+        "driver": DRIVERS[driver],
+        "values": rider_values.tolist(),
+    }
+    if horse_values is not None:
+        message["horse"] = horse_values.tolist()
+    return orjson.dumps(message).decode()
+
+
+def decode_binary_frame(data: bytes) -> dict[str, Any]:
+    """The inverse of the binary layout (for clients and tests)."""
+    magic, size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, _ = BINARY_HEADER.unpack_from(data)
+    if magic != BINARY_MAGIC:
+        raise ValueError("not a riderlive binary frame")
+    rider = np.frombuffer(data, dtype="<f8", count=n_rider, offset=size)
+    out: dict[str, Any] = {
+        "type": "frame",
+        "seq": seq,
+        "t": engine_t,
+        "source_t": source_t,
+        "driver": DRIVERS[driver] if driver < len(DRIVERS) else driver,
+        "values": rider.tolist(),
+    }
+    if flags & FLAG_HORSE:
+        out["horse"] = np.frombuffer(data, dtype="<f8", count=n_horse, offset=size + 8 * n_rider).tolist()
+    return out

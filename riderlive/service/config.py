@@ -1,0 +1,146 @@
+"""The service's typed configuration (``riderlive serve --config FILE``).
+
+Every key has a default, so ``riderlive serve`` with no file runs the procedural
+horse on 127.0.0.1:8000. See ``config/service.example.toml`` for a commented file.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+from typing import Literal
+
+import pydantic
+
+from riderlive.configfile import StrictModel, load
+from riderlive.horse import DEFAULT_SCALE, GAITS
+
+
+class ServerSection(StrictModel):
+    host: str = "127.0.0.1"
+    port: int = pydantic.Field(default=8000, ge=0, le=65535)
+    cors_origins: list[str] = pydantic.Field(default_factory=list)
+    log_level: Literal["critical", "error", "warning", "info", "debug"] = "info"
+    shutdown_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+    nice: int = pydantic.Field(default=0, ge=-20, le=19)
+    """Scheduling niceness of the web process (negative needs privileges; falls back with a warning)."""
+
+
+class SecuritySection(StrictModel):
+    token: str | None = None
+    """Required for ingest and control when bound to a non-loopback address."""
+    require_token: bool | None = None
+    """None: required exactly when ``host`` is not a loopback address."""
+    publish_requires_token: bool = False
+
+    @pydantic.field_validator("token")
+    @classmethod
+    def _token_chars(cls, value: str | None) -> str | None:
+        if value is not None and (len(value) < 8 or not all(c.isalnum() or c in "-_." for c in value)):
+            raise ValueError("must be at least 8 characters of A-Z a-z 0-9 - _ . (it travels in a subprotocol)")
+        return value
+
+
+class TickSection(StrictModel):
+    rate: float = pydantic.Field(default=120.0, ge=30.0, le=1000.0)
+    realtime_priority: bool = True
+    spin: float | None = pydantic.Field(default=None, ge=0.0, le=0.005)
+    """Seconds the tick spins before each deadline; unset: 0.25 ms at SCHED_FIFO, else 1 ms."""
+    isolation: Literal["process", "thread"] = "process"
+    """``process``: the tick in its own process (the design). ``thread``: in the web
+    process, sharing its GIL; only as a baseline for benchmarks."""
+    length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
+    """Thesis rig units per service length unit (25 = the service speaks metres)."""
+    preset: str = "kuhnel2003"
+
+
+class InputSection(StrictModel):
+    delay: float = pydantic.Field(default=0.01, ge=0.0, le=1.0)
+    hold: float = pydantic.Field(default=0.25, ge=0.0, le=5.0)
+    ease_time: float = pydantic.Field(default=1.0, ge=0.0, le=30.0)
+    blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=30.0)
+    producer_timeout: float = pydantic.Field(default=0.5, gt=0.0, le=30.0)
+    """A producer silent this long loses control to another one."""
+    max_message_bytes: int = pydantic.Field(default=65536, ge=256, le=16 * 1024 * 1024)
+    max_rate: float = pydantic.Field(default=2000.0, gt=0.0)
+    """Frames per second per producer connection; faster frames are rejected."""
+    max_errors: int = pydantic.Field(default=100, ge=1)
+    """Rejected frames within ``error_window`` before the connection is closed."""
+    error_window: float = pydantic.Field(default=10.0, gt=0.0)
+
+
+class SourceSection(StrictModel):
+    kind: Literal["live", "procedural"] = "live"
+    """``live``: producers drive when present; ``procedural``: the procedural horse is pinned."""
+    fallback_procedural: bool = True
+    """In ``live``: the procedural horse runs while no producer drives."""
+    resume_after: float = pydantic.Field(default=2.0, ge=0.0, le=600.0)
+    gait: str = "trot"
+    speed: float = pydantic.Field(default=4.0, ge=0.0, le=20.0)
+    seed: int | None = None
+
+    @pydantic.field_validator("gait")
+    @classmethod
+    def _known_gait(cls, value: str) -> str:
+        if value not in GAITS:
+            raise ValueError(f"unknown gait; choose one of {', '.join(GAITS)}")
+        return value
+
+
+class PublishSection(StrictModel):
+    send_timeout: float = pydantic.Field(default=2.0, gt=0.0, le=60.0)
+    """A client whose send takes longer than this is cut off."""
+    max_clients: int = pydantic.Field(default=256, ge=1)
+    send_buffer_bytes: int = pydantic.Field(default=65536, ge=4096, le=16 * 1024 * 1024)
+    """Kernel send buffer per client (SO_SNDBUF): how much may queue for a slow reader."""
+
+
+class TakesSection(StrictModel):
+    directory: str = "takes"
+    flush_interval: float = pydantic.Field(default=0.5, gt=0.0, le=1.0)
+
+
+class RigSection(StrictModel):
+    file: str | None = None
+    port: str | None = None
+    park_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+
+
+class ServiceConfig(StrictModel):
+    server: ServerSection = ServerSection()
+    security: SecuritySection = SecuritySection()
+    tick: TickSection = TickSection()
+    input: InputSection = InputSection()
+    source: SourceSection = SourceSection()
+    publish: PublishSection = PublishSection()
+    takes: TakesSection = TakesSection()
+    rig: RigSection = RigSection()
+
+    @pydantic.model_validator(mode="after")
+    def _token_when_required(self) -> ServiceConfig:
+        if self.token_required and not self.security.token:
+            raise ValueError(
+                f"server.host {self.server.host!r} is not a loopback address: set security.token "
+                "(or security.require_token = false to run open, at your own risk)"
+            )
+        return self
+
+    @property
+    def token_required(self) -> bool:
+        if self.security.require_token is not None:
+            return self.security.require_token
+        return not is_loopback(self.server.host)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def load_config(path: str | Path | None) -> ServiceConfig:
+    """The config in ``path``, or the defaults."""
+    return ServiceConfig() if path is None else load(ServiceConfig, path)

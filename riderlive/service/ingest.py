@@ -1,0 +1,254 @@
+"""``/ws/horse``: producers stream horse frames in; the arbiter picks the one that drives.
+
+Arbitration (docs/protocol.md, "Several producers"):
+
+- Source ``live``: the driving producer is the one with the highest ``priority``
+  (declared in its hello, default 0). Among equals the incumbent keeps control; a
+  newcomer takes over only when the incumbent disconnects or sends nothing for
+  ``input.producer_timeout`` seconds. A higher priority takes over at its next frame.
+- Source ``replay``: only the replay drives; live producers are on standby.
+- Source ``procedural``: nobody drives; frames are validated and counted only.
+
+Each producer is told ``{"type": "control", "driving": true|false}`` when that changes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from riderlive.channels import HORSE, HORSE_NAMES, Kind
+from riderlive.realtime import commands as cmd
+from riderlive.service import auth
+from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_horse_frame, parse_message
+
+if TYPE_CHECKING:
+    from riderlive.service.runtime import Service
+
+log = logging.getLogger(__name__)
+_TRANSLATION = frozenset(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
+_ids = itertools.count(1)
+
+
+def next_producer_id() -> int:
+    return next(_ids)
+
+
+@dataclass
+class Producer:
+    """One connected producer (or the replay) and its per-connection settings."""
+
+    id: int
+    name: str
+    priority: int = 0
+    length_gain: float = 1.0
+    """Producer length unit -> service length unit."""
+    order: tuple[int, ...] | None = None
+    last: list[float] = field(default_factory=lambda: [0.0] * len(HORSE_NAMES))
+    last_frame_at: float = -1e9
+    accepted: int = 0
+    rejected: int = 0
+    errors: deque[float] = field(default_factory=deque)
+    window_start: float = 0.0
+    window_frames: int = 0
+    websocket: WebSocket | None = None
+
+    def merge(self, values: dict[int, float]) -> list[float]:
+        """Apply a frame onto the last one (omitted channels keep their last value)."""
+        gain = self.length_gain
+        for index, value in values.items():
+            self.last[index] = value * gain if gain != 1.0 and index in _TRANSLATION else value
+        return list(self.last)
+
+
+class Arbiter:
+    """Which producer drives; see the module docstring."""
+
+    def __init__(self, timeout: float) -> None:
+        self.timeout = timeout
+        self.producers: dict[int, Producer] = {}
+        self.active: int | None = None
+        self.selection: str = "live"
+        self.replay_id: int | None = None
+
+    def drives(self, producer: Producer, now: float) -> bool:
+        """Called for each accepted frame; True when this producer's frame goes to the tick."""
+        if self.selection == "procedural":
+            return False
+        if self.selection == "replay":
+            return producer.id == self.replay_id
+        current = self.producers.get(self.active) if self.active is not None else None
+        if current is producer:
+            return True
+        if current is None or now - current.last_frame_at > self.timeout or producer.priority > current.priority:
+            self.active = producer.id
+            return True
+        return False
+
+    def remove(self, producer_id: int) -> bool:
+        """Forget a producer; True if it was driving."""
+        self.producers.pop(producer_id, None)
+        was_active = self.active == producer_id or (self.selection == "replay" and self.replay_id == producer_id)
+        if self.active == producer_id:
+            self.active = None
+        return was_active
+
+
+async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: float) -> None:
+    """Send a JSON message; a client that does not read or has left is ignored."""
+    with contextlib.suppress(Exception):  # gone or stuck: its receive loop will end it
+        await asyncio.wait_for(websocket.send_json(message), timeout)
+
+
+class IngestEndpoint:
+    """The ``/ws/horse`` handler, bound to the running service."""
+
+    def __init__(self, service: Service) -> None:
+        self.service = service
+
+    async def authenticate(self, websocket: WebSocket, offered: list[str]) -> dict[str, Any] | None:
+        """Check the token (subprotocol or first message); return the first message if read."""
+        config = self.service.config
+        if not config.token_required:
+            return None
+        if auth.token_matches(config.security.token, auth.token_from_subprotocols(offered)):
+            return None
+        try:
+            first = await asyncio.wait_for(websocket.receive(), 5.0)
+            text = first.get("text") or first.get("bytes")
+            obj = parse_message(text or b"", config.input.max_message_bytes) if text else {}
+        except (TimeoutError, BadFrame):
+            obj = {}
+        if not auth.token_matches(config.security.token, obj.get("token")):
+            raise auth.Unauthorized
+        return obj
+
+    async def __call__(self, websocket: WebSocket) -> None:
+        service = self.service
+        config = service.config
+        offered = list(websocket.scope.get("subprotocols", []))
+        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
+        try:
+            first = await self.authenticate(websocket, offered)
+        except auth.Unauthorized:
+            service.metrics.bad_frames["unauthorized"] += 1
+            await send_quietly(websocket, {"type": "error", "reason": "unauthorized", "message": "token required"}, 1.0)
+            with contextlib.suppress(Exception):  # it may have left already
+                await websocket.close(code=4401, reason="unauthorized")
+            return
+        producer = Producer(
+            id=next_producer_id(), name=f"producer-{len(service.arbiter.producers) + 1}", websocket=websocket
+        )
+        producer.name = f"producer-{producer.id}"
+        service.arbiter.producers[producer.id] = producer
+        await websocket.send_json(
+            {
+                "type": "welcome",
+                "protocol": PROTOCOL_VERSION,
+                "session": service.session,
+                "producer": producer.id,
+                "channels": [{"name": c.name, "unit": c.unit} for c in HORSE],
+                "length_scale": config.tick.length_scale,
+                "max_message_bytes": config.input.max_message_bytes,
+                "max_rate": config.input.max_rate,
+            }
+        )
+        driving: bool | None = None
+        try:
+            if first is not None:
+                self.handle(producer, first)
+            while True:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                data = message.get("text")
+                if data is None:
+                    data = message.get("bytes") or b""
+                now = time.perf_counter()
+                try:
+                    result = self.handle(producer, parse_message(data, config.input.max_message_bytes), now)
+                except BadFrame as exc:
+                    if await self.reject(producer, exc, now):
+                        break
+                    continue
+                if result is not None and result != driving:
+                    driving = result
+                    await send_quietly(websocket, {"type": "control", "driving": driving}, 1.0)
+        except WebSocketDisconnect:
+            pass
+        finally:
+            if service.arbiter.remove(producer.id):
+                service.link.send(cmd.ProducerGone(producer.id))
+
+    def handle(self, producer: Producer, obj: dict[str, Any], now: float | None = None) -> bool | None:
+        """Apply one decoded message; for a frame return whether it drives."""
+        kind = obj.get("type", "frame")
+        if kind == "hello":
+            self.hello(producer, obj)
+            return None
+        if kind != "frame":
+            raise BadFrame("unknown_type", f"unknown message type {kind!r}")
+        now = time.perf_counter() if now is None else now
+        limits = self.service.config.input
+        if now - producer.window_start >= 1.0:
+            producer.window_start, producer.window_frames = now, 0
+        producer.window_frames += 1
+        if producer.window_frames > limits.max_rate:
+            raise BadFrame("rate", f"more than {limits.max_rate:g} frames per second")
+        frame = decode_horse_frame(obj, producer.order)
+        values = producer.merge(frame.values)
+        producer.accepted += 1
+        self.service.metrics.frames_in[producer.name] += 1
+        arbiter = self.service.arbiter
+        drives = arbiter.drives(producer, now)
+        producer.last_frame_at = now
+        if drives:
+            self.service.link.push_input(producer.id, frame.t, now - self.service.link.start, values)
+        return drives
+
+    def hello(self, producer: Producer, obj: dict[str, Any]) -> None:
+        """Per-connection settings: name, priority, length_scale, channels (order of ``v``)."""
+        if "name" in obj:
+            if not isinstance(obj["name"], str) or not 0 < len(obj["name"]) <= 64:
+                raise BadFrame("wrong_type", "'name' must be a string of 1-64 characters")
+            producer.name = obj["name"]
+        if "priority" in obj:
+            value = obj["priority"]
+            if isinstance(value, bool) or not isinstance(value, int) or not -1000 <= value <= 1000:
+                raise BadFrame("wrong_type", "'priority' must be an integer -1000..1000")
+            producer.priority = value
+        if "length_scale" in obj:
+            scale = obj["length_scale"]
+            if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale < 1e9:
+                raise BadFrame("wrong_type", "'length_scale' must be a number > 0")
+            producer.length_gain = float(scale) / self.service.config.tick.length_scale
+        if "channels" in obj:
+            producer.order = channel_order(obj["channels"])
+
+    async def reject(self, producer: Producer, exc: BadFrame, now: float) -> bool:
+        """Count and answer a bad message; True when the client keeps abusing (close it)."""
+        service = self.service
+        limits = service.config.input
+        service.metrics.bad_frames[exc.reason] += 1
+        producer.rejected += 1
+        producer.errors.append(now)
+        while producer.errors and now - producer.errors[0] > limits.error_window:
+            producer.errors.popleft()
+        websocket = producer.websocket
+        assert websocket is not None
+        if len(producer.errors) > limits.max_errors:
+            await send_quietly(
+                websocket, {"type": "error", "reason": "abuse", "message": "too many bad messages; closing"}, 1.0
+            )
+            await websocket.close(code=1008, reason="too many bad messages")
+            return True
+        await send_quietly(websocket, {"type": "error", "reason": exc.reason, "message": str(exc)}, 1.0)
+        return False

@@ -1,0 +1,164 @@
+"""Counters of the web process and their Prometheus text rendering (``GET /metrics``)."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+from riderlive.realtime.pacing import LATENESS_BUCKETS
+
+LATENCY_BUCKETS: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5)
+
+
+@dataclass
+class Histogram:
+    """A cumulative-on-render histogram of seconds."""
+
+    bounds: tuple[float, ...]
+    counts: list[int] = field(default_factory=list)
+    total: float = 0.0
+    n: int = 0
+
+    def __post_init__(self) -> None:
+        self.counts = [0] * (len(self.bounds) + 1)
+
+    def observe(self, value: float) -> None:
+        for i, bound in enumerate(self.bounds):
+            if value <= bound:
+                self.counts[i] += 1
+                break
+        else:
+            self.counts[-1] += 1
+        self.total += value
+        self.n += 1
+
+    def render(self, name: str, labels: str = "") -> list[str]:
+        lines = []
+        running = 0
+        sep = "," if labels else ""
+        for bound, count in zip((*self.bounds, float("inf")), self.counts, strict=True):
+            running += count
+            le = "+Inf" if bound == float("inf") else repr(bound)
+            lines.append(f'{name}_bucket{{{labels}{sep}le="{le}"}} {running}')
+        braces = f"{{{labels}}}" if labels else ""
+        lines.append(f"{name}_sum{braces} {self.total}")
+        lines.append(f"{name}_count{braces} {self.n}")
+        return lines
+
+
+@dataclass
+class ServiceMetrics:
+    """What the web process counts; per-client figures live on each client."""
+
+    bad_frames: Counter[str] = field(default_factory=Counter)
+    frames_in: Counter[str] = field(default_factory=Counter)
+    """Accepted horse frames per producer name."""
+    ticks_published: int = 0
+    ticks_coalesced: int = 0
+    """Ticks that arrived together with a newer one (the web process was late)."""
+    clients_cut_off: int = 0
+    input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+
+
+def _escape(value: str) -> str:
+    return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+
+
+def render(
+    metrics: ServiceMetrics,
+    tick: dict[str, float],
+    clients: list[tuple[str, str, int, int]],
+    producers: int,
+) -> str:
+    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped)."""
+    out: list[str] = []
+
+    def metric(name: str, kind: str, help_text: str, lines: list[str]) -> None:
+        out.append(f"# HELP {name} {help_text}")
+        out.append(f"# TYPE {name} {kind}")
+        out.extend(lines)
+
+    running = 0.0
+    lines = []
+    for i, bound in enumerate((*LATENESS_BUCKETS, float("inf"))):
+        running += tick.get(f"lateness_bucket_{i}", 0.0)
+        le = "+Inf" if bound == float("inf") else repr(bound)
+        lines.append(f'riderlive_tick_lateness_seconds_bucket{{le="{le}"}} {int(running)}')
+    lines.append(f"riderlive_tick_lateness_seconds_sum {tick.get('lateness_sum', 0.0)}")
+    lines.append(f"riderlive_tick_lateness_seconds_count {int(tick.get('ticks', 0.0))}")
+    metric("riderlive_tick_lateness_seconds", "histogram", "How late each tick started after its deadline.", lines)
+    metric(
+        "riderlive_tick_lateness_max_seconds",
+        "gauge",
+        "Worst tick lateness.",
+        [f"riderlive_tick_lateness_max_seconds {tick.get('lateness_max', 0.0)}"],
+    )
+    for key, help_text in (
+        ("ticks", "Ticks run."),
+        ("overruns", "Ticks that started more than one period late."),
+        ("skipped", "Deadlines skipped after overruns."),
+        ("input_frames", "Horse frames taken by the tick."),
+        ("input_lapped", "Horse frames overwritten in the ring before the tick read them."),
+        ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
+    ):
+        metric(
+            f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
+        )
+    metric(
+        "riderlive_tick_realtime",
+        "gauge",
+        "1 when the tick runs at SCHED_FIFO.",
+        [f"riderlive_tick_realtime {int(tick.get('realtime', 0))}"],
+    )
+    metric(
+        "riderlive_clients_connected",
+        "gauge",
+        "Connected websocket clients.",
+        [
+            f'riderlive_clients_connected{{path="/ws/rider"}} {len(clients)}',
+            f'riderlive_clients_connected{{path="/ws/horse"}} {producers}',
+        ],
+    )
+    metric(
+        "riderlive_frames_out_total",
+        "counter",
+        "Frames sent per client.",
+        [f'riderlive_frames_out_total{{client="{_escape(c)}"}} {sent}' for c, _, sent, _ in clients],
+    )
+    metric(
+        "riderlive_frames_dropped_total",
+        "counter",
+        "Frames replaced in a slow client's slot.",
+        [f'riderlive_frames_dropped_total{{client="{_escape(c)}"}} {dropped}' for c, _, _, dropped in clients],
+    )
+    metric(
+        "riderlive_frames_in_total",
+        "counter",
+        "Horse frames accepted per producer.",
+        [f'riderlive_frames_in_total{{producer="{_escape(p)}"}} {n}' for p, n in sorted(metrics.frames_in.items())],
+    )
+    metric(
+        "riderlive_bad_frames_total",
+        "counter",
+        "Rejected messages by reason.",
+        [f'riderlive_bad_frames_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.bad_frames.items())],
+    )
+    metric(
+        "riderlive_clients_cut_off_total",
+        "counter",
+        "Clients closed after a send timeout.",
+        [f"riderlive_clients_cut_off_total {metrics.clients_cut_off}"],
+    )
+    metric(
+        "riderlive_ticks_coalesced_total",
+        "counter",
+        "Ticks that reached the web process together with a newer one.",
+        [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
+    )
+    metric(
+        "riderlive_input_to_send_seconds",
+        "histogram",
+        "Horse frame received to the first rider frame computed from it sent.",
+        metrics.input_to_send.render("riderlive_input_to_send_seconds"),
+    )
+    return "\n".join(out) + "\n"

@@ -1,0 +1,316 @@
+"""``/ws/rider``: fan-out of tick records, latest-only per client, never waiting on one.
+
+The tick's record is encoded once per subscription key (encoding and channel subset)
+and, on uvicorn with :mod:`~riderlive.service.wsprotocol`, turned once into wire
+bytes that are written straight to each client's transport. A client whose
+transport still holds more than one unsent frame is behind: the new frame is dropped
+for it (counted), so it gets the newest frame when it catches up and never a
+backlog; behind for longer than ``publish.send_timeout``, it is cut off (aborted).
+
+Other messages (hello, status, acknowledgements, errors, goodbye) go through ASGI
+from the client's own sender task, with latest-only slots for status and, on other
+servers, for frames too. Nothing here waits on a client from the tick's callback,
+so a slow client never delays the tick or the others.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import orjson
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from riderlive import __version__
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER
+from riderlive.realtime import layout as L
+from riderlive.service import auth
+from riderlive.service.codecs import (
+    PROTOCOL_VERSION,
+    BadFrame,
+    Subscription,
+    decode_subscription,
+    encode_frame,
+    parse_message,
+)
+from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
+
+if TYPE_CHECKING:
+    from riderlive.service.runtime import Service
+
+log = logging.getLogger(__name__)
+_ids = itertools.count(1)
+CONTROL_QUEUE = 64
+CONTROL_BUFFER_LIMIT = 1 << 20
+"""A client that neither reads nor stops asking gets no more answers past this backlog."""
+
+
+@dataclass(eq=False)
+class Subscriber:
+    """One /ws/rider client: its subscription, slots and counters."""
+
+    websocket: WebSocket
+    id: str
+    subscription: Subscription
+    frame: tuple[str | bytes, float] | None = None
+    status: str | None = None
+    control: deque[str] = field(default_factory=lambda: deque(maxlen=CONTROL_QUEUE))
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+    sent: int = 0
+    dropped: int = 0
+    closed: bool = False
+    transport: Any = None
+    """The raw transport (fast path), or None: frames then go through the slot."""
+    behind_since: float | None = None
+
+    def offer_frame(self, data: str | bytes, input_rx: float) -> None:
+        if self.frame is not None:
+            self.dropped += 1
+        self.frame = (data, input_rx)
+        self.wake.set()
+
+    def offer_status(self, text: str) -> None:
+        self.status = text
+        self.wake.set()
+
+    def offer_control(self, message: dict[str, Any]) -> None:
+        """Acknowledgements, errors, goodbye: in order with the frames around them."""
+        text = orjson.dumps(message).decode()
+        transport = self.transport
+        if transport is None:
+            self.control.append(text)
+            self.wake.set()
+        elif not transport.is_closing() and transport.get_write_buffer_size() < CONTROL_BUFFER_LIMIT:
+            transport.write(wire_frame(text))
+
+
+def abort_transport(websocket: WebSocket) -> None:
+    """Drop a stuck connection at once (see :mod:`riderlive.service.wsprotocol`)."""
+    abort = websocket.scope.get("extensions", {}).get(ABORT)
+    if abort is not None:
+        abort()
+
+
+async def _send(websocket: WebSocket, data: str | bytes) -> None:
+    if isinstance(data, bytes):
+        await websocket.send_bytes(data)
+    else:
+        await websocket.send_text(data)
+
+
+class Hub:
+    """The set of /ws/rider clients and the fan-out of tick records."""
+
+    def __init__(self, service: Service) -> None:
+        self.service = service
+        self.clients: dict[str, Subscriber] = {}
+        self._seen_input_rx = -1.0
+
+    def hello(self) -> dict[str, Any]:
+        service = self.service
+        config = service.config
+        return {
+            "type": "hello",
+            "protocol": PROTOCOL_VERSION,
+            "server": f"riderlive {__version__}",
+            "session": service.session,
+            "tick_rate": config.tick.rate,
+            "engine_time": service.link.engine_time(),
+            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER],
+            "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
+            "axis_convention": AXIS_CONVENTION,
+            "length_scale": config.tick.length_scale,
+            "length_unit": "service length unit: thesis rig units / length_scale",
+            "rotation_unit": "deg",
+            "encodings": ["json", "binary"],
+            "drivers": ["procedural", "input", "neutral"],
+        }
+
+    def publish(self, records: list[np.ndarray]) -> None:
+        """Offer the newest of ``records`` (new ticks, oldest first) to every client.
+
+        A client with decimation N gets the newest record whose ``seq % N == 0``, so
+        its frames stay evenly spaced even when the web process was late and several
+        ticks arrived at once. Each (subscription, record) is encoded once.
+        """
+        rx_so_far = []
+        newest_rx = self._seen_input_rx
+        for record in records:
+            newest_rx = max(newest_rx, float(record[L.OUT_INPUT_RX]))
+            rx_so_far.append(newest_rx)
+        chosen: dict[int, int | None] = {}
+        encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+        now = time.perf_counter()
+        timeout = self.service.config.publish.send_timeout
+        fresh_rx = -1.0
+        for client in list(self.clients.values()):
+            if client.closed:
+                continue
+            sub = client.subscription
+            decimation = sub.decimation
+            if decimation not in chosen:
+                chosen[decimation] = next(
+                    (i for i in range(len(records) - 1, -1, -1) if int(records[i][L.OUT_SEQ]) % decimation == 0),
+                    None,
+                )
+            index = chosen[decimation]
+            if index is None:
+                continue
+            key = (*sub.key, index)
+            data = encoded.get(key)
+            if data is None:
+                message = encode_frame(sub, records[index])
+                data = (message, wire_frame(message))
+                encoded[key] = data
+            input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
+            if client.transport is None:
+                client.offer_frame(data[0], input_rx)
+                continue
+            fresh_rx = max(fresh_rx, input_rx)
+            self._write(client, data[1], now, timeout)
+        self._seen_input_rx = newest_rx
+        if fresh_rx >= 0.0:
+            self.service.metrics.input_to_send.observe(self.service.link.engine_time() - fresh_rx)
+
+    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> None:
+        """The fast path: write a frame's wire bytes, or drop it if the client is behind."""
+        transport = client.transport
+        if transport.is_closing():
+            client.closed = True
+            return
+        if transport.get_write_buffer_size() > len(wire):
+            client.dropped += 1
+            if client.behind_since is None:
+                client.behind_since = now
+            elif now - client.behind_since > timeout:
+                self.service.metrics.clients_cut_off += 1
+                log.warning("client %s has not read for %.1f s: cut off", client.id, timeout)
+                client.closed = True
+                client.wake.set()
+                transport.abort()
+            return
+        client.behind_since = None
+        transport.write(wire)
+        client.sent += 1
+
+    def publish_status(self, status: dict[str, Any]) -> None:
+        text = orjson.dumps({"type": "status", **status}).decode()
+        for client in self.clients.values():
+            client.offer_status(text)
+
+    async def goodbye(self, reason: str) -> None:
+        """Tell every client the service is going away, then close them."""
+        for client in list(self.clients.values()):
+            client.offer_control({"type": "goodbye", "reason": reason})
+        await asyncio.sleep(0.05)
+        for client in list(self.clients.values()):
+            client.closed = True
+            client.wake.set()
+            with contextlib.suppress(Exception):  # already gone or not reading
+                await asyncio.wait_for(client.websocket.close(code=1001, reason=reason), 0.5)
+
+    async def sender(self, client: Subscriber) -> None:
+        """Send the client's slots until it leaves, is cut off or the service stops."""
+        timeout = self.service.config.publish.send_timeout
+        metrics = self.service.metrics
+        try:
+            while not client.closed:
+                await client.wake.wait()
+                client.wake.clear()
+                while client.control:
+                    await asyncio.wait_for(_send(client.websocket, client.control.popleft()), timeout)
+                if client.status is not None:
+                    status, client.status = client.status, None
+                    await asyncio.wait_for(_send(client.websocket, status), timeout)
+                if client.frame is not None and not client.closed:
+                    (data, input_rx), client.frame = client.frame, None
+                    await asyncio.wait_for(_send(client.websocket, data), timeout)
+                    client.sent += 1
+                    if input_rx >= 0.0:
+                        metrics.input_to_send.observe(self.service.link.engine_time() - input_rx)
+        except TimeoutError:
+            metrics.clients_cut_off += 1
+            log.warning("client %s did not read for %.1f s: cut off", client.id, timeout)
+            client.closed = True
+            asyncio.get_running_loop().create_task(self._close(client, 1013, "too slow"))
+        except Exception:  # the client left mid-send
+            client.closed = True
+
+    @staticmethod
+    async def _close(client: Subscriber, code: int, reason: str) -> None:
+        """Close a client that does not read: try a close frame, then drop the connection."""
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(client.websocket.close(code=code, reason=reason), 0.5)
+        abort_transport(client.websocket)
+
+    async def __call__(self, websocket: WebSocket) -> None:
+        service = self.service
+        config = service.config
+        offered = list(websocket.scope.get("subprotocols", []))
+        if len(self.clients) >= config.publish.max_clients:
+            await websocket.close(code=1013, reason="too many clients")
+            return
+        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
+        if config.security.publish_requires_token and not auth.token_matches(
+            config.security.token, auth.token_from_subprotocols(offered)
+        ):
+            try:
+                first = await asyncio.wait_for(websocket.receive_text(), 5.0)
+                token = orjson.loads(first).get("token")
+            except Exception:
+                token = None
+            if not auth.token_matches(config.security.token, token):
+                service.metrics.bad_frames["unauthorized"] += 1
+                with contextlib.suppress(Exception):  # it may have left already
+                    await websocket.send_json({"type": "error", "reason": "unauthorized", "message": "token required"})
+                    await websocket.close(code=4401, reason="unauthorized")
+                return
+        client = Subscriber(websocket, f"rider-{next(_ids)}", Subscription())
+        client.transport = websocket.scope.get("extensions", {}).get(TRANSPORT)
+        await websocket.send_text(orjson.dumps(self.hello()).decode())
+        status = service.link.status()
+        if status:
+            client.offer_status(orjson.dumps({"type": "status", **status}).decode())
+        self.clients[client.id] = client
+        task = asyncio.get_running_loop().create_task(self.sender(client))
+        try:
+            while not client.closed:
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                self.handle(client, message.get("text") or message.get("bytes") or b"")
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            client.closed = True
+            client.wake.set()
+            self.clients.pop(client.id, None)
+            task.cancel()
+
+    def handle(self, client: Subscriber, data: str | bytes) -> None:
+        service = self.service
+        try:
+            obj = parse_message(data, service.config.input.max_message_bytes)
+            kind = obj.get("type")
+            if kind == "subscribe":
+                client.subscription = decode_subscription(obj, client.subscription, service.config.tick.rate)
+                client.offer_control(client.subscription.describe(service.config.tick.rate))
+            elif kind == "ping":
+                client.offer_control({"type": "pong", "id": obj.get("id"), "engine_time": service.link.engine_time()})
+            elif kind == "auth":
+                pass
+            else:
+                raise BadFrame("unknown_type", f"unknown message type {kind!r}")
+        except BadFrame as exc:
+            service.metrics.bad_frames[exc.reason] += 1
+            client.offer_control({"type": "error", "reason": exc.reason, "message": str(exc)})
+
+    def snapshot(self) -> list[tuple[str, str, int, int]]:
+        return [(c.id, "/ws/rider", c.sent, c.dropped) for c in self.clients.values()]

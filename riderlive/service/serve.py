@@ -1,0 +1,86 @@
+"""``riderlive serve``: run the live service until SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import socket
+import sys
+
+import uvicorn
+
+from riderlive.configfile import ConfigError
+from riderlive.service.config import ServiceConfig, load_config
+from riderlive.service.runtime import Service
+from riderlive.service.wsprotocol import protocol_class
+
+
+def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) -> uvicorn.Config:
+    """uvicorn settings for frames: websockets impl, no per-message deflate, bounded messages."""
+    return uvicorn.Config(
+        app,  # type: ignore[arg-type]
+        host=config.server.host,
+        port=config.server.port,
+        fd=fd,
+        ws=protocol_class(config.publish.send_buffer_bytes),
+        ws_per_message_deflate=False,
+        ws_max_size=max(4 * config.input.max_message_bytes, 1 << 20),
+        log_level=config.server.log_level,
+        timeout_graceful_shutdown=math.ceil(config.server.shutdown_timeout),
+        lifespan="on",
+    )
+
+
+class RiderServer(uvicorn.Server):
+    """uvicorn's server, saying goodbye to websocket clients before it drops them."""
+
+    def __init__(self, config: uvicorn.Config, service: Service) -> None:
+        super().__init__(config)
+        self.service = service
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        await self.service.hub.goodbye("shutdown")
+        await super().shutdown(sockets)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", help="service TOML (see config/service.example.toml)")
+    parser.add_argument("--host", help="override server.host")
+    parser.add_argument("--port", type=int, help="override server.port (0 = any free port)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from riderlive.service.app import create_app
+
+    try:
+        config = load_config(args.config)
+        overrides = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
+        if overrides:
+            data = config.model_dump()
+            data["server"].update(overrides)
+            config = ServiceConfig.model_validate(data)
+    except (ConfigError, ValueError) as exc:
+        print(f"riderlive serve: {exc}", file=sys.stderr)
+        return 2
+    try:
+        sock = socket.socket(socket.AF_INET6 if ":" in config.server.host else socket.AF_INET)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((config.server.host, config.server.port))
+        sock.listen(2048)
+    except OSError as exc:
+        print(f"riderlive serve: cannot listen on {config.server.host}:{config.server.port}: {exc}", file=sys.stderr)
+        return 2
+    port = sock.getsockname()[1]
+    print(
+        f"riderlive serve: listening on port {port} (http://{config.server.host}:{port}/)", file=sys.stderr, flush=True
+    )
+    if config.server.nice:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
+        except OSError as exc:
+            print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
+    app = create_app(config)
+    server = RiderServer(uvicorn_config(app, config), app.state.service)
+    server.run(sockets=[sock])
+    return 0

@@ -1,0 +1,79 @@
+"""Run the real ``riderlive serve`` in a subprocess on a free loopback port."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class LiveServer:
+    """``riderlive serve --config FILE --port 0``; its stderr is kept in ``log``."""
+
+    def __init__(self, config_text: str, workdir: Path, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.workdir = workdir
+        self.host = host
+        config = workdir / "service.toml"
+        config.write_text(config_text)
+        env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--host", host, "--port", str(port)],
+            cwd=workdir,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self.log: list[str] = []
+        self._ready = threading.Event()
+        self.port = 0
+        threading.Thread(target=self._read, daemon=True).start()
+        if not self._ready.wait(30.0):
+            self.stop()
+            raise RuntimeError("server did not start:\n" + "".join(self.log))
+        self.base = f"http://{host}:{self.port}"
+        self.ws = f"ws://{host}:{self.port}"
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.log.append(line)
+            match = re.search(r"listening on port (\d+)", line)
+            if match:
+                self.port = int(match.group(1))
+            if "Application startup complete" in line:
+                self._ready.set()
+
+    def get(self, path: str, **kwargs: object) -> httpx.Response:
+        return httpx.get(self.base + path, timeout=10.0, **kwargs)  # type: ignore[arg-type]
+
+    def request(self, method: str, path: str, **kwargs: object) -> httpx.Response:
+        return httpx.request(method, self.base + path, timeout=10.0, **kwargs)  # type: ignore[arg-type]
+
+    def metric(self, name: str, labels: str = "") -> float:
+        """One sample of /metrics (0 when absent)."""
+        wanted = f"{name}{{{labels}}}" if labels else name
+        for line in self.get("/metrics").text.splitlines():
+            if line.startswith(wanted + " "):
+                return float(line.rsplit(" ", 1)[1])
+        return 0.0
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5.0)
+        time.sleep(0.05)
+        return self.proc.returncode

@@ -1,0 +1,110 @@
+"""Test producers and a subscriber that follows /ws/rider in a thread."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+from websockets.sync.client import ClientConnection, connect
+
+from riderlive.channels import HORSE_NAMES
+
+
+class Producer:
+    """Streams frames ``make(t) -> dict`` at ``rate`` Hz to /ws/horse in a thread."""
+
+    def __init__(
+        self,
+        url: str,
+        make: Callable[[float], dict[str, Any]],
+        rate: float = 100.0,
+        hello: dict[str, Any] | None = None,
+        binary: bool = False,
+        **connect_kwargs: Any,
+    ) -> None:
+        self.ws: ClientConnection = connect(url + "/ws/horse", **connect_kwargs).__enter__()
+        self.welcome = json.loads(self.ws.recv(timeout=5))
+        self.make, self.rate, self.binary = make, rate, binary
+        self.messages: list[dict[str, Any]] = []
+        self.sending = threading.Event()
+        self.sending.set()
+        self.closed = threading.Event()
+        if hello:
+            self.ws.send(json.dumps({"type": "hello", **hello}))
+        threading.Thread(target=self._send, daemon=True).start()
+        threading.Thread(target=self._recv, daemon=True).start()
+
+    def _send(self) -> None:
+        t0 = time.perf_counter()
+        n = 0
+        while not self.closed.is_set():
+            n += 1
+            time.sleep(max(0.0, t0 + n / self.rate - time.perf_counter()))
+            if not self.sending.is_set():
+                continue
+            frame = self.make(time.perf_counter() - t0)
+            try:
+                self.ws.send(msgpack.packb(frame) if self.binary else json.dumps(frame))
+            except Exception:
+                return
+
+    def _recv(self) -> None:
+        try:
+            for message in self.ws:
+                self.messages.append(json.loads(message))
+        except Exception:
+            pass
+
+    def driving(self) -> bool | None:
+        controls = [m["driving"] for m in self.messages if m.get("type") == "control"]
+        return controls[-1] if controls else None
+
+    def close(self) -> None:
+        self.closed.set()
+        self.ws.close()
+
+
+def constant(values: dict[str, float]) -> Callable[[float], dict[str, Any]]:
+    return lambda t: {"t": t, "values": values}
+
+
+class Follower:
+    """Collects every frame of /ws/rider (all rider and horse channels) in a thread."""
+
+    def __init__(self, url: str) -> None:
+        self.ws = connect(url + "/ws/rider").__enter__()
+        self.hello = json.loads(self.ws.recv(timeout=5))
+        self.ws.send(json.dumps({"type": "subscribe", "horse_channels": list(HORSE_NAMES)}))
+        self.frames: list[dict[str, Any]] = []
+        threading.Thread(target=self._recv, daemon=True).start()
+
+    def _recv(self) -> None:
+        try:
+            for message in self.ws:
+                obj = json.loads(message)
+                if obj["type"] == "frame" and "horse" in obj:
+                    obj["at"] = time.perf_counter()
+                    self.frames.append(obj)
+        except Exception:
+            pass
+
+    def wait_for(self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 5.0) -> dict[str, Any]:
+        start = len(self.frames)
+        deadline = time.perf_counter() + timeout
+        while time.perf_counter() < deadline:
+            for frame in self.frames[start:]:
+                if predicate(frame):
+                    return frame
+            time.sleep(0.01)
+        last = self.frames[-1] if self.frames else None
+        raise AssertionError(f"no frame matched within {timeout} s; last: {last}")
+
+    def since(self, frame: dict[str, Any]) -> list[dict[str, Any]]:
+        return [f for f in self.frames if f["seq"] >= frame["seq"]]
+
+    def close(self) -> None:
+        self.ws.close()

@@ -1,0 +1,33 @@
+"""The service config: the example file is the defaults, errors name file and key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from riderlive.configfile import CONFIG_DIR, ConfigError
+from riderlive.service.config import ServiceConfig, load_config
+
+
+def test_the_example_file_loads_and_matches_the_defaults() -> None:
+    assert load_config(CONFIG_DIR / "service.example.toml") == ServiceConfig()
+    assert load_config(None) == ServiceConfig()
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[tick]\nrate = 5000.0\n", "tick.rate"),
+        ("[tick]\nrate = nan\n", "tick.rate"),
+        ("[input]\nholdd = 1.0\n", "input.holdd"),
+        ("[source]\ngait = 'pace'\n", "source.gait"),
+        ("[security]\ntoken = 'short'\n", "security.token"),
+    ],
+)
+def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    assert err.value.key == key and str(path) in str(err.value)

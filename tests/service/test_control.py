@@ -1,0 +1,158 @@
+"""REST control against the real server: sources, params, presets, animator, takes, e-stop."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from riderlive.bake import bake_table
+from riderlive.channels import HORSE_INDEX, RIDER_INDEX, RIDER_NAMES
+from riderlive.framefile import read_frames
+from riderlive.rules import RiderModel, load_preset
+from riderlive.rules.kuhnel2003 import RULE_INPUTS
+from tests.service.conftest import BASE_CONFIG
+from tests.service.live_server import LiveServer
+from tests.service.producers import Follower
+
+
+def test_openapi_documents_the_control_paths(server: LiveServer) -> None:
+    paths = server.get("/openapi.json").json()["paths"]
+    for path in (
+        "/api/state",
+        "/api/source",
+        "/api/horse/perform",
+        "/api/presets",
+        "/api/preset",
+        "/api/params",
+        "/api/animator",
+        "/api/record/start",
+        "/api/record/stop",
+        "/api/takes",
+        "/api/estop",
+        "/api/reset",
+        "/metrics",
+    ):
+        assert path in paths, path
+    assert server.get("/").status_code == 200
+
+
+def test_params_patch_changes_the_next_frames(server: LiveServer) -> None:
+    follower = Follower(server.ws)
+    try:
+        assert server.request("PUT", "/api/source", json={"kind": "procedural", "gait": "walk"}).status_code == 200
+        bad = server.request("PATCH", "/api/params", json={"head.no_such": 1.0})
+        assert bad.status_code == 422
+        response = server.request("PATCH", "/api/params", json={"head.offset": 12.5})
+        assert response.status_code == 200 and response.json()["head.offset"] == 12.5
+        changed = time.perf_counter()
+        params = load_preset("kuhnel2003").with_values({"head.offset": 12.5})
+        model = RiderModel(params=params, scale=25.0)
+        frame = follower.wait_for(lambda f: f["at"] > changed + 0.05)
+        np.testing.assert_allclose(frame["values"], model.evaluate(frame["horse"]), atol=1e-9)
+        assert server.get("/api/params").json()["head.offset"] == 12.5
+        assert server.request("PUT", "/api/preset", json={"name": "child"}).json() == {"current": "child"}
+        assert "child" in server.get("/api/presets").json()["presets"]
+        assert server.request("PUT", "/api/preset", json={"name": "nope"}).status_code == 400
+        animator = {"offsets": {"head.rz": 3.0}, "gains": {"cog.ty": 0.5}}
+        assert server.request("PUT", "/api/animator", json=animator).status_code == 200
+        assert server.get("/api/animator").json() == animator
+        assert server.request("PUT", "/api/animator", json={"offsets": {"bad.ch": 1}}).status_code == 422
+    finally:
+        server.request("PUT", "/api/preset", json={"name": "kuhnel2003"})
+        server.request("PUT", "/api/animator", json={"offsets": {}, "gains": {}})
+        server.request("PUT", "/api/source", json={"kind": "live"})
+        follower.close()
+
+
+def test_estop_and_reset_reach_the_tick(server: LiveServer) -> None:
+    assert server.request("POST", "/api/estop").json() == {"estop": True}
+    deadline = time.perf_counter() + 3
+    while not server.get("/api/state").json()["tick"]["estop"]:
+        assert time.perf_counter() < deadline
+        time.sleep(0.05)
+    server.request("POST", "/api/reset")
+    while server.get("/api/state").json()["tick"]["estop"]:
+        assert time.perf_counter() < deadline
+        time.sleep(0.05)
+
+
+def test_record_then_replay_at_original_timing(server: LiveServer) -> None:
+    name = "replay-me"
+    assert server.request("POST", "/api/record/start", json={"name": name}).json() == {"recording": name}
+    time.sleep(1.0)
+    stopped = server.request("POST", "/api/record/stop").json()["take"]
+    assert stopped["name"] == name and stopped["rows"] > 150
+    assert name in [t["name"] for t in server.get("/api/takes").json()["takes"]]
+    take = read_frames(str(server.workdir / "takes" / f"{name}.csv"), required=RULE_INPUTS)
+    baked = bake_table(take, RiderModel(params=load_preset("kuhnel2003"), scale=25.0))
+    recorded = np.column_stack([take.column(n) for n in RIDER_NAMES])
+    np.testing.assert_allclose(recorded, baked.values, atol=1e-9, err_msg="a take bakes to its own rider")
+    follower = Follower(server.ws)
+    try:
+        response = server.request("PUT", "/api/source", json={"kind": "replay", "take": name})
+        assert response.status_code == 200, response.text
+        first = follower.wait_for(lambda f: f["driver"] == "input")
+        last = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=5)
+        replayed = [f for f in follower.since(first) if f["driver"] == "input" and f["seq"] < last["seq"]]
+        moving = [f for f in replayed if f["source_t"] < take.t[-1]]
+        engine_span = moving[-1]["t"] - moving[0]["t"]
+        source_span = moving[-1]["source_t"] - moving[0]["source_t"]
+        # The producer clock estimate may improve during the take (a less-delayed frame).
+        assert abs(engine_span - source_span) < 0.1, "played at its original timing"
+        assert source_span > float(take.t[-1]) - 0.1, "all of it"
+        held = [f for f in replayed if f["source_t"] == take.t[-1]]
+        assert len(held) / 200.0 < 0.5 + 0.03 + 0.02, "the last frame is held for at most `hold`"
+        rz = np.array([f["horse"][HORSE_INDEX["rearPivot.rz"]] for f in replayed])
+        source = np.array([f["source_t"] for f in replayed])
+        expected = np.interp(source, take.t, take.column("rearPivot.rz"))
+        np.testing.assert_allclose(rz, expected, atol=1e-9, err_msg="the take's horse, resampled")
+    finally:
+        follower.close()
+    assert server.request("PUT", "/api/source", json={"kind": "replay", "take": "../etc"}).status_code in (400, 422)
+
+
+def test_a_take_survives_kill_9(tmp_path: Path) -> None:
+    live = LiveServer(BASE_CONFIG, tmp_path)
+    try:
+        live.request("POST", "/api/record/start", json={"name": "crash"})
+        time.sleep(2.5)
+        rows_before = live.get("/api/state").json()["recording"]["rows"]
+        live.proc.send_signal(signal.SIGKILL)
+        live.proc.wait(5)
+    finally:
+        live.stop()
+    take = read_frames(str(tmp_path / "takes" / "crash.csv"), required=RULE_INPUTS)
+    assert rows_before > 200
+    assert len(take) >= rows_before - 200, "at most the last second (200 ticks) is lost"
+    assert np.all(np.diff(take.t) > 0)
+    assert RIDER_INDEX["head.rz"] >= 0 and "head.rz" in take.names
+
+
+def test_sigterm_says_goodbye_and_closes_the_take(tmp_path: Path) -> None:
+    live = LiveServer(BASE_CONFIG, tmp_path)
+    try:
+        live.request("POST", "/api/record/start", json={"name": "clean"})
+        with connect(live.ws + "/ws/rider") as ws:
+            ws.recv(timeout=5)
+            time.sleep(0.3)
+            live.proc.send_signal(signal.SIGTERM)
+            messages = []
+            try:
+                while True:
+                    messages.append(ws.recv(timeout=10))
+            except ConnectionClosed as closed:
+                code = closed.rcvd.code if closed.rcvd else None
+        goodbyes = [json.loads(m) for m in messages if isinstance(m, str) and '"goodbye"' in m]
+        assert goodbyes == [{"type": "goodbye", "reason": "shutdown"}]
+        assert code == 1001
+        assert live.proc.wait(15) in (0, -signal.SIGTERM), "uvicorn re-raises the signal after a clean shutdown"
+    finally:
+        live.stop()
+    meta = json.loads((tmp_path / "takes" / "clean.json").read_text())
+    assert meta["rows"] == len(read_frames(str(tmp_path / "takes" / "clean.csv")))
