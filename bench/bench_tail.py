@@ -6,7 +6,7 @@ blocks, and the ratio to a baseline measured in the same run: one 12-vertex stra
 stepped in plain Python floats (Verlet, 4 distance iterations, follow-the-leader; no
 bending, no collisions), the cheapest honest way to simulate one strand without NumPy.
 The skinned tail plus braid runs twice: compiled (numba kernels, the default) and on
-the NumPy path, the second baseline (same results to ~1e-15 per step).
+the NumPy path, the second baseline (same results within 1e-12 per step).
 
     PYTHONPATH=$PWD /work/main/.venv/bin/python bench/bench_tail.py [--quick]
 """

@@ -11,7 +11,7 @@ the braid with the rider's back (and, when it swings that far, the horse).
 
 ``compiled`` (the default when numba is installed) runs posing, strands and chains
 through :mod:`riderlive.physics.kernels`, about 15x faster for these tiny arrays and
-equal to the NumPy path to ~1e-15 m per step; ``compiled=False`` keeps the NumPy path.
+equal to the NumPy path within 1e-12 per step; ``compiled=False`` keeps the NumPy path.
 """
 
 from __future__ import annotations
