@@ -14,10 +14,14 @@ from hypothesis import strategies as st
 from riderlive.channels import HORSE_NAMES
 from riderlive.cli import main
 from riderlive.framefile import FrameTable, write_frames
+from riderlive.horse import DEFAULT_SCALE
 from riderlive.physics import chain, kernels, strands
 from riderlive.physics.config import PhysicsConfig
+from riderlive.physics.drive import TakeSource
 from riderlive.physics.skinned import SkinnedModel, SkinnedState
 from riderlive.physics.strands import StrandModel, StrandState
+from riderlive.rules.engine import RiderModel
+from riderlive.rules.params import load_preset
 from tests.physics.motion import horse_take, source
 from tests.physics.test_chain import hanging_chain
 from tests.physics.test_chain import model as chain_model
@@ -45,12 +49,19 @@ def _differences(a: SkinnedState, b: SkinnedState) -> dict[str, float]:
     return {k: float(np.abs(u - v).max()) for k, (u, v) in pairs.items()}
 
 
+def _with_rider(kind: str) -> TakeSource:
+    """The take with the rider rules' frames, so the braid's anchor leans, lifts and turns."""
+    times, frames = horse_take(kind)
+    rules = RiderModel(params=load_preset("kuhnel2003"), scale=DEFAULT_SCALE)
+    return TakeSource(times, frames, np.asarray(rules.evaluate_batch(frames), dtype=np.float64))
+
+
 @cache
 def _compare_take(kind: str) -> tuple[dict[str, float], float, float]:
     """Per step: both paths from the NumPy state; also the compiled path running free, and its anchors."""
     oracle = SkinnedModel.build(CONFIG, compiled=False)
     fast = SkinnedModel.build(CONFIG, compiled=True)
-    src = source(kind)
+    src = _with_rider(kind)
     steps = len(horse_take(kind)[0]) - 1
     state = oracle.initial(src(0.0))
     free = fast.initial(src(0.0))
@@ -76,6 +87,16 @@ def test_compiled_step_agrees_with_numpy_every_step(kind: str) -> None:
     worst, _, anchors = _compare_take(kind)
     assert anchors <= TOL
     assert max(worst.values()) <= TOL, worst
+
+
+def test_compiled_anchors_without_a_rider() -> None:
+    oracle = SkinnedModel.build(CONFIG, compiled=False)
+    fast = SkinnedModel.build(CONFIG, compiled=True)
+    src = source("buck")
+    for t in np.linspace(0.0, 3.5, 50):
+        a, b = oracle.anchors(src(t)), fast.anchors(src(t))
+        for u, v in ((a.pins, b.pins), (a.up, b.up), (a.colliders.a, b.colliders.a), (a.colliders.b, b.colliders.b)):
+            assert np.allclose(u, v, rtol=0.0, atol=TOL)
 
 
 @pytest.mark.parametrize("kind", ["gallop", "buck"])
