@@ -10,7 +10,7 @@ Everything collides with everything: the tail with the hindquarters and hind leg
 the braid with the rider's back (and, when it swings that far, the horse).
 
 ``compiled`` (the default when numba is installed) runs posing, strands and chains
-through :mod:`riderlive.physics.kernels`, about 20x faster for these tiny arrays and
+through :mod:`riderlive.physics.kernels`, 15-25x faster for these tiny arrays and
 equal to the NumPy path within 1e-12 per step; ``compiled=False`` keeps the NumPy path.
 """
 
