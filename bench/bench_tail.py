@@ -5,6 +5,8 @@ clock, so waiting for a core on the shared machine does not count), best of
 blocks, and the ratio to a baseline measured in the same run: one 12-vertex strand
 stepped in plain Python floats (Verlet, 4 distance iterations, follow-the-leader; no
 bending, no collisions), the cheapest honest way to simulate one strand without NumPy.
+The skinned tail plus braid runs twice: compiled (numba kernels, the default) and on
+the NumPy path, the second baseline (same results within 1e-12 per step).
 
     PYTHONPATH=$PWD /work/main/.venv/bin/python bench/bench_tail.py [--quick]
 """
@@ -19,7 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from riderlive.horse import ProceduralHorse
-from riderlive.physics import chain, strands
+from riderlive.physics import chain, kernels, strands
 from riderlive.physics.config import PhysicsConfig
 from riderlive.physics.drive import Drive
 from riderlive.physics.reference import ReferenceModel
@@ -80,6 +82,35 @@ def python_strand(n: int = 12, iterations: int = 4) -> Callable[[], None]:
     return step
 
 
+def skinned_rows(drive: Drive, compiled: bool, blocks: int) -> list[tuple[str, float]]:
+    """The skinned tail + braid's whole step and its parts, compiled or on the NumPy path."""
+    sk = SkinnedModel.build(PhysicsConfig(), compiled=compiled)
+    state = sk.initial(drive)
+    for _ in range(120):  # let the strands fall onto the body; also compiles (or loads) the kernels
+        state = sk.step(state, drive)
+    anchors = sk.anchors(drive)
+    step_strands = kernels.strand_step if compiled else strands.step
+    step_chain = kernels.chain_step if compiled else chain.step
+    calls = 3000 if compiled else 300
+    return [
+        (
+            f"skinned tail + braid, whole step ({'compiled' if compiled else 'NumPy'})",
+            per_call_us(lambda: sk.step(state, drive), calls, blocks),
+        ),
+        ("  posing (dock, rider, colliders)", per_call_us(lambda: sk.anchors(drive), calls, blocks)),
+        (
+            "  strand solver (2 strands)",
+            per_call_us(
+                lambda: step_strands(sk.strands, state.strands, anchors.pins, anchors.colliders), calls, blocks
+            ),
+        ),
+        (
+            "  bone chains (2 x 11 bones)",
+            per_call_us(lambda: step_chain(sk.bones, state.bones, state.strands.x, anchors.up), calls, blocks),
+        ),
+    ]
+
+
 def main() -> int:
     quick = "--quick" in sys.argv
     blocks = 3 if quick else 7
@@ -97,29 +128,12 @@ def main() -> int:
         calls = 20 if n == 400 else 3
         full = per_call_us(lambda ref=ref, state=state: ref.step(state, drive), calls, blocks)
         rows.append((f"reference {n} x 12 (posing + solver)", full))
-    cfg = PhysicsConfig()
-    sk = SkinnedModel.build(cfg)
-    sstate = sk.initial(drive)
-    for _ in range(120):
-        sstate = sk.step(sstate, drive)
-    anchors = sk.anchors(drive)
-    rows.append(("skinned tail + braid, whole step", per_call_us(lambda: sk.step(sstate, drive), 300, blocks)))
-    rows.append(("  posing (dock, rider, colliders)", per_call_us(lambda: sk.anchors(drive), 300, blocks)))
-    rows.append(
-        (
-            "  strand solver (2 strands)",
-            per_call_us(lambda: strands.step(sk.strands, sstate.strands, anchors.pins, anchors.colliders), 300, blocks),
-        )
-    )
-    x = sstate.strands.x
-    rows.append(
-        (
-            "  bone chains (2 x 11 bones)",
-            per_call_us(lambda: chain.step(sk.bones, sstate.bones, x, anchors.up), 300, blocks),
-        )
-    )
+    compiled = skinned_rows(drive, True, blocks)
+    numpy_path = skinned_rows(drive, False, blocks)
+    rows += compiled + numpy_path
     for label, us in rows:
         print(f"{label:52s} {us:8.1f} us/step  ({us / baseline:5.2f} x baseline)")
+    print(f"skinned tail + braid, NumPy path / compiled          {numpy_path[0][1] / compiled[0][1]:8.1f} x")
     return 0
 
 

@@ -208,6 +208,12 @@ def read_frames(path: str, required: Iterable[str] = (), fmt: str | None = None)
     return _read_jsonl(source, _decode(source, _read_bytes(path)), required)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextmanager
 def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
     """Yield a file beside ``path`` that replaces it only on success."""
@@ -220,6 +226,7 @@ def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
     try:
         with os.fdopen(fd, "wb") as fh:
             yield fh
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

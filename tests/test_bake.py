@@ -165,3 +165,14 @@ def test_bad_options_exit_2(tmp_path: Path) -> None:
     assert run_cli("bake", str(src), "-o", out, "--scale", "0").returncode == 2
     assert run_cli("bake", str(src), "-o", out, "--preset", "nope").returncode == 2
     assert "file not found" in run_cli("bake", str(tmp_path / "none.csv"), "-o", out).stderr
+
+
+def test_output_gets_the_usual_file_mode(tmp_path: Path) -> None:
+    import os
+
+    src, out = tmp_path / "horse.csv", tmp_path / "rider.csv"
+    write_csv(src, horse_take(3))
+    assert run_cli("bake", str(src), "-o", str(out)).returncode == 0
+    mask = os.umask(0)
+    os.umask(mask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~mask

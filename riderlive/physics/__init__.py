@@ -1,7 +1,8 @@
 """Strand physics: the horse's tail (many strands, and one strand driving a bone chain) and the rider's braid.
 
 Modules: :mod:`strands` (the solver: Model / State / step), :mod:`collision`
-(capsules), :mod:`chain` (bone chains driven by strands), :mod:`quaternion`,
+(capsules), :mod:`chain` (bone chains driven by strands), :mod:`kernels` (numba
+twins of posing, strand step and chain for the skinned tail), :mod:`quaternion`,
 :mod:`attach` (dock, rider pose and colliders from horse and rider frames),
 :mod:`reference` (the 400-strand tail), :mod:`skinned` (skinned tail + braid in one
 state), :mod:`drive` (sources and the fixed-step accumulator), :mod:`outputs`

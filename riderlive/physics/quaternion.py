@@ -44,7 +44,9 @@ def shortest_arc(a: FloatArray, b: FloatArray) -> FloatArray:
     q = np.empty((*np.broadcast_shapes(a.shape, b.shape)[:-1], 4))
     q[..., :3] = np.cross(a, b)
     q[..., 3] = 1.0 + np.sum(a * b, axis=-1)
-    opposite = q[..., 3] < 1e-9
+    # No axis when a and b are opposite to within 1e-7 rad (1 + a.b alone is ~1e-10 already
+    # 1e-5 rad away, where a x b still gives the axis precisely).
+    opposite = np.sum(q * q, axis=-1) < 1e-14
     if np.any(opposite):
         q[opposite, :3] = perpendicular(np.broadcast_to(a, q[..., :3].shape)[opposite])
         q[opposite, 3] = 0.0

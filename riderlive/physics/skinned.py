@@ -8,16 +8,20 @@ lie along the dock (head) direction, and the strand vertices are the bone joints
 
 Everything collides with everything: the tail with the hindquarters and hind legs,
 the braid with the rider's back (and, when it swings that far, the horse).
+
+``compiled`` (the default when numba is installed) runs posing, strands and chains
+through :mod:`riderlive.physics.kernels`, 15-25x faster for these tiny arrays and
+equal to the NumPy path within 1e-12 per step; ``compiled=False`` keeps the NumPy path.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.physics import chain, strands
+from riderlive.physics import chain, kernels, strands
 from riderlive.physics.attach import Frame, HorseAttachment, RiderAttachment
 from riderlive.physics.chain import ChainModel, ChainState
 from riderlive.physics.collision import Capsules
@@ -51,16 +55,33 @@ class Anchors:
 
 @dataclass(frozen=True, eq=False)
 class SkinnedModel:
-    """Solver model for tail + braid strands, chain model, and the config they came from."""
+    """Solver model for tail + braid strands, chain model, and the config they came from.
+
+    ``compiled``: step with the numba kernels (default when numba is installed) or NumPy.
+    """
 
     strands: StrandModel
     bones: ChainModel
     config: PhysicsConfig
     horse: HorseAttachment
     rider: RiderAttachment
+    compiled: bool = kernels.AVAILABLE
+    _pose: kernels.CompiledPose | None = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.compiled and not kernels.AVAILABLE:
+            raise ValueError("the compiled skinned tail needs numba (pip install numba); or pass compiled=False")
+        cfg = self.config
+        pose = (
+            kernels.CompiledPose(self.horse, self.rider, cfg.skinned.strand.root_length, cfg.rider.braid.root_length)
+            if self.compiled
+            else None
+        )
+        object.__setattr__(self, "_pose", pose)
 
     @staticmethod
-    def build(config: PhysicsConfig) -> SkinnedModel:
+    def build(config: PhysicsConfig, compiled: bool | None = None) -> SkinnedModel:
+        """The model for ``config``; ``compiled`` None means whenever numba is installed."""
         tail, braid = config.skinned.strand, config.rider.braid
         if tail.vertices != braid.vertices:
             raise ValueError("the skinned tail and the braid must have the same number of vertices")
@@ -86,10 +107,20 @@ class SkinnedModel:
             fan_time=sk.fan_time,
             fan_profile=chain.fan_profile(tail.vertices - 1, [sk.subchains > 0, False]),
         )
-        return SkinnedModel(model, bones, config, HorseAttachment(config.horse), RiderAttachment(config.rider))
+        return SkinnedModel(
+            model,
+            bones,
+            config,
+            HorseAttachment(config.horse),
+            RiderAttachment(config.rider),
+            kernels.AVAILABLE if compiled is None else compiled,
+        )
 
     def anchors(self, drive: Drive) -> Anchors:
         """Where the tail's dock and the braid's tie are, and what they collide with, for ``drive``."""
+        if self._pose is not None:
+            pins, up, colliders, hq, head = self._pose(drive)
+            return Anchors(pins, up, colliders, (hq, head))
         cfg = self.config
         hq = self.horse.hindquarters(drive.horse)
         tail_frame = self.horse.dock(hq)
@@ -118,6 +149,10 @@ class SkinnedModel:
     def step(self, state: SkinnedState, drive: Drive) -> SkinnedState:
         """One fixed step: the strands, then the bone chains that follow them."""
         anchors = self.anchors(drive)
-        moved = strands.step(self.strands, state.strands, anchors.pins, anchors.colliders)
-        bones = chain.step(self.bones, state.bones, moved.x, anchors.up)
+        if self.compiled:
+            moved = kernels.strand_step(self.strands, state.strands, anchors.pins, anchors.colliders)
+            bones = kernels.chain_step(self.bones, state.bones, moved.x, anchors.up)
+        else:
+            moved = strands.step(self.strands, state.strands, anchors.pins, anchors.colliders)
+            bones = chain.step(self.bones, state.bones, moved.x, anchors.up)
         return SkinnedState(moved, bones, anchors.parents)

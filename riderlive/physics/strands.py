@@ -79,7 +79,7 @@ class StrandModel:
     _bends: bool = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        rest = np.asarray(self.rest, dtype=np.float64)
+        rest = np.ascontiguousarray(self.rest, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[0] < 1:
             raise ValueError(f"rest must be (V-1, N), got {rest.shape}")
         n_vert, n_strands = rest.shape[0] + 1, rest.shape[1]

@@ -68,3 +68,11 @@ def test_euler_round_trip(rx, ry, rz) -> None:
     assert np.allclose(m, quaternion.rotation_z(rz) @ quaternion.rotation_y(ry) @ quaternion.rotation_x(rx), atol=1e-12)
     back = quaternion.from_matrix(m)
     assert np.allclose(back, q if q[3] >= 0 else -q, atol=1e-9)
+
+
+def test_shortest_arc_nearly_antiparallel() -> None:
+    """1e-5 rad from opposite: the cross product still defines the axis (found by hypothesis)."""
+    a, b = unit((1.0, 0.0, 1e-5)), np.array([-1.0, 0.0, 0.0])
+    q = quaternion.shortest_arc(a, b)
+    assert np.allclose(quaternion.rotate(q, a), b, atol=1e-9)
+    assert abs(np.dot(q[:3], a)) < 1e-9

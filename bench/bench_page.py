@@ -1,0 +1,215 @@
+"""Frame rate of the previs page in headless Chromium with 120 Hz input.
+
+Starts the real service (its own process, a free loopback port), streams the
+procedural horse into /ws/horse at 120 Hz as a live producer (so the page's frames come
+from live input at the tick rate), opens the page and samples the page's own counters
+(``riderlive.fps``: animation frames per second; ``riderlive.frameRate``: websocket
+frames per second) once a second. Baseline, measured in the same run and browser: an
+empty page that only counts animation frames. Also prints the served bundle size.
+
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_page.py [--seconds 20] [--screenshots docs/img]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+from PIL import Image
+from playwright.sync_api import sync_playwright
+from websockets.sync.client import connect
+
+import riderlive
+from riderlive.channels import HORSE_NAMES
+from riderlive.horse import ProceduralHorse
+from riderlive.web import STATIC_DIR, static_size
+
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+]
+BLANK = """<!doctype html><body><script>
+window.riderlive = {fps: 0}; let n = 0, t0 = performance.now();
+function f(now) { n++; if (now - t0 >= 1000) { riderlive.fps = n * 1000 / (now - t0); n = 0; t0 = now; }
+  requestAnimationFrame(f); }
+requestAnimationFrame(f);
+</script></body>"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_server(workdir: Path) -> tuple[subprocess.Popen[bytes], str]:
+    port = free_port()
+    config = workdir / "service.toml"
+    config.write_text(f'[server]\nport = {port}\n\n[takes]\ndirectory = "{workdir / "takes"}"\n')
+    root = Path(riderlive.__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    log = (workdir / "serve.log").open("wb")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "riderlive", "serve", "--config", str(config)], env=env, stdout=log, stderr=log
+    )
+    url = f"http://127.0.0.1:{port}"
+    for _ in range(200):
+        try:
+            urllib.request.urlopen(url + "/api/state", timeout=1).read()
+            return proc, url
+        except OSError:
+            time.sleep(0.1)
+    proc.kill()
+    raise SystemExit("the service did not start")
+
+
+def feed(url: str, stop: threading.Event, errors: list[str], rate: float = 120.0) -> None:
+    """Stream the procedural horse into /ws/horse at ``rate`` Hz (deadline-paced)."""
+    try:
+        _feed(url, stop, rate)
+    except Exception as exc:
+        errors.append(repr(exc))
+
+
+def _feed(url: str, stop: threading.Event, rate: float) -> None:
+    horse = ProceduralHorse("trot", 4.0, seed=1)
+    with connect(url.replace("http", "ws") + "/ws/horse", max_size=None) as ws:
+        ws.send(json.dumps({"type": "hello", "name": "bench_page"}))
+        t0 = time.perf_counter()
+        k = 0
+        while not stop.is_set():
+            t = k / rate
+            values = dict(zip(HORSE_NAMES, horse.sample(t), strict=True))
+            ws.send(json.dumps({"t": t, "values": values}))
+            k += 1
+            delay = t0 + k / rate - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+
+
+def sample(page: object, seconds: float) -> tuple[list[float], list[float], list[float]]:
+    fps: list[float] = []
+    rate: list[float] = []
+    scale: list[float] = []
+    time.sleep(1.5)
+    for _ in range(int(seconds)):
+        time.sleep(1.0)
+        f, r, s = page.evaluate("() => [riderlive.fps, riderlive.frameRate || 0, riderlive.renderScale || 1]")  # type: ignore[attr-defined]
+        fps.append(f)
+        rate.append(r)
+        scale.append(s)
+    return fps, rate, scale
+
+
+def solver_cost(n: int = 2000) -> tuple[float, float, float]:
+    """Median microseconds: one rider pose, one horse pose, and (baseline) one rules frame."""
+    from riderlive.horse import DEFAULT_SCALE
+    from riderlive.rules import RiderModel
+    from riderlive.skeleton import bone_quaternions, horse_pose
+
+    horse = ProceduralHorse("trot", 4.0, seed=1)
+    frames = [horse.sample(k / 120) for k in range(n)]
+    model = RiderModel(scale=DEFAULT_SCALE)
+    riders = [model.evaluate(f) for f in frames]
+
+    def per_call(fn: object, items: list[list[float]]) -> float:
+        times = []
+        for item in items:
+            t = time.perf_counter()
+            fn(item)  # type: ignore[operator]
+            times.append(time.perf_counter() - t)
+        return statistics.median(times) * 1e6
+
+    return per_call(bone_quaternions, riders), per_call(horse_pose, frames), per_call(model.evaluate, frames)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--height", type=int, default=760)
+    ap.add_argument("--screenshots", type=Path, help="write page_side/front/perspective.png here")
+    args = ap.parse_args()
+
+    with tempfile.TemporaryDirectory() as tmp:
+        proc, url = start_server(Path(tmp))
+        stop = threading.Event()
+        feed_errors: list[str] = []
+        producer = threading.Thread(target=feed, args=(url, stop, feed_errors), daemon=True)
+        producer.start()
+        try:
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+                viewport = {"width": args.width, "height": args.height}
+                blank = browser.new_page(viewport=viewport)
+                blank.set_content(BLANK)
+                base_fps, _, _ = sample(blank, min(args.seconds, 8))
+                blank.close()
+
+                page = browser.new_page(viewport=viewport)
+                page.goto(url + "/")
+                page.wait_for_function("() => window.riderlive && riderlive.connected && riderlive.frames > 10")
+                page.evaluate("() => riderlive.setView('perspective')")
+                fps, rate, scale = sample(page, args.seconds)
+                driver = page.evaluate("() => riderlive.driver")
+                tick_ms = page.evaluate("() => riderlive.tickMs")
+                state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
+                fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
+                if args.screenshots:
+                    args.screenshots.mkdir(parents=True, exist_ok=True)
+                    page.set_viewport_size({"width": 960, "height": 600})
+                    page.evaluate("() => riderlive.setRenderScale(1)")
+                    for view in ("side", "front", "perspective"):
+                        page.evaluate(f"() => riderlive.setView('{view}')")
+                        time.sleep(0.6)
+                        shot = args.screenshots / f"page_{view}.png"
+                        page.screenshot(path=str(shot))
+                        small = Image.open(shot).convert("RGB").quantize(colors=96)
+                        small.save(shot, optimize=True)
+                browser.close()
+        finally:
+            stop.set()
+            proc.send_signal(signal.SIGINT)
+            proc.wait(10)
+
+    rider_us, horse_us, rules_us = solver_cost()
+    med = statistics.median(fps)
+    base = statistics.median(base_fps)
+    print(f"input: procedural trot streamed into /ws/horse at 120 Hz ({fed} frames accepted); page driver: {driver}")
+    if feed_errors:
+        print(f"producer failed: {feed_errors[0]}")
+    print(f"viewport {args.width}x{args.height}, {len(fps)} one-second samples")
+    p10 = sorted(fps)[len(fps) // 10]
+    print(f"page fps      median {med:.1f}  p10 {p10:.1f}  min {min(fps):.1f}  max {max(fps):.1f}")
+    print("fps by second " + " ".join(f"{f:.0f}" for f in fps))
+    print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
+    print(f"JS per animation frame {tick_ms:.2f} ms (pose both skeletons, update the scene, submit GL, plots)")
+    print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")
+    print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
+    print(f"baseline fps  (empty page, same browser) median {base:.1f}")
+    print(f"ratio page/baseline {med / base:.2f}")
+    print(f"python solver: rider pose {rider_us:.0f} us, horse pose {horse_us:.0f} us per frame")
+    print(f"  (baseline: the rules, one frame {rules_us:.1f} us; ratio rider/rules {rider_us / rules_us:.0f})")
+    print(f"bundle {static_size() / 1e6:.3f} MB in {STATIC_DIR.name}/ (budget 1.5 MB)")
+    slow = sum(f < 30.0 for f in fps)
+    print("PASS: >= 30 fps every second" if slow == 0 else f"below 30 fps in {slow} of {len(fps)} seconds")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

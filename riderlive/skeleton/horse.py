@@ -1,0 +1,106 @@
+"""The default horse skeleton and how the horse channels drive it.
+
+Channels are metres and degrees, as :mod:`riderlive.horse` emits them: every channel is
+0 for the square-standing horse, which is this skeleton's rest pose. Hoof ``tx`` is
+forward of the hoof's standing spot, ``ty`` its height above the ground, ``tz`` to the
+horse's right; ``rearPivot.t*`` displace the hips from standing (``tz`` + right);
+``rearPivot.rz`` > 0 lifts the front (pitch up), ``rearPivot.rx`` > 0 rolls to the right
+(right side down), ``root.ry`` > 0 turns left. The rear pivot turns by
+``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last) about the hips, where
+``riderlive.physics`` has it (``pivot_rest``); the tail root is its dock. The skeleton's axes are those of
+:mod:`riderlive.skeleton.rig` and of the channels (right-handed, ``+z`` the horse's
+right), so every channel drives its axis with a positive sign.
+"""
+
+from __future__ import annotations
+
+from riderlive.skeleton.quat import Vec3
+from riderlive.skeleton.rig import Bone, Chain, Drive, Offset, Rig, X, Y, Z
+
+_SIDE = 0.2
+"""Half the distance between a left and a right leg, metres."""
+
+
+def _leg(hoof: str, parent: str, right: bool, knee: Vec3, fetlock: Vec3) -> list[tuple[str, str, Vec3]]:
+    side = _SIDE if right else -_SIDE
+    middle = "Knee" if hoof[1] == "f" else "Hock"
+    return [
+        (f"{hoof}Leg", parent, (0.0, _LEG_ROOT_HEIGHT, side)),
+        (f"{hoof}{middle}", f"{hoof}Leg", knee),
+        (f"{hoof}Fetlock", f"{hoof}{middle}", fetlock),
+        (f"{hoof}Hoof", f"{hoof}Fetlock", (0.02, -0.18, 0.0)),
+    ]
+
+
+_LEG_ROOT_HEIGHT = 0.3
+"""The legs hang from the top of the shoulder blade and the croup, above the joints."""
+_FRONT_KNEE: Vec3 = (0.12, -0.92, 0.0)
+_FRONT_CANNON: Vec3 = (-0.09, -0.34, 0.0)
+_HIND_HOCK: Vec3 = (-0.12, -0.85, 0.0)
+_HIND_CANNON: Vec3 = (0.05, -0.32, 0.0)
+
+_ROWS: list[tuple[str, str | None, Vec3]] = [
+    ("root", None, (0.0, 0.0, 0.0)),
+    ("rearPivot", "root", (-0.55, 1.05, 0.0)),
+    ("backMid", "rearPivot", (0.55, 0.23, 0.0)),
+    ("saddle", "backMid", (0.05, 0.18, 0.0)),
+    ("shoulders", "backMid", (0.55, -0.14, 0.0)),
+    ("neck", "shoulders", (0.25, 0.2, 0.0)),
+    ("head", "neck", (0.35, 0.42, 0.0)),
+    ("muzzle", "head", (0.2, -0.45, 0.0)),
+    ("tailRoot", "rearPivot", (-0.5, 0.42, 0.0)),
+    *_leg("lf", "shoulders", False, _FRONT_KNEE, _FRONT_CANNON),
+    *_leg("rf", "shoulders", True, _FRONT_KNEE, _FRONT_CANNON),
+    ("hips", "rearPivot", (-0.05, 0.0, 0.0)),
+    *_leg("lb", "hips", False, _HIND_HOCK, _HIND_CANNON),
+    *_leg("rb", "hips", True, _HIND_HOCK, _HIND_CANNON),
+]
+
+
+def _bones() -> tuple[Bone, ...]:
+    index: dict[str, int] = {}
+    bones: list[Bone] = []
+    for name, parent, offset in _ROWS:
+        bones.append(Bone(name, -1 if parent is None else index[parent], offset))
+        index[name] = len(bones) - 1
+    return tuple(bones)
+
+
+BONES = _bones()
+
+
+HOOVES: tuple[str, ...] = ("lf", "rf", "lb", "rb")
+
+HORSE_NEUTRAL: dict[str, float] = {}
+"""Horse channel values of the standing horse (the rest pose): all 0."""
+
+HORSE_RIG = Rig(
+    name="horse",
+    bones=BONES,
+    neutral=HORSE_NEUTRAL,
+    rotations=(
+        Drive("root.ry", "root", Y),
+        Drive("rearPivot.rx", "rearPivot", X),
+        Drive("rearPivot.rz", "rearPivot", Z),
+        Drive("rearPivot.ry", "rearPivot", Y),
+        Drive("backMid.rz", "backMid", Z),
+    ),
+    translations=(
+        Drive("root.tx", "root", X),
+        Drive("root.ty", "root", Y),
+        Drive("root.tz", "root", Z),
+        Drive("rearPivot.tx", "rearPivot", X),
+        Drive("rearPivot.ty", "rearPivot", Y),
+        Drive("rearPivot.tz", "rearPivot", Z),
+    ),
+    chains=tuple(
+        Chain(
+            upper=f"{h}Leg",
+            lower=f"{h}{'Knee' if h[1] == 'f' else 'Hock'}",
+            end=f"{h}Fetlock",
+            frame="root",
+            target=(Offset(f"{h}Hoof.tx", X), Offset(f"{h}Hoof.ty", Y), Offset(f"{h}Hoof.tz", Z)),
+        )
+        for h in HOOVES
+    ),
+)

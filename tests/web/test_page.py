@@ -1,0 +1,273 @@
+"""The previs page in a real headless Chromium against the real service."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from riderlive.channels import BY_NAME, HORSE_NAMES, RIDER_NAMES, Kind
+from riderlive.horse import DEFAULT_SCALE
+from riderlive.rules import RiderModel
+from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_rig
+from tests.web.conftest import PageUnderTest, Server, free_port, open_page
+
+pytestmark = pytest.mark.browser
+
+
+def _recent(p: PageUnderTest, channel: str, seconds: float) -> list[float]:
+    """Values of ``channel`` in the frames the page received over the last ``seconds``."""
+    return list(p.state(f"riderlive.history({channel!r}, {seconds})"))
+
+
+def test_page_loads_live_without_console_errors(live_page: PageUnderTest) -> None:
+    live_page.wait_for("riderlive.fps > 0", timeout=5)
+    assert live_page.state("riderlive.state") == "live"
+    assert live_page.page.locator("#conn").inner_text() == "live"
+    assert live_page.page.locator("#estop").is_visible()
+    assert live_page.page.locator("#gone").is_hidden()
+    assert live_page.state("riderlive.errors") == []
+    assert live_page.errors == []
+
+
+def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page: PageUnderTest) -> None:
+    names = list(rider_rig().names)
+    poses = []
+    for _ in range(2):
+        seq, values, pose, horse = live_page.state(
+            "[riderlive.seq, riderlive.values, riderlive.pose.rider, riderlive.pose.horse]"
+        )
+        poses.append((seq, values, pose))
+        # The page's pose is the Python skeleton's pose of the same frame.
+        expected = np.array(bone_quaternions(values)).reshape(-1, 4)
+        got = np.array([pose[n] for n in names])
+        assert np.allclose(got, expected, atol=1e-9)
+        horse_values = {n: v for n, v in values.items() if n in HORSE_NAMES}
+        assert len(horse_values) == len(HORSE_NAMES)  # the page subscribed to the horse too
+        want = horse_pose(horse_values).local_rotations
+        assert np.allclose([horse[b.name] for b in HORSE_RIG.bones], want, atol=1e-9)
+        time.sleep(0.4)
+    (seq0, _, pose0), (seq1, _, pose1) = poses
+    assert seq1 > seq0
+    assert not np.allclose(pose0["lower_back"], pose1["lower_back"], atol=1e-6), "the rider did not move"
+
+
+def _wait_estop(server: Server, engaged: bool, what: str) -> None:
+    deadline = time.monotonic() + 5
+    while bool(server.get("/api/state")["tick"].get("estop")) is not engaged:
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Server) -> None:
+    assert server.get("/api/state")["tick"].get("estop") is not True
+    live_page.page.locator("#estop").click()
+    _wait_estop(server, True, "the e-stop never reached the service")
+    live_page.wait_for("document.getElementById('estop').classList.contains('engaged')", timeout=5)
+    live_page.page.locator("#reset").click()
+    _wait_estop(server, False, "reset did not clear the e-stop")
+
+
+def test_space_bar_is_an_estop_and_never_presses_the_focused_button(live_page: PageUnderTest, server: Server) -> None:
+    live_page.page.locator("#rec-start").focus()
+    live_page.page.keyboard.press("Space")
+    _wait_estop(server, True, "the space bar did not e-stop")
+    time.sleep(0.3)
+    assert server.get("/api/state")["recording"] is None, "the space bar also pressed the focused Record button"
+    live_page.page.locator("#reset").click()
+    _wait_estop(server, False, "reset did not clear the e-stop")
+
+
+def _move_slider(p: PageUnderTest, key: str, value: float) -> None:
+    p.page.evaluate(
+        """([key, value]) => {
+            const input = document.querySelector(`#params input[data-key="${key}"]`);
+            input.value = value;
+            input.dispatchEvent(new Event("input", { bubbles: true }));
+        }""",
+        [key, value],
+    )
+
+
+def test_weight_slider_changes_the_next_frames(live_page: PageUnderTest, server: Server) -> None:
+    key = "knees.lift_offset"
+    before_param = server.get("/api/params")[key]
+    live_page.wait_for(f"document.querySelector('#params input[data-key=\"{key}\"]') !== null")
+    live_page.wait_for("riderlive.history('lf_knee.ty', 2).length > 100", timeout=10)
+    before = _recent(live_page, "lf_knee.ty", 1.0)
+    _move_slider(live_page, key, before_param - 2.0)
+    deadline = time.monotonic() + 5
+    while server.get("/api/params")[key] != pytest.approx(before_param - 2.0, abs=0.02):
+        assert time.monotonic() < deadline, "the slider never reached the service"
+        time.sleep(0.05)
+    time.sleep(1.2)
+    after = _recent(live_page, "lf_knee.ty", 1.0)
+    try:
+        assert len(before) > 30 and len(after) > 30
+        # lift_offset is in thesis units; the service speaks metres (its default length scale).
+        scale = DEFAULT_SCALE
+        shift = np.median(after) - np.median(before)
+        assert shift == pytest.approx(-2.0 / scale, abs=0.01)
+        assert max(after) < min(before)
+    finally:
+        server.request("PATCH", "/api/params", {key: before_param})
+
+
+def test_record_button_makes_a_take_that_replays_from_the_list(live_page: PageUnderTest, server: Server) -> None:
+    page: Any = live_page.page
+    page.locator("#rec-start").click()
+    live_page.wait_for("document.getElementById('rec-now').textContent.startsWith('recording')", timeout=5)
+    time.sleep(0.6)
+    page.locator("#rec-stop").click()
+    live_page.wait_for("document.getElementById('rec-now').textContent === ''", timeout=5)
+    names = [t["name"] for t in server.get("/api/takes")["takes"]]
+    assert names, "no take was recorded"
+    live_page.wait_for(f"[...document.querySelectorAll('#takes li')].some((li) => li.textContent === {names[0]!r})")
+    seq = live_page.state("riderlive.seq")
+    page.locator("#takes li", has_text=names[0]).click()
+    try:
+        deadline = time.monotonic() + 5
+        while server.get("/api/state")["source"].get("take") != names[0]:
+            assert time.monotonic() < deadline, "clicking the recorded take did not replay it"
+            time.sleep(0.05)
+        live_page.wait_for(f"riderlive.seq > {seq} + 30", timeout=5)  # frames keep coming
+    finally:
+        server.request("PUT", "/api/source", {"kind": "live"})
+
+
+def test_a_take_replays_on_the_page(live_page: PageUnderTest, server: Server) -> None:
+    """A take in the service's takes directory, replayed from the page's list, drives the page."""
+    frame = dict.fromkeys(HORSE_NAMES, 0.0)
+    frame.update({"rearPivot.rz": 7.5, "backMid.rz": -4.0, "lfHoof.ty": 0.05})
+    takes = server.workdir / "takes"
+    takes.mkdir(exist_ok=True)
+    rows = [",".join(["t", *HORSE_NAMES])]
+    rows += [",".join([f"{k / 120:.6f}", *(repr(frame[n]) for n in HORSE_NAMES)]) for k in range(120 * 6)]
+    (takes / "page-test-take.csv").write_text("\n".join(rows) + "\n")
+    expected = dict(zip(RIDER_NAMES, RiderModel(scale=DEFAULT_SCALE).evaluate([frame[n] for n in HORSE_NAMES])))
+
+    live_page.wait_for("[...document.querySelectorAll('#takes li')].some((li) => li.textContent === 'page-test-take')")
+    live_page.page.locator("#takes li", has_text="page-test-take").click()
+    try:
+        live_page.wait_for("Math.abs(riderlive.values['rearPivot.rz'] - 7.5) < 1e-9", timeout=5)
+        state = server.get("/api/state")["source"]
+        assert state.get("kind") == "replay" and state.get("take") == "page-test-take"
+        values = live_page.state("riderlive.values")
+        assert values["backMid.rz"] == pytest.approx(-4.0)
+        # The rider the page shows is the rules' rider for the take's horse, once the
+        # service's blend from the previous source has settled.
+        live_page.wait_for(f"Math.abs(riderlive.values['lower_back.rz'] - {expected['lower_back.rz']!r}) < 1e-6", 5)
+        values = live_page.state("riderlive.values")
+        for name in ("lower_back.rz", "cog.ty", "head.rz", "lf_foot.tx"):
+            assert values[name] == pytest.approx(expected[name], abs=1e-9), name
+        live_page.wait_for("document.getElementById('src-now').textContent.includes('page-test-take')", timeout=5)
+    finally:
+        server.request("PUT", "/api/source", {"kind": "live"})
+    assert live_page.errors == []
+
+
+def test_views_switch_the_camera(live_page: PageUnderTest) -> None:
+    spots = {}
+    for view in ("side", "front", "perspective"):
+        live_page.page.locator(f"[data-view={view}]").click()
+        spots[view] = live_page.state("riderlive.camera")
+    assert len({tuple(np.round(v, 3)) for v in spots.values()}) == 3
+    side, front = np.array(spots["side"]), np.array(spots["front"])
+    assert abs(side[2]) > 3 * abs(side[0])  # looks along z: at the horse's flank
+    assert abs(front[0]) > 3 * abs(front[2])  # looks along x: at the horse's chest
+
+
+def test_servo_table_shows_the_rig_status(live_page: PageUnderTest) -> None:
+    """A status message shaped like the rig's ``RigStatus.to_dict()`` fills the servo table."""
+    assert live_page.page.locator("#rig").is_hidden()  # no rig attached to this service
+    rig = {
+        "state": "running",
+        "fault": None,
+        "servos": [
+            {
+                "name": "lower_back",
+                "id": 1,
+                "goal_deg": 12.5,
+                "present_deg": 11.0,
+                "tracking_error_deg": 1.5,
+                "temperature_c": 41,
+                "hardware_error": [],
+            },
+            {
+                "name": "head<b>",
+                "id": 2,
+                "goal_deg": -3.0,
+                "present_deg": None,
+                "tracking_error_deg": None,
+                "temperature_c": 77,
+                "hardware_error": ["overheating"],
+            },
+        ],
+    }
+    # Handle the message and read the table in the same turn, before any real status arrives.
+    shown = live_page.page.evaluate(
+        """(rig) => {
+            riderlive.link.handle({type: "status", estop: false, rig});
+            const rows = [...document.querySelectorAll("#servos tbody tr")];
+            return {
+                visible: !document.getElementById("rig").hidden,
+                rows: rows.map((r) => [...r.cells].map((c) => c.textContent)),
+                classes: rows.map((r) => r.className),
+                state: document.getElementById("rigstate").textContent,
+            };
+        }""",
+        rig,
+    )
+    assert shown["visible"]
+    assert shown["rows"] == [
+        ["lower_back", "12.5", "11.0", "41.0", "—"],
+        ["head<b>", "-3.0", "—", "77.0", "overheating"],  # names are shown as text, not markup
+    ]
+    assert shown["classes"] == ["", "fault"]
+    assert shown["state"] == "rig: running"
+
+
+def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(browser: Any, tmp_path: Any) -> None:
+    """A service set up otherwise: a control token, and lengths in thesis units (length_scale 1)."""
+    token = "page-test-token-0123"
+    config = f'[security]\ntoken = "{token}"\nrequire_token = true\n\n[tick]\nlength_scale = 1.0\n'
+    s = Server(free_port(), tmp_path, extra_config=config)
+    s.start()
+    try:
+        without = open_page(browser, s.url)
+        without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
+        without.page.locator("#estop").click()
+        without.wait_for("document.getElementById('message').textContent.includes('control token')", timeout=5)
+        assert s.get("/api/state")["tick"].get("estop") is not True
+        without.page.close()
+
+        p = open_page(browser, s.url, f"/#token={token}")
+        p.wait_for("riderlive.connected && riderlive.frames > 5")
+        assert p.state("location.hash") == ""  # the token leaves the address bar
+        # Lengths arrive in thesis units; the page poses the metre skeleton with value / 25.
+        values, pose = p.state("[riderlive.values, riderlive.pose.rider]")
+        metres = {n: v / DEFAULT_SCALE if BY_NAME[n].kind is Kind.TRANSLATION else v for n, v in values.items()}
+        want = np.array(bone_quaternions({n: metres[n] for n in RIDER_NAMES})).reshape(-1, 4)
+        assert np.allclose([pose[n] for n in rider_rig().names], want, atol=1e-9)
+        first = p.state("riderlive.session")
+
+        # The service goes away: the page says so, then finds the restarted one by itself.
+        s.stop()
+        p.wait_for("riderlive.state === 'gone'", timeout=5)
+        assert p.page.locator("#gone").is_visible()
+        assert p.page.locator("#conn").inner_text() == "service gone"
+        s.start()
+        p.wait_for(f"riderlive.connected && riderlive.session !== {first!r}", timeout=15)
+        assert p.page.locator("#gone").is_hidden()
+
+        # The token survived the reconnect: the e-stop reaches the new service.
+        p.page.locator("#estop").click()
+        deadline = time.monotonic() + 5
+        while not s.get("/api/state")["tick"].get("estop"):
+            assert time.monotonic() < deadline, "the e-stop with a token never reached the service"
+            time.sleep(0.05)
+        p.page.close()
+    finally:
+        s.stop()

@@ -1,0 +1,286 @@
+// The control panel: REST calls to the service (source, presets, weights, animator,
+// record, takes, e-stop) and the rig's servo table. Paths: docs/protocol.md.
+
+const $ = (id) => document.getElementById(id);
+
+/**
+ * The control token, when the service requires one (bound beyond loopback): opened as
+ * `/#token=...` (a fragment never reaches the server or its logs), kept for the tab.
+ */
+export function controlToken() {
+  const m = location.hash.match(/token=([^&]+)/);
+  if (m) {
+    sessionStorage.setItem("riderlive.token", decodeURIComponent(m[1]));
+    history.replaceState(null, "", location.pathname + location.search);
+  }
+  return sessionStorage.getItem("riderlive.token");
+}
+
+export async function api(method, path, body) {
+  const init = { method, headers: {} };
+  const token = controlToken();
+  if (token) init.headers.authorization = `Bearer ${token}`;
+  if (body !== undefined) {
+    init.headers["content-type"] = "application/json";
+    init.body = JSON.stringify(body);
+  }
+  const res = await fetch(path, init);
+  const text = await res.text();
+  let data = null;
+  try {
+    data = text ? JSON.parse(text) : null;
+  } catch {
+    data = null;
+  }
+  if (res.status === 401 || res.status === 403) throw new Error(`${method} ${path}: the service wants a control token (open the page as /#token=...)`);
+  if (!res.ok) throw new Error(`${method} ${path}: ${res.status} ${data && data.detail ? JSON.stringify(data.detail) : text}`);
+  return data;
+}
+
+function say(text, bad = false) {
+  const m = $("message");
+  m.textContent = text;
+  m.style.color = bad ? "var(--bad)" : "";
+}
+
+async function attempt(what, fn) {
+  try {
+    const out = await fn();
+    say(`${what}: ok`);
+    return out;
+  } catch (err) {
+    say(`${what}: ${err.message}`, true);
+    return null;
+  }
+}
+
+/** Calls `send(value)` at most every `ms`, always with the latest value. */
+function throttled(send, ms = 80) {
+  let pending = null;
+  let timer = null;
+  return (value) => {
+    pending = value;
+    if (timer) return;
+    timer = setTimeout(async () => {
+      timer = null;
+      const v = pending;
+      pending = null;
+      await send(v);
+    }, ms);
+  };
+}
+
+function slider(parent, key, value, lo, hi, onInput) {
+  const label = document.createElement("label");
+  const step = (hi - lo) / 400;
+  label.innerHTML = `<span title="${key}">${key}</span><input type="range"><output></output>`;
+  const input = label.querySelector("input");
+  const out = label.querySelector("output");
+  Object.assign(input, { min: lo, max: hi, step, value });
+  input.dataset.key = key;
+  out.textContent = (+value).toPrecision(3);
+  input.addEventListener("input", () => {
+    out.textContent = (+input.value).toPrecision(3);
+    onInput(key, +input.value);
+  });
+  parent.appendChild(label);
+  return input;
+}
+
+function rangeFor(v) {
+  if (v === 0) return [-1, 1];
+  const a = Math.abs(v);
+  return v > 0 ? [0, 3 * a] : [-3 * a, 0];
+}
+
+/**
+ * The e-stop: bound first, before anything else on the page can fail. Click, or the
+ * space bar anywhere but in a text field (a focused button loses focus first, so the
+ * space bar never presses it as well).
+ */
+export function bindEstop() {
+  const fire = async () => {
+    $("estop").classList.add("engaged");
+    await attempt("E-STOP", () => api("POST", "/api/estop"));
+  };
+  $("estop").addEventListener("click", fire);
+  document.addEventListener("keydown", (ev) => {
+    if (ev.code !== "Space" || ev.repeat) return;
+    const t = ev.target;
+    if (t instanceof HTMLInputElement && t.type !== "range" && t.type !== "checkbox") return;
+    if (t instanceof HTMLSelectElement || t instanceof HTMLTextAreaElement) return;
+    ev.preventDefault();
+    if (document.activeElement instanceof HTMLElement) document.activeElement.blur();
+    fire();
+  });
+}
+
+export class Controls {
+  constructor(state) {
+    this.state = state;
+    this.riderChannels = [];
+    const changes = {};
+    const patch = throttled(async () => {
+      const body = { ...changes };
+      for (const k in changes) delete changes[k];
+      await attempt("weights", () => api("PATCH", "/api/params", body));
+    });
+    this.onParam = (key, value) => {
+      changes[key] = value;
+      patch();
+    };
+    this.offsets = {};
+    this.gains = {};
+    const putAnimator = throttled(() => attempt("animator", () => api("PUT", "/api/animator", { offsets: this.offsets, gains: this.gains })));
+    this.onOffset = (key, value) => {
+      this.offsets[key] = value;
+      putAnimator();
+    };
+    this.bind();
+  }
+
+  bind() {
+    $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
+    $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
+    $("src-kind").addEventListener("change", () => this.showSourceRows());
+    $("src-apply").addEventListener("click", () => this.applySource());
+    $("jump").addEventListener("click", () => attempt("jump", () => api("POST", "/api/horse/perform", { move: "jump" })));
+    $("preset").addEventListener("change", async () => {
+      await attempt("preset", () => api("PUT", "/api/preset", { name: $("preset").value }));
+      await this.loadParams();
+    });
+    $("param-filter").addEventListener("input", () => this.filterParams());
+    $("rec-start").addEventListener("click", () => attempt("record", () => api("POST", "/api/record/start", {})).then(() => this.refresh()));
+    $("rec-stop").addEventListener("click", () => attempt("stop", () => api("POST", "/api/record/stop")).then(() => this.refresh()));
+    $("anim-zero").addEventListener("click", () => {
+      for (const k in this.offsets) this.offsets[k] = 0;
+      for (const input of $("animator").querySelectorAll("input")) input.value = 0;
+      attempt("animator", () => api("PUT", "/api/animator", { offsets: this.offsets, gains: this.gains }));
+    });
+    this.showSourceRows();
+  }
+
+  showSourceRows() {
+    const kind = $("src-kind").value;
+    for (const row of document.querySelectorAll("[data-for]")) row.hidden = row.dataset.for !== kind;
+  }
+
+  async applySource(take) {
+    let body;
+    const kind = take ? "replay" : $("src-kind").value;
+    if (kind === "procedural") body = { kind, gait: $("src-gait").value, speed: +$("src-speed").value };
+    else if (kind === "replay") body = { kind, take: take || $("src-take").value };
+    else body = { kind: "live" };
+    await attempt(`source ${kind}`, () => api("PUT", "/api/source", body));
+    this.refresh();
+  }
+
+  /** Everything that only needs loading once per connection. */
+  async load(riderChannels) {
+    this.riderChannels = riderChannels;
+    const presets = await attempt("presets", () => api("GET", "/api/presets"));
+    if (presets) {
+      const names = presets.presets || presets.names || [];
+      $("preset").innerHTML = names.map((n) => `<option>${typeof n === "string" ? n : n.name}</option>`).join("");
+      if (presets.current) $("preset").value = presets.current;
+    }
+    await this.loadParams();
+    const anim = await attempt("animator", () => api("GET", "/api/animator"));
+    if (anim) {
+      this.offsets = { ...(anim.offsets || {}) };
+      this.gains = { ...(anim.gains || {}) };
+    }
+    const box = $("animator");
+    box.innerHTML = "";
+    for (const c of riderChannels) {
+      const span = c.unit === "deg" ? 30 : c.unit === "length" ? 0.15 : 5;
+      slider(box, c.name, this.offsets[c.name] || 0, -span, span, this.onOffset);
+    }
+    await this.refresh();
+  }
+
+  async loadParams() {
+    const params = await attempt("params", () => api("GET", "/api/params"));
+    if (!params) return;
+    const box = $("params");
+    box.innerHTML = "";
+    for (const [key, value] of Object.entries(params)) {
+      if (typeof value !== "number") continue;
+      const [lo, hi] = rangeFor(value);
+      slider(box, key, value, lo, hi, this.onParam);
+    }
+    this.filterParams();
+  }
+
+  filterParams() {
+    const f = $("param-filter").value.trim();
+    for (const label of $("params").children) label.hidden = f !== "" && !label.textContent.includes(f);
+  }
+
+  /** State, takes: polled about once a second. */
+  async refresh() {
+    let state;
+    try {
+      state = await api("GET", "/api/state");
+    } catch {
+      return;
+    }
+    this.state.service = state;
+    const src = state.source || {};
+    if (!this.sourceShown && src.kind) {
+      this.sourceShown = true;
+      $("src-kind").value = src.kind;
+      this.showSourceRows();
+    }
+    $("src-now").textContent = src.kind ? `now: ${src.kind}${src.gait ? ` ${src.gait}` : ""}${src.take ? ` ${src.take}` : ""}` : "";
+    const rec = state.recording;
+    $("rec-now").textContent = rec ? `recording ${rec.name} (${rec.rows} rows)` : "";
+    const estopped = state.estop === true || (state.tick && state.tick.estop === true);
+    this.state.estop = Boolean(estopped);
+    $("estop").classList.toggle("engaged", Boolean(estopped));
+    try {
+      const takes = await api("GET", "/api/takes");
+      const list = (Array.isArray(takes) ? takes : takes.takes || []).map((t) => (typeof t === "string" ? t : t.name));
+      if (list.join("\n") === this.shownTakes) return;
+      this.shownTakes = list.join("\n");
+      const ul = $("takes");
+      ul.innerHTML = "";
+      for (const name of list) {
+        const li = document.createElement("li");
+        li.textContent = name;
+        li.title = "replay this take";
+        li.addEventListener("click", () => this.applySource(name));
+        ul.appendChild(li);
+      }
+      const sel = $("src-take");
+      const cur = sel.value;
+      sel.innerHTML = list.map((n) => `<option>${n}</option>`).join("");
+      if (list.includes(cur)) sel.value = cur;
+    } catch {
+      /* takes are optional */
+    }
+  }
+
+  /** Status from the websocket (the tick's status; `rig` is the rig's, with its servos). */
+  status(msg) {
+    if (typeof msg.estop === "boolean") $("estop").classList.toggle("engaged", msg.estop);
+    const rig = msg.rig || null;
+    const fault = rig && rig.fault ? ` · fault: ${rig.fault.reason || rig.fault.kind || JSON.stringify(rig.fault)}` : "";
+    $("rigstate").textContent = rig ? `rig: ${rig.state}${fault}` : "";
+    const servos = rig ? rig.servos : null;
+    if (!Array.isArray(servos) || servos.length === 0) {
+      $("rig").hidden = true;
+      return;
+    }
+    $("rig").hidden = false;
+    const num = (v) => (typeof v === "number" ? v.toFixed(1) : "—");
+    const text = (v) => String(v).replace(/[&<>"]/g, (c) => `&#${c.charCodeAt(0)};`);
+    $("servos").tBodies[0].innerHTML = servos
+      .map((sv) => {
+        const errs = Array.isArray(sv.hardware_error) ? sv.hardware_error.join(", ") : sv.hardware_error || "";
+        const track = typeof sv.tracking_error_deg === "number" ? ` title="tracking error ${num(sv.tracking_error_deg)}°"` : "";
+        return `<tr class="${errs ? "fault" : ""}"><td>${text(sv.name ?? sv.id)}</td><td>${num(sv.goal_deg)}</td><td${track}>${num(sv.present_deg)}</td><td>${num(sv.temperature_c)}</td><td>${errs ? text(errs) : "—"}</td></tr>`;
+      })
+      .join("");
+  }
+}
