@@ -24,7 +24,7 @@ class TickLink:
 
     def __init__(self, setup: TickSetup) -> None:
         self.inputs = SharedRing(L.INPUT_CAPACITY, L.INPUT_WIDTH)
-        self.outputs = SharedRing(L.OUTPUT_CAPACITY, L.OUTPUT_WIDTH)
+        self.outputs = SharedRing(L.OUTPUT_CAPACITY, L.OUTPUT_WIDTH + len(setup.extra_channels))
         self.counters = SharedCounters(L.COUNTERS)
         self.status_blob = SharedBlob()
         names = {

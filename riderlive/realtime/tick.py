@@ -22,7 +22,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import orjson
 
@@ -36,6 +36,9 @@ from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams
+
+if TYPE_CHECKING:
+    from riderlive.realtime.tail import TickPhysics
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +66,12 @@ class TickSetup:
     rig_file: str | None = None
     rig_port: str | None = None
     park_timeout: float = 5.0
+    tail: bool = False
+    """Run the tail and braid physics (``riderlive.realtime.tail``) and publish their channels."""
+    physics_file: str | None = None
+    """Physics TOML (None: ``config/physics/tail.toml``)."""
+    extra_channels: tuple[str, ...] = ()
+    """Channels appended to each output record after the rider's (the tail's, when on)."""
     shm_names: dict[str, str] = field(default_factory=dict)
 
 
@@ -90,6 +99,18 @@ class TickLoop:
         self.rig: dict[str, Any] | None = None
         self._status_dirty = True
         self._last_good: TickResult | None = None
+        self.physics: TickPhysics | None = None
+        if setup.tail:
+            from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
+
+            self.physics = TickPhysics(setup.physics_file, setup.length_scale)
+            if self.physics.names != setup.extra_channels:
+                raise ValueError("the tick's physics channels differ from the web process's")
+
+    def warm(self) -> None:
+        """Compile or load the physics kernels now, so compile time never lands in a tick."""
+        if self.physics is not None:
+            self.physics.warm(self.core.neutral_horse, self.core.neutral_rider)
 
     # -- commands ---------------------------------------------------------------
     def _handle(self, command: cmd.Command, now: float) -> None:
@@ -152,6 +173,7 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": self.rig,
+            "physics": None if self.physics is None else self.physics.status(),
             "events": list(self.events),
         }
 
@@ -187,6 +209,13 @@ class TickLoop:
                 newest_rx = max(newest_rx, rx)
             values[index["input_lapped"]] = self.inputs.lapped
             result = self._step(now, values, index)
+            extra: list[float] = []
+            if self.physics is not None:
+                errors, fresh = self.physics.errors, self.physics.stepper is None
+                extra = self.physics.tick(now, result.horse, result.rider)
+                if self.physics.errors != errors:
+                    self.events.append("the tail physics failed; restarted from rest")
+                self._status_dirty |= fresh or self.physics.errors != errors
             if self.output is not None:
                 try:
                     status = self.output.tick(result.rider, deadline)
@@ -211,6 +240,7 @@ class TickLoop:
                 lateness,
                 *result.horse,
                 *result.rider,
+                *extra,
             ]
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):
@@ -282,6 +312,7 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
     loop = TickLoop(setup, commands, notify_fd, output)
     if in_process:
         signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
+    loop.warm()
     loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
     if in_process:
         # The loop makes no reference cycles: refcounting frees everything, and a

@@ -26,7 +26,10 @@ PROTOCOL_VERSION = 1
 BINARY_MAGIC = b"RLF1"
 BINARY_HEADER = struct.Struct("<4sHBBQddHHI")
 """magic, header size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, reserved."""
+BONES_HEADER = struct.Struct("<HHI")
+"""Appended to the header when flag bit 1 is set: n_bones (floats), reserved, reserved."""
 FLAG_HORSE = 1
+FLAG_BONES = 2
 
 DRIVERS = ("procedural", "input", "neutral")
 
@@ -115,23 +118,27 @@ class Subscription:
     """What one /ws/rider client receives."""
 
     rider: tuple[int, ...] = tuple(range(len(RIDER_NAMES)))
+    """Indices into the published channels: the rider's, then any simulated bone chains."""
     horse: tuple[int, ...] = ()
     decimation: int = 1
     encoding: str = "json"
+    bones: bool = False
+    """Add the rider's per-bone quaternions (``riderlive.skeleton.bone_quaternions``)."""
 
     @property
     def key(self) -> tuple[Any, ...]:
         """Clients with the same key share one encoded frame per tick."""
-        return (self.encoding, self.rider, self.horse)
+        return (self.encoding, self.rider, self.horse, self.bones)
 
-    def describe(self, tick_rate: float) -> dict[str, Any]:
+    def describe(self, tick_rate: float, names: Sequence[str] = RIDER_NAMES) -> dict[str, Any]:
         return {
             "type": "subscribed",
-            "channels": [RIDER_NAMES[i] for i in self.rider],
+            "channels": [names[i] for i in self.rider],
             "horse_channels": [HORSE_NAMES[i] for i in self.horse],
             "decimation": self.decimation,
             "rate": tick_rate / self.decimation,
             "encoding": self.encoding,
+            "bones": self.bones,
         }
 
 
@@ -144,11 +151,17 @@ def _pick(names: Any, table: dict[str, int], what: str) -> tuple[int, ...]:
     return tuple(table[n] for n in names)
 
 
-def decode_subscription(obj: dict[str, Any], current: Subscription, tick_rate: float) -> Subscription:
-    """Apply a ``subscribe`` message; omitted fields keep their current value."""
+def decode_subscription(
+    obj: dict[str, Any], current: Subscription, tick_rate: float, index: dict[str, int] | None = None
+) -> Subscription:
+    """Apply a ``subscribe`` message; omitted fields keep their current value.
+
+    ``index``: published channel name -> column (default: the rider channels).
+    """
     from riderlive.channels import RIDER_INDEX
 
-    rider = _pick(obj["channels"], RIDER_INDEX, "channels") if "channels" in obj else current.rider
+    table = RIDER_INDEX if index is None else index
+    rider = _pick(obj["channels"], table, "channels") if "channels" in obj else current.rider
     horse = _pick(obj["horse_channels"], HORSE_INDEX, "horse_channels") if "horse_channels" in obj else current.horse
     decimation = current.decimation
     if "decimation" in obj:
@@ -164,11 +177,17 @@ def decode_subscription(obj: dict[str, Any], current: Subscription, tick_rate: f
     encoding = obj.get("encoding", current.encoding)
     if encoding not in ("json", "binary"):
         raise BadFrame("wrong_type", "'encoding' must be 'json' or 'binary'")
-    return Subscription(rider, horse, decimation, encoding)
+    bones = obj.get("bones", current.bones)
+    if not isinstance(bones, bool):
+        raise BadFrame("wrong_type", "'bones' must be true or false")
+    return Subscription(rider, horse, decimation, encoding, bones)
 
 
-def encode_frame(sub: Subscription, record: np.ndarray) -> str | bytes:
-    """One output-ring record as a frame for ``sub``: JSON text or the binary layout (docs/protocol.md)."""
+def encode_frame(sub: Subscription, record: np.ndarray, bones: np.ndarray | None = None) -> str | bytes:
+    """One output-ring record as a frame for ``sub``: JSON text or the binary layout (docs/protocol.md).
+
+    ``bones``: the rider's bone quaternions for this record, added when ``sub.bones``.
+    """
     seq = int(record[L.OUT_SEQ])
     engine_t = float(record[L.OUT_ENGINE_T])
     source_t = float(record[L.OUT_SOURCE_T])
@@ -177,11 +196,13 @@ def encode_frame(sub: Subscription, record: np.ndarray) -> str | bytes:
     rider = record[L.OUT_RIDER :]
     rider_values = rider[list(sub.rider)] if len(sub.rider) != len(rider) else rider
     horse_values = horse[list(sub.horse)] if sub.horse else None
+    bone_values = bones if sub.bones else None
     if sub.encoding == "binary":
-        flags = FLAG_HORSE if horse_values is not None else 0
+        flags = (FLAG_HORSE if horse_values is not None else 0) | (FLAG_BONES if bone_values is not None else 0)
+        size = BINARY_HEADER.size + (BONES_HEADER.size if bone_values is not None else 0)
         header = BINARY_HEADER.pack(
             BINARY_MAGIC,
-            BINARY_HEADER.size,
+            size,
             driver,
             flags,
             seq,
@@ -191,9 +212,13 @@ def encode_frame(sub: Subscription, record: np.ndarray) -> str | bytes:
             0 if horse_values is None else len(horse_values),
             0,
         )
+        if bone_values is not None:
+            header += BONES_HEADER.pack(len(bone_values), 0, 0)
         body = rider_values.astype("<f8").tobytes()
         if horse_values is not None:
             body += horse_values.astype("<f8").tobytes()
+        if bone_values is not None:
+            body += np.asarray(bone_values, dtype="<f8").tobytes()
         return header + body
     message: dict[str, Any] = {
         "type": "frame",
@@ -205,6 +230,8 @@ def encode_frame(sub: Subscription, record: np.ndarray) -> str | bytes:
     }
     if horse_values is not None:
         message["horse"] = horse_values.tolist()
+    if bone_values is not None:
+        message["bones"] = np.asarray(bone_values).tolist()
     return orjson.dumps(message).decode()
 
 
@@ -224,4 +251,8 @@ def decode_binary_frame(data: bytes) -> dict[str, Any]:
     }
     if flags & FLAG_HORSE:
         out["horse"] = np.frombuffer(data, dtype="<f8", count=n_horse, offset=size + 8 * n_rider).tolist()
+    if flags & FLAG_BONES:
+        (n_bones, _, _) = BONES_HEADER.unpack_from(data, BINARY_HEADER.size)
+        offset = size + 8 * (n_rider + (n_horse if flags & FLAG_HORSE else 0))
+        out["bones"] = np.frombuffer(data, dtype="<f8", count=n_bones, offset=offset).tolist()
     return out

@@ -106,6 +106,15 @@ class RigSection(StrictModel):
     park_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
 
 
+class PhysicsSection(StrictModel):
+    tail: bool = False
+    """Run the horse's tail and the rider's braid in the tick and publish ``tail_NN.*`` /
+    ``braid_NN.*``. Off by default: the compiled kernels take 10-20 s to compile on a
+    cold cache (once per checkout; `riderlive serve --tail` turns it on)."""
+    file: str | None = None
+    """Physics TOML (default ``config/physics/tail.toml``)."""
+
+
 class ServiceConfig(StrictModel):
     server: ServerSection = ServerSection()
     security: SecuritySection = SecuritySection()
@@ -115,6 +124,7 @@ class ServiceConfig(StrictModel):
     publish: PublishSection = PublishSection()
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
+    physics: PhysicsSection = PhysicsSection()
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import logging
 import time
@@ -29,7 +30,8 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, Kind, lookup
+from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
 from riderlive.service import auth
 from riderlive.service.codecs import (
@@ -41,6 +43,7 @@ from riderlive.service.codecs import (
     parse_message,
 )
 from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
+from riderlive.skeleton import bone_quaternions, hello_skeletons
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -91,6 +94,27 @@ class Subscriber:
             transport.write(wire_frame(text))
 
 
+@functools.cache
+def skeletons() -> dict[str, Any]:
+    """``hello_skeletons()``, computed once per process (it is the same for every hello)."""
+    return hello_skeletons()
+
+
+_RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
+
+
+def rider_bones(record: np.ndarray, length_scale: float) -> np.ndarray:
+    """The rider's bone quaternions (x, y, z, w per bone) for one output record.
+
+    The skeletons are in metres; rider translations are in service length units.
+    """
+    rider = record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)]
+    if length_scale != DEFAULT_SCALE:
+        rider = rider.copy()
+        rider[_RIDER_LENGTHS] *= length_scale / DEFAULT_SCALE
+    return np.asarray(bone_quaternions(rider.tolist()), dtype=np.float64)
+
+
 def abort_transport(websocket: WebSocket) -> None:
     """Drop a stuck connection at once (see :mod:`riderlive.service.wsprotocol`)."""
     abort = websocket.scope.get("extensions", {}).get(ABORT)
@@ -112,6 +136,10 @@ class Hub:
         self.service = service
         self.clients: dict[str, Subscriber] = {}
         self._seen_input_rx = -1.0
+        self.names: tuple[str, ...] = (*RIDER_NAMES, *service.extra_channels)
+        """Published channels: the rider's, then the simulated tail and braid (when on)."""
+        self.index = {name: i for i, name in enumerate(self.names)}
+        self.default = Subscription(rider=tuple(range(len(self.names))))
 
     def hello(self) -> dict[str, Any]:
         service = self.service
@@ -123,7 +151,7 @@ class Hub:
             "session": service.session,
             "tick_rate": config.tick.rate,
             "engine_time": service.link.engine_time(),
-            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER],
+            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in self._channels()],
             "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
             "axis_convention": AXIS_CONVENTION,
             "length_scale": config.tick.length_scale,
@@ -131,7 +159,11 @@ class Hub:
             "rotation_unit": "deg",
             "encodings": ["json", "binary"],
             "drivers": ["procedural", "input", "neutral"],
+            "skeletons": skeletons(),
         }
+
+    def _channels(self) -> list[Any]:
+        return [*RIDER, *(lookup(name) for name in self.service.extra_channels)]
 
     def publish(self, records: list[np.ndarray]) -> None:
         """Offer the newest of ``records`` (new ticks, oldest first) to every client.
@@ -147,6 +179,7 @@ class Hub:
             rx_so_far.append(newest_rx)
         chosen: dict[int, int | None] = {}
         encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+        bones: dict[int, np.ndarray] = {}
         now = time.perf_counter()
         timeout = self.service.config.publish.send_timeout
         fresh_rx = -1.0
@@ -166,7 +199,9 @@ class Hub:
             key = (*sub.key, index)
             data = encoded.get(key)
             if data is None:
-                message = encode_frame(sub, records[index])
+                if sub.bones and index not in bones:
+                    bones[index] = rider_bones(records[index], self.service.config.tick.length_scale)
+                message = encode_frame(sub, records[index], bones.get(index))
                 data = (message, wire_frame(message))
                 encoded[key] = data
             input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
@@ -272,7 +307,7 @@ class Hub:
                     await websocket.send_json({"type": "error", "reason": "unauthorized", "message": "token required"})
                     await websocket.close(code=4401, reason="unauthorized")
                 return
-        client = Subscriber(websocket, f"rider-{next(_ids)}", Subscription())
+        client = Subscriber(websocket, f"rider-{next(_ids)}", self.default)
         client.transport = websocket.scope.get("extensions", {}).get(TRANSPORT)
         await websocket.send_text(orjson.dumps(self.hello()).decode())
         status = service.link.status()
@@ -300,8 +335,10 @@ class Hub:
             obj = parse_message(data, service.config.input.max_message_bytes)
             kind = obj.get("type")
             if kind == "subscribe":
-                client.subscription = decode_subscription(obj, client.subscription, service.config.tick.rate)
-                client.offer_control(client.subscription.describe(service.config.tick.rate))
+                client.subscription = decode_subscription(
+                    obj, client.subscription, service.config.tick.rate, self.index
+                )
+                client.offer_control(client.subscription.describe(service.config.tick.rate, self.names))
             elif kind == "ping":
                 client.offer_control({"type": "pong", "id": obj.get("id"), "engine_time": service.link.engine_time()})
             elif kind == "auth":

@@ -28,7 +28,7 @@ from riderlive.takes.replay import Replay, load_replay
 log = logging.getLogger(__name__)
 
 
-def make_setup(config: ServiceConfig, params: RuleParams) -> TickSetup:
+def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[str, ...] = ()) -> TickSetup:
     source = config.source
     timing = Timing(
         delay=config.input.delay,
@@ -55,6 +55,9 @@ def make_setup(config: ServiceConfig, params: RuleParams) -> TickSetup:
         rig_file=config.rig.file,
         rig_port=config.rig.port,
         park_timeout=config.rig.park_timeout,
+        tail=config.physics.tail,
+        physics_file=config.physics.file,
+        extra_channels=extra_channels,
     )
 
 
@@ -64,6 +67,12 @@ class Service:
     def __init__(self, config: ServiceConfig) -> None:
         self.config = config
         self.session = uuid.uuid4().hex
+        self.extra_channels: tuple[str, ...] = ()
+        """Channels published after the rider's: the tail and braid when ``physics.tail``."""
+        if config.physics.tail:
+            from riderlive.realtime.tail import physics_channels  # numba: imported only when on
+
+            self.extra_channels = physics_channels(config.physics.file)
         self.params = load_preset(config.tick.preset)
         self.animator = AnimatorLayer()
         self.metrics = ServiceMetrics()
@@ -82,7 +91,7 @@ class Service:
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
-        self.link = TickLink(make_setup(self.config, self.params))
+        self.link = TickLink(make_setup(self.config, self.params, self.extra_channels))
         loop = asyncio.get_running_loop()
         loop.add_reader(self.link.notify_fd, self.on_tick)
         self._watchdog = loop.create_task(self._watch_tick())
@@ -198,7 +207,7 @@ class Service:
         name = name or datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
         path = take_path(self.config.takes.directory, name)
         meta = {"session": self.session, "tick_rate": self.config.tick.rate, "preset": self.params.name}
-        self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta)
+        self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels)
         self.take_name = path.stem
         return path.stem
 

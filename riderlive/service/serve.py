@@ -48,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="service TOML (see config/service.example.toml)")
     parser.add_argument("--host", help="override server.host")
     parser.add_argument("--port", type=int, help="override server.port (0 = any free port)")
+    parser.add_argument(
+        "--tail", action="store_true", help="run the tail and braid physics (physics.tail = true; see docs/tail.md)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,9 +59,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         overrides = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
-        if overrides:
+        if overrides or getattr(args, "tail", False):
             data = config.model_dump()
             data["server"].update(overrides)
+            if getattr(args, "tail", False):
+                data["physics"]["tail"] = True
             config = ServiceConfig.model_validate(data)
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)
@@ -80,7 +85,11 @@ def run(args: argparse.Namespace) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
         except OSError as exc:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
-    app = create_app(config)
+    try:
+        app = create_app(config)
+    except (ConfigError, ValueError) as exc:
+        print(f"riderlive serve: {exc}", file=sys.stderr)
+        return 2
     server = RiderServer(uvicorn_config(app, config), app.state.service)
     try:
         server.run(sockets=[sock])

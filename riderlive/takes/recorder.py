@@ -44,12 +44,19 @@ def list_takes(directory: str | Path) -> list[dict[str, object]]:
 class TakeRecorder:
     """An open take; ``add`` a row per tick, ``close`` at the end."""
 
-    def __init__(self, path: Path, flush_interval: float = 0.5, meta: dict[str, object] | None = None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        flush_interval: float = 0.5,
+        meta: dict[str, object] | None = None,
+        extra: tuple[str, ...] = (),
+    ) -> None:
+        """``extra``: channels after the rider's (the tail's); ``add`` takes them at the end of ``rider``."""
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
         self.flush_interval = flush_interval
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        os.write(self._fd, (",".join(COLUMNS) + "\n").encode())
+        os.write(self._fd, (",".join((*COLUMNS, *extra)) + "\n").encode())
         self._lines: list[str] = []
         self._last_flush = time.monotonic()
         self._t0: float | None = None

@@ -1,4 +1,4 @@
-"""The service config: the example file is the defaults, errors name file and key."""
+"""The service config: the example file is the defaults (but the tail), errors name file and key."""
 
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ from riderlive.service.config import ServiceConfig, load_config
 
 
 def test_the_example_file_loads_and_matches_the_defaults() -> None:
-    assert load_config(CONFIG_DIR / "service.example.toml") == ServiceConfig()
+    example = load_config(CONFIG_DIR / "service.example.toml")
+    assert example.physics.tail is True, "the example turns the tail on"
+    assert not ServiceConfig().physics.tail, "off by default: the kernels compile on first use"
+    assert example.model_copy(update={"physics": ServiceConfig().physics}) == ServiceConfig()
     assert load_config(None) == ServiceConfig()
 
 
@@ -23,6 +26,7 @@ def test_the_example_file_loads_and_matches_the_defaults() -> None:
         ("[input]\nholdd = 1.0\n", "input.holdd"),
         ("[source]\ngait = 'pace'\n", "source.gait"),
         ("[security]\ntoken = 'short'\n", "security.token"),
+        ("[physics]\ntail = 'maybe'\n", "physics.tail"),
     ],
 )
 def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> None:

@@ -1,0 +1,155 @@
+"""The horse's tail and the rider's braid in the tick: strand physics driven by the tick's own frames.
+
+:class:`TickPhysics` wraps :class:`riderlive.physics.skinned.SkinnedModel` (the compiled
+kernels) and a :class:`riderlive.physics.drive.FixedStepper`. Each tick hands it the
+horse and rider frames the tick produced at engine time ``now``; the stepper takes
+every internal step (``PhysicsConfig.rate``, 240 Hz) that ends by ``now``, each one
+seeing the tick frames interpolated linearly to its own time (:class:`TickFrames`:
+exactly what :class:`~riderlive.physics.drive.TakeSource` does on a recorded take,
+so an offline run on the take gives the same values). Publishing stays outside the
+step and is done only when a step was taken.
+
+Units: the tick's frames are in service length units; the physics speaks metres
+(``length_scale / DEFAULT_SCALE`` converts), and the published positions and ``fan``
+go back to service units. Pure apart from the kernels' compile-on-first-use:
+:meth:`TickPhysics.warm` makes that happen before the loop starts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from riderlive.channels import HORSE, RIDER, Kind, lookup
+from riderlive.horse import DEFAULT_SCALE
+from riderlive.physics.config import load_physics
+from riderlive.physics.drive import Drive, FixedStepper
+from riderlive.physics.outputs import channel_names, publish
+from riderlive.physics.skinned import SkinnedModel, SkinnedState
+
+FloatArray = npt.NDArray[np.float64]
+MAX_CATCH_UP = 48
+"""Internal steps one tick may take (0.2 s at 240 Hz); a longer stall skips the excess time."""
+
+_HORSE_LENGTHS = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
+_RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
+
+
+def physics_channels(file: str | Path | None = None) -> tuple[str, ...]:
+    """The ``tail_NN.*`` / ``braid_NN.*`` channels the tick publishes for a physics config."""
+    return channel_names(SkinnedModel.build(load_physics(file), compiled=False))
+
+
+class TickFrames:
+    """The source between two tick frames: linear interpolation, held at the ends (``TakeSource``'s arithmetic)."""
+
+    def __init__(self) -> None:
+        self.t0 = self.t1 = 0.0
+        self.a: Drive | None = None
+        self.b: Drive | None = None
+
+    def push(self, t: float, drive: Drive) -> None:
+        self.t0, self.a = self.t1, self.b
+        self.t1, self.b = t, drive
+
+    def __call__(self, t: float) -> Drive:
+        a, b = self.a, self.b
+        assert b is not None
+        if a is None or t >= self.t1:
+            return b
+        if t < self.t0:
+            return a
+        f = (t - self.t0) / (self.t1 - self.t0)
+        assert a.rider is not None and b.rider is not None
+        return Drive(a.horse + f * (b.horse - a.horse), a.rider + f * (b.rider - a.rider))
+
+
+class TickPhysics:
+    """The skinned tail and braid as the tick runs them; :meth:`tick` once per tick."""
+
+    def __init__(self, file: str | Path | None, length_scale: float, compiled: bool | None = None) -> None:
+        self.config = load_physics(file)
+        self.model = SkinnedModel.build(self.config, compiled)
+        self.names = channel_names(self.model)
+        self.to_metres = length_scale / DEFAULT_SCALE
+        self._lengths = np.array([lookup(n).kind is Kind.TRANSLATION for n in self.names])
+        self.frames = TickFrames()
+        self.stepper: FixedStepper[SkinnedState] | None = None
+        self.start = math.nan
+        """Engine time of the first tick the physics saw (its state starts from rest there)."""
+        self.values: list[float] = []
+        self.errors = 0
+
+    def drive(self, horse: Sequence[float], rider: Sequence[float]) -> Drive:
+        """A tick's frames in the physics' units (metres, degrees)."""
+        h = np.array(horse, dtype=np.float64)
+        r = np.array(rider, dtype=np.float64)
+        if self.to_metres != 1.0:
+            h[_HORSE_LENGTHS] *= self.to_metres
+            r[_RIDER_LENGTHS] *= self.to_metres
+        return Drive(h, r)
+
+    def warm(self, horse: Sequence[float], rider: Sequence[float]) -> None:
+        """Compile (or load) the kernels and run publishing once, so no tick pays for it."""
+        drive = self.drive(horse, rider)
+        state = self.model.initial(drive)
+        for _ in range(3):
+            state = self.model.step(state, drive)
+        self._publish(state)
+
+    def _publish(self, state: SkinnedState) -> list[float]:
+        values = publish(self.model, state)
+        if self.to_metres != 1.0:
+            values[self._lengths] /= self.to_metres
+        out: list[float] = values.tolist()
+        return out
+
+    def restart(self, now: float, drive: Drive) -> None:
+        """Start from rest at ``now``: the bones along the dock, as at the first tick."""
+        self.frames = TickFrames()
+        self.frames.push(now, drive)
+        self.stepper = FixedStepper(
+            self.model.step, self.model.initial(drive), self.config.rate, start=now, max_catch_up=MAX_CATCH_UP
+        )
+        self.start = now
+
+    def tick(self, now: float, horse: Sequence[float], rider: Sequence[float]) -> list[float]:
+        """The channels at engine time ``now`` (seconds, non-decreasing) for this tick's frames.
+
+        The tick's frames are finite (the tick guards them); a step that raises or
+        gives a non-finite value restarts the strands from rest at this frame
+        (counted in ``errors``), so the published values are always finite.
+        """
+        drive = self.drive(horse, rider)
+        if self.stepper is None:
+            self.restart(now, drive)
+            assert self.stepper is not None
+            self.values = self._publish(self.stepper.state)
+            return self.values
+        self.frames.push(now, drive)
+        try:
+            if self.stepper.advance_to(now, self.frames):
+                values = self._publish(self.stepper.state)
+                if not all(math.isfinite(v) for v in values):
+                    raise FloatingPointError("the strands produced a non-finite value")
+                self.values = values
+        except Exception:
+            self.errors += 1
+            self.restart(now, drive)
+            self.values = self._publish(self.stepper.state)
+        return self.values
+
+    def status(self) -> dict[str, float | int]:
+        stepper = self.stepper
+        return {
+            "channels": len(self.names),
+            "rate": self.config.rate,
+            "start": self.start,
+            "steps": 0 if stepper is None else stepper.steps,
+            "skipped_steps": 0 if stepper is None else stepper.skipped_steps,
+            "errors": self.errors,
+        }
