@@ -65,7 +65,8 @@ class TickFrames:
             return a
         f = (t - self.t0) / (self.t1 - self.t0)
         assert a.rider is not None and b.rider is not None
-        return Drive(a.horse + f * (b.horse - a.horse), a.rider + f * (b.rider - a.rider))
+        with np.errstate(invalid="ignore", over="ignore"):  # a non-finite drive is the stepper's to hold
+            return Drive(a.horse + f * (b.horse - a.horse), a.rider + f * (b.rider - a.rider))
 
 
 class TickPhysics:

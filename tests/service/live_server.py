@@ -20,8 +20,15 @@ class LiveServer:
     """``riderlive serve --config FILE --port 0``; its stderr is kept in ``log``."""
 
     def __init__(
-        self, config_text: str, workdir: Path, host: str = "127.0.0.1", port: int = 0, token: str | None = None
+        self,
+        config_text: str,
+        workdir: Path,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        token: str | None = None,
+        wait_for_ticks: bool = True,
     ) -> None:
+        """``wait_for_ticks`` False: return once the web process is up (call :meth:`wait_for_ticks`)."""
         self.token = token
         self.workdir = workdir
         self.host = host
@@ -45,9 +52,10 @@ class LiveServer:
             raise RuntimeError("server did not start:\n" + "".join(self.log))
         self.base = f"http://{host}:{self.port}"
         self.ws = f"ws://{host}:{self.port}"
-        self._wait_for_ticks()
+        if wait_for_ticks:
+            self.wait_for_ticks()
 
-    def _wait_for_ticks(self, timeout: float = 30.0) -> None:
+    def wait_for_ticks(self, timeout: float = 30.0) -> None:
         """The tick process is spawned at startup and needs a moment to import."""
         deadline = time.perf_counter() + timeout
         while time.perf_counter() < deadline:

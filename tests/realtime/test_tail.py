@@ -1,0 +1,89 @@
+"""The tail and braid as the tick runs them: equal to an offline run, tick-rate independent, always finite."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riderlive.channels import HORSE, HORSE_INDEX, RIDER, Kind
+from riderlive.horse import ProceduralHorse
+from riderlive.physics.drive import FixedStepper, TakeSource
+from riderlive.physics.outputs import channel_names, publish
+from riderlive.physics.skinned import SkinnedModel
+from riderlive.realtime.tail import TickPhysics, physics_channels
+from riderlive.rules.engine import RiderModel
+from riderlive.rules.params import load_preset
+
+RULES = RiderModel(params=load_preset("kuhnel2003"), scale=25.0)
+
+
+def tick_frames(rate: float, seconds: float, offset: float = 3.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Procedural gallop frames at tick times (engine seconds from ``offset``) and the rules' rider."""
+    horse = ProceduralHorse("gallop", 12.0, seed=3)
+    times = offset + np.arange(int(seconds * rate)) / rate
+    h = np.array([horse.sample(float(t)) for t in times])
+    return times, h, RULES.evaluate_batch(h)
+
+
+def run_live(physics: TickPhysics, times: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray:
+    return np.array([physics.tick(float(t), h[i].tolist(), r[i].tolist()) for i, t in enumerate(times)])
+
+
+def test_channels_are_the_physics_outputs() -> None:
+    names = physics_channels()
+    assert names == channel_names(SkinnedModel.build(TickPhysics(None, 25.0).config, compiled=False))
+    assert any(n.startswith("tail_10.") for n in names) and any(n.startswith("braid_10.") for n in names)
+
+
+def test_tick_equals_an_offline_run_on_the_same_frames() -> None:
+    times, h, r = tick_frames(120.0, 2.0)
+    physics = TickPhysics(None, 25.0)
+    live = run_live(physics, times, h, r)
+    model = physics.model
+    source = TakeSource(times, h, r)
+    stepper = FixedStepper(model.step, model.initial(source(times[0])), model.config.rate, start=float(times[0]))
+    offline = []
+    for t in times:
+        stepper.advance_to(float(t), source)
+        offline.append(publish(model, stepper.state))
+    np.testing.assert_array_equal(live, np.array(offline))
+    assert np.isfinite(live).all()
+    rz = [i for i, n in enumerate(physics.names) if n.startswith("tail_0") and n.endswith(".rz")]
+    assert live[:, rz].std(axis=0).max() > 1.0, "the tail swings (deg) while the horse gallops"
+
+
+@pytest.mark.parametrize("rate", [120.0, 500.0])
+def test_the_internal_step_is_fixed_whatever_the_tick_rate(rate: float) -> None:
+    times, h, r = tick_frames(rate, 1.0)
+    physics = TickPhysics(None, 25.0)
+    run_live(physics, times, h, r)
+    assert physics.stepper is not None
+    assert physics.stepper.steps == int(np.floor((times[-1] - times[0]) * 240.0 + 1e-6))
+    assert physics.stepper.rate == 240.0
+
+
+def test_service_length_units_scale_positions_not_rotations() -> None:
+    times, h, r = tick_frames(120.0, 0.5)
+    metres = run_live(TickPhysics(None, 25.0), times, h, r)
+    scale = 2.5  # the service speaks decimetres: lengths are 10x the metre values
+    lengths = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
+    rider_lengths = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
+    h10, r10 = h.copy(), r.copy()
+    h10[:, lengths] *= 10.0
+    r10[:, rider_lengths] *= 10.0
+    physics = TickPhysics(None, scale)
+    decimetres = run_live(physics, times, h10, r10)
+    is_length = np.array([n.split(".")[1] in ("tx", "ty", "tz", "fan") for n in physics.names])
+    np.testing.assert_allclose(decimetres[:, is_length], 10.0 * metres[:, is_length], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(decimetres[:, ~is_length], metres[:, ~is_length], rtol=1e-7, atol=1e-7)
+
+
+def test_bad_frames_never_reach_the_output() -> None:
+    times, h, r = tick_frames(120.0, 0.5)
+    h[20:30, HORSE_INDEX["root.ty"]] = np.inf  # the tick guards its frames; the physics holds anyway
+    h[40, HORSE_INDEX["rearPivot.rz"]] = 1e300  # absurd but finite: the strands may blow up
+    physics = TickPhysics(None, 25.0)
+    out = run_live(physics, times, h, r)
+    assert np.isfinite(out).all()
+    assert physics.stepper is not None
+    assert physics.stepper.bad_inputs > 0 or physics.errors > 0
