@@ -81,7 +81,8 @@ class TickPhysics:
         self.frames = TickFrames()
         self.stepper: FixedStepper[SkinnedState] | None = None
         self.start = math.nan
-        """Engine time of the first tick the physics saw (its state starts from rest there)."""
+        """Engine time of the first tick the physics saw (its state starts from rest there);
+        the physics' own clock is ``now - start``."""
         self.values: list[float] = []
         self.errors = 0
 
@@ -111,12 +112,12 @@ class TickPhysics:
 
     def restart(self, now: float, drive: Drive) -> None:
         """Start from rest at ``now``: the bones along the dock, as at the first tick."""
-        self.frames = TickFrames()
-        self.frames.push(now, drive)
-        self.stepper = FixedStepper(
-            self.model.step, self.model.initial(drive), self.config.rate, start=now, max_catch_up=MAX_CATCH_UP
-        )
         self.start = now
+        self.frames = TickFrames()
+        self.frames.push(0.0, drive)
+        self.stepper = FixedStepper(
+            self.model.step, self.model.initial(drive), self.config.rate, start=0.0, max_catch_up=MAX_CATCH_UP
+        )
 
     def tick(self, now: float, horse: Sequence[float], rider: Sequence[float]) -> list[float]:
         """The channels at engine time ``now`` (seconds, non-decreasing) for this tick's frames.
@@ -131,9 +132,10 @@ class TickPhysics:
             assert self.stepper is not None
             self.values = self._publish(self.stepper.state)
             return self.values
-        self.frames.push(now, drive)
+        t = now - self.start  # as a take recorded from this tick computes its t: bit-equal offline runs
+        self.frames.push(t, drive)
         try:
-            if self.stepper.advance_to(now, self.frames):
+            if self.stepper.advance_to(t, self.frames):
                 values = self._publish(self.stepper.state)
                 if not all(math.isfinite(v) for v in values):
                     raise FloatingPointError("the strands produced a non-finite value")

@@ -25,6 +25,21 @@ def tick_frames(rate: float, seconds: float, offset: float = 3.1) -> tuple[np.nd
     return times, h, RULES.evaluate_batch(h)
 
 
+def assert_matches_offline(live: np.ndarray, offline: np.ndarray, names: tuple[str, ...]) -> None:
+    """Live (tick) values equal an offline run on the same frames, to rounding.
+
+    A step whose end time rounds a hair (< 1e-15 s) past a tick's time sees that tick's
+    frame held in the tick (the next frame does not exist yet) and a 1e-13 extrapolation
+    offline (``TakeSource`` already knows the next row); the solver carries that on.
+    Measured: <= 1e-10 m for positions, <= 2e-8 deg for angles over a few seconds.
+    """
+    diff = np.abs(live - offline)
+    lengths = np.array([n.split(".")[1] in ("tx", "ty", "tz", "fan") for n in names])
+    assert np.isfinite(live).all()
+    assert diff[:, lengths].max() <= 1e-9, f"positions differ by {diff[:, lengths].max():.2e} m"
+    assert diff[:, ~lengths].max() <= 1e-6, f"angles differ by {diff[:, ~lengths].max():.2e} deg"
+
+
 def run_live(physics: TickPhysics, times: np.ndarray, h: np.ndarray, r: np.ndarray) -> np.ndarray:
     return np.array([physics.tick(float(t), h[i].tolist(), r[i].tolist()) for i, t in enumerate(times)])
 
@@ -40,14 +55,13 @@ def test_tick_equals_an_offline_run_on_the_same_frames() -> None:
     physics = TickPhysics(None, 25.0)
     live = run_live(physics, times, h, r)
     model = physics.model
-    source = TakeSource(times, h, r)
-    stepper = FixedStepper(model.step, model.initial(source(times[0])), model.config.rate, start=float(times[0]))
+    source = TakeSource(times - times[0], h, r)  # as a take records it: t from 0 at the first tick
+    stepper = FixedStepper(model.step, model.initial(source(0.0)), model.config.rate)
     offline = []
-    for t in times:
+    for t in times - times[0]:
         stepper.advance_to(float(t), source)
         offline.append(publish(model, stepper.state))
-    np.testing.assert_array_equal(live, np.array(offline))
-    assert np.isfinite(live).all()
+    assert_matches_offline(live, np.array(offline), physics.names)
     rz = [i for i, n in enumerate(physics.names) if n.startswith("tail_0") and n.endswith(".rz")]
     assert live[:, rz].std(axis=0).max() > 1.0, "the tail swings (deg) while the horse gallops"
 
