@@ -209,13 +209,6 @@ class TickLoop:
                 newest_rx = max(newest_rx, rx)
             values[index["input_lapped"]] = self.inputs.lapped
             result = self._step(now, values, index)
-            extra: list[float] = []
-            if self.physics is not None:
-                errors, fresh = self.physics.errors, self.physics.stepper is None
-                extra = self.physics.tick(now, result.horse, result.rider)
-                if self.physics.errors != errors:
-                    self.events.append("the tail physics failed; restarted from rest")
-                self._status_dirty |= fresh or self.physics.errors != errors
             if self.output is not None:
                 try:
                     status = self.output.tick(result.rider, deadline)
@@ -228,6 +221,13 @@ class TickLoop:
                 ):
                     self.rig = status
                     self._status_dirty = True
+            extra: list[float] = []  # after the rig's transaction: the bus never waits on the tail
+            if self.physics is not None:
+                errors, fresh = self.physics.errors, self.physics.stepper is None
+                extra = self.physics.tick(now, result.horse, result.rider)
+                if self.physics.errors != errors:
+                    self.events.append("the tail physics failed; restarted from rest")
+                self._status_dirty |= fresh or self.physics.errors != errors
             done = time.perf_counter() - setup.start
             record_out = [
                 float(clock.tick),
