@@ -54,6 +54,8 @@ COUNTERS: tuple[str, ...] = (
     "input_out_of_order",
     "step_errors",
     "nonfinite_outputs",
+    "physics_errors",
+    "physics_skipped_steps",
     "realtime",
     "alive",
     *(f"lateness_bucket_{i}" for i in range(len(LATENESS_BUCKETS) + 1)),

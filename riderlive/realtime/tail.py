@@ -85,6 +85,8 @@ class TickPhysics:
         the physics' own clock is ``now - start``."""
         self.values: list[float] = []
         self.errors = 0
+        self._skipped_before = 0
+        """Steps skipped by steppers replaced at a restart."""
 
     def drive(self, horse: Sequence[float], rider: Sequence[float]) -> Drive:
         """A tick's frames in the physics' units (metres, degrees)."""
@@ -112,6 +114,8 @@ class TickPhysics:
 
     def restart(self, now: float, drive: Drive) -> None:
         """Start from rest at ``now``: the bones along the dock, as at the first tick."""
+        if self.stepper is not None:
+            self._skipped_before += self.stepper.skipped_steps
         self.start = now
         self.frames = TickFrames()
         self.frames.push(0.0, drive)
@@ -146,6 +150,11 @@ class TickPhysics:
             self.values = self._publish(self.stepper.state)
         return self.values
 
+    @property
+    def skipped_steps(self) -> int:
+        """Internal steps skipped after stalls longer than :data:`MAX_CATCH_UP` steps, in total."""
+        return self._skipped_before + (0 if self.stepper is None else self.stepper.skipped_steps)
+
     def status(self) -> dict[str, float | int]:
         stepper = self.stepper
         return {
@@ -153,6 +162,6 @@ class TickPhysics:
             "rate": self.config.rate,
             "start": self.start,
             "steps": 0 if stepper is None else stepper.steps,
-            "skipped_steps": 0 if stepper is None else stepper.skipped_steps,
+            "skipped_steps": self.skipped_steps,
             "errors": self.errors,
         }

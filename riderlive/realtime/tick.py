@@ -228,6 +228,8 @@ class TickLoop:
                 if self.physics.errors != errors:
                     self.events.append("the tail physics failed; restarted from rest")
                 self._status_dirty |= fresh or self.physics.errors != errors
+                values[index["physics_errors"]] = self.physics.errors
+                values[index["physics_skipped_steps"]] = self.physics.skipped_steps
             done = time.perf_counter() - setup.start
             record_out = [
                 float(clock.tick),
@@ -312,15 +314,18 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
     loop = TickLoop(setup, commands, notify_fd, output)
     if in_process:
         signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
-    loop.warm()
-    loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
-    if in_process:
-        # The loop makes no reference cycles: refcounting frees everything, and a
-        # collection of the whole heap would stall a tick for milliseconds.
-        gc.collect()
-        gc.freeze()
-        gc.disable()
     try:
+        # The physics kernels compile (cold cache) or load here: before real-time priority
+        # (a 10-20 s compile at FIFO would starve the web process), before the collector is
+        # frozen (compiling makes cyclic garbage) and before the first deadline.
+        loop.warm()
+        loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
+        if in_process:
+            # The loop makes no reference cycles: refcounting frees everything, and a
+            # collection of the whole heap would stall a tick for milliseconds.
+            gc.collect()
+            gc.freeze()
+            gc.disable()
         if output is not None:
             output.open()
         loop.run()

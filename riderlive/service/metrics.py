@@ -102,6 +102,8 @@ def render(
         ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
         ("step_errors", "Ticks whose step raised (the last good frame was repeated)."),
         ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
+        ("physics_errors", "Tail physics restarts from rest after a failed or non-finite step."),
+        ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]

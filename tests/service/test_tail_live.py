@@ -94,6 +94,7 @@ def test_take_records_the_tail_and_equals_an_offline_run(tail_server: tuple[Live
     meta = json.loads(path.with_suffix(".json").read_text())
     physics = state["tick"]["physics"]
     assert physics["channels"] == len(TAIL) and physics["errors"] == 0
+    assert "riderlive_tick_physics_errors_total 0" in server.get("/metrics").text.splitlines()
     assert meta["engine_t0"] == physics["start"], "the take holds every tick since the physics started"
     data = table.values
     n_h, n_r = len(HORSE_NAMES), len(RIDER_NAMES)
