@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# From a fresh clone to ready: .venv with riderlive and its dev tools, and Debian's
+# chromium for the browser tests (installed with apt-get when missing; needs root).
+set -euo pipefail
+cd "$(dirname "$0")"
+
+if ! command -v chromium >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "install: Debian chromium for the browser tests"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update -qq && apt-get install -y -qq chromium >/dev/null
+    else
+        echo "install: chromium is missing; the browser tests need it: sudo apt-get install chromium" >&2
+    fi
+fi
+
+[ -x .venv/bin/python ] || python3 -m venv .venv
+.venv/bin/pip install -q --disable-pip-version-check -e '.[dev]'
+echo "install: ready. Test: .venv/bin/pytest   Run: .venv/bin/riderlive serve"
