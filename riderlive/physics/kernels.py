@@ -33,7 +33,7 @@ from riderlive.physics.attach import Frame, HorseAttachment, RiderAttachment
 from riderlive.physics.chain import FOLDED, ChainModel, ChainState
 from riderlive.physics.collision import SKIN, WEDGE_SKIN, Capsules
 from riderlive.physics.drive import Drive
-from riderlive.physics.strands import EXTRA_PASSES, REPAIR_DEPTH, StrandModel, StrandState
+from riderlive.physics.strands import EXTRA_PASSES, MAX_WEDGE_SKIN, REPAIR_DEPTH, StrandModel, StrandState
 
 FloatArray = npt.NDArray[np.float64]
 F = TypeVar("F", bound=Callable[..., Any])
@@ -268,9 +268,11 @@ def _strand_step(  # noqa: PLR0917
                 break
             _distance_pass(new, rest, w, 0)
             _distance_pass(new, rest, w, 1)
+        wedge = wedge_skin
         for _ in range(extra_passes):
-            if _push_out(new, pinned, cap_a, cap_b, cap_r, wedge_skin) == 0.0:
+            if _push_out(new, pinned, cap_a, cap_b, cap_r, wedge) == 0.0:
                 break
+            wedge = min(2.0 * wedge, MAX_WEDGE_SKIN)
     out_prev = x.copy()
     for i in range(n_vert - 1):
         for c in range(3):

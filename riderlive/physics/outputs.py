@@ -39,24 +39,20 @@ def channel_names(model: SkinnedModel) -> tuple[str, ...]:
 
 def local_rotations(state: SkinnedState) -> FloatArray:
     """Local rotations (B, C, 4) of every bone (xyzw), bone 0 relative to its anchor's parent frame."""
-    world = quaternion.from_matrix(chain.world_rotations(state.bones))
-    parents = np.stack([quaternion.from_matrix(p.rotation) for p in state.parents])
-    parent = np.concatenate((parents[None], world[:-1]), axis=0)
-    local = quaternion.multiply(quaternion.conjugate(parent), world)
+    parents = np.stack([p.rotation for p in state.parents])[None]  # (1, C, 3, 3)
+    both = quaternion.from_matrix(np.concatenate((parents, chain.world_rotations(state.bones)), axis=0))
+    local = quaternion.multiply(quaternion.conjugate(both[:-1]), both[1:])
     return np.where(local[..., 3:] < 0.0, -local, local)
 
 
 def publish(model: SkinnedModel, state: SkinnedState) -> FloatArray:
-    """One frame of :func:`channel_names` values for ``state``."""
-    local = local_rotations(state)
-    euler = quaternion.to_euler_xyz(local)
-    heads = state.strands.x[:-1]  # (B, 3, C)
-    out: list[float] = []
-    for column in (TAIL, BRAID):
-        for j in range(heads.shape[0]):
-            out += heads[j, :, column].tolist()
-            out += euler[j, column].tolist()
-            out += local[j, column].tolist()
-            if model.bones.fan_profile[j, column] > 0.0:
-                out.append(float(state.bones.fan[j, column]))
-    return np.array(out)
+    """One frame of :func:`channel_names` values for ``state``: per chain, per bone, the
+    head position, Euler degrees, quaternion and (where published) the fan distance."""
+    local = local_rotations(state)  # (B, C, 4)
+    heads = state.strands.x[:-1].transpose(0, 2, 1)  # (B, C, 3)
+    fan = state.bones.fan[:, :, None]  # (B, C, 1)
+    per_bone = np.concatenate((heads, quaternion.to_euler_xyz(local), local, fan), axis=-1)
+    keep = np.ones(per_bone.shape, dtype=bool)
+    keep[..., -1] = model.bones.fan_profile > 0.0
+    order = (TAIL, BRAID)
+    return np.asarray(per_bone[:, order].transpose(1, 0, 2)[keep[:, order].transpose(1, 0, 2)], dtype=np.float64)

@@ -115,9 +115,16 @@ def from_matrix(m: FloatArray) -> FloatArray:
 
 def to_matrix(q: FloatArray) -> FloatArray:
     """Rotation matrices (..., 3, 3) of unit quaternions; columns are the rotated x, y, z axes."""
-    eye = np.eye(3)
-    cols = [rotate(q, np.broadcast_to(eye[i], (*q.shape[:-1], 3))) for i in range(3)]
-    return np.stack(cols, axis=-1)
+    q = np.asarray(q, dtype=np.float64)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    rows = (
+        (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)),
+        (2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)),
+        (2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)),
+    )
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def to_euler_xyz(q: FloatArray) -> FloatArray:

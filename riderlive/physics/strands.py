@@ -43,6 +43,8 @@ from riderlive.physics.collision import WEDGE_SKIN, Capsules, push_out
 FloatArray = npt.NDArray[np.float64]
 EXTRA_PASSES = 32
 """Final collision passes, until no vertex is inside (a vertex wedged between two shapes may need several)."""
+MAX_WEDGE_SKIN = 1e-2
+"""The largest margin (metres) the final passes grow to for a wedged vertex."""
 REPAIR_DEPTH = 3e-4
 """A push deeper than this (metres) is followed by a distance pass to repair the lengths it broke."""
 MAX_BEND = 0.5
@@ -237,9 +239,11 @@ def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Ca
             _distance_pass(new, pre, "even", 0)  # a deep push broke lengths: repair them...
             if model.n_vertices >= 3:
                 _distance_pass(new, pre, "odd", 1)
-        for _ in range(EXTRA_PASSES):  # ...and end outside every shape (this pass finds nothing, normally)
-            if push_out(free, caps, WEDGE_SKIN) == 0.0:
+        wedge = WEDGE_SKIN  # ...and end outside every shape (this pass finds nothing, normally);
+        for _ in range(EXTRA_PASSES):  # a vertex wedged between two shapes gets a growing margin
+            if push_out(free, caps, wedge) == 0.0:
                 break
+            wedge = min(2.0 * wedge, MAX_WEDGE_SKIN)
     # Each vertex's velocity loses the part of its child's move that was not its own
     # (Mueller 2012's velocity correction), so the one-sided projection does not add a
     # drag toward the root.
