@@ -39,7 +39,7 @@ export class RiderLink {
       return;
     }
     this.ws = ws;
-    this.setState("connecting");
+    if (this.state !== "gone") this.setState("connecting"); // once gone, say so until a hello arrives
     ws.onmessage = (ev) => {
       if (typeof ev.data !== "string") return;
       let msg;
