@@ -15,7 +15,7 @@ right), so every channel drives its axis with a positive sign.
 from __future__ import annotations
 
 from riderlive.skeleton.quat import Vec3
-from riderlive.skeleton.rig import Bone, Chain, Drive, Offset, Rig, X, Y, Z
+from riderlive.skeleton.rig import Chain, Drive, Offset, Rig, X, Y, Z, bones_from_rows
 
 _SIDE = 0.2
 """Half the distance between a left and a right leg, metres."""
@@ -57,16 +57,7 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
 ]
 
 
-def _bones() -> tuple[Bone, ...]:
-    index: dict[str, int] = {}
-    bones: list[Bone] = []
-    for name, parent, offset in _ROWS:
-        bones.append(Bone(name, -1 if parent is None else index[parent], offset))
-        index[name] = len(bones) - 1
-    return tuple(bones)
-
-
-BONES = _bones()
+BONES = bones_from_rows(_ROWS)
 
 
 HOOVES: tuple[str, ...] = ("lf", "rf", "lb", "rb")

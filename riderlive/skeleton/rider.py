@@ -23,7 +23,7 @@ import functools
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.skeleton.horse import HORSE_NEUTRAL
 from riderlive.skeleton.quat import Vec3
-from riderlive.skeleton.rig import Bone, Chain, Drive, Offset, Rig, X, Y, Z
+from riderlive.skeleton.rig import Chain, Drive, Offset, Rig, X, Y, Z, bones_from_rows
 
 
 def _side(prefix: str, rows: list[tuple[str, str, Vec3]]) -> list[tuple[str, str, Vec3]]:
@@ -61,16 +61,7 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
 ]
 
 
-def _bones() -> tuple[Bone, ...]:
-    index: dict[str, int] = {}
-    bones: list[Bone] = []
-    for name, parent, offset in _ROWS:
-        bones.append(Bone(name, -1 if parent is None else index[parent], offset))
-        index[name] = len(bones) - 1
-    return tuple(bones)
-
-
-BONES = _bones()
+BONES = bones_from_rows(_ROWS)
 
 HUMANOID: dict[str, tuple[str, str]] = {
     "hips": ("Hips", "hips"),

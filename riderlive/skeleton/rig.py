@@ -23,7 +23,7 @@ A rig drives a skeleton from named channels, all taken as deltas from the rig's
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +54,16 @@ class Bone:
     """Index of the parent bone (always smaller than this bone's), -1 for the root."""
     offset: Vec3
     """Rest position of the joint in the parent's frame, metres."""
+
+
+def bones_from_rows(rows: Sequence[tuple[str, str | None, Vec3]]) -> tuple[Bone, ...]:
+    """Bones from ``(name, parent name or None, offset)`` rows listed parents first."""
+    index: dict[str, int] = {}
+    bones: list[Bone] = []
+    for name, parent, offset in rows:
+        bones.append(Bone(name, -1 if parent is None else index[parent], offset))
+        index[name] = len(bones) - 1
+    return tuple(bones)
 
 
 @dataclass(frozen=True, slots=True)
