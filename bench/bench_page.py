@@ -33,16 +33,8 @@ from websockets.sync.client import connect
 import riderlive
 from riderlive.channels import HORSE_NAMES
 from riderlive.horse import ProceduralHorse
-from riderlive.web import STATIC_DIR, static_size
+from riderlive.web import CHROMIUM, CHROMIUM_ARGS, STATIC_DIR, static_size
 
-CHROMIUM_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--no-first-run",
-]
 BLANK = """<!doctype html><body><script>
 window.riderlive = {fps: 0}; let n = 0, t0 = performance.now();
 function f(now) { n++; if (now - t0 >= 1000) { riderlive.fps = n * 1000 / (now - t0); n = 0; t0 = now; }
@@ -154,7 +146,7 @@ def main() -> int:
         producer.start()
         try:
             with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
                 viewport = {"width": args.width, "height": args.height}
                 blank = browser.new_page(viewport=viewport)
                 blank.set_content(BLANK)

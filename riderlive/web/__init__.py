@@ -13,6 +13,18 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 MAX_BUNDLE_BYTES = 1_500_000
 """The served page (everything under STATIC_DIR) stays at most this size."""
 
+CHROMIUM = "/usr/bin/chromium"
+"""Debian's Chromium, which the browser tests and the page benchmark drive (never a downloaded one)."""
+CHROMIUM_ARGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+)
+"""Headless, and quiet on a machine with no network beyond the package registries."""
+
 
 def static_size() -> int:
     """Total bytes of the served files."""

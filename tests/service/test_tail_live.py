@@ -62,7 +62,8 @@ def test_hello_lists_the_tail_after_the_rider_and_frames_carry_it(tail_server: t
 
 def test_the_page_receives_the_tail_and_braid(tail_server: tuple[LiveServer, dict]) -> None:
     """The previs page groups ``tail_NN`` / ``braid_NN`` from the hello and gets their values."""
-    from tests.web.conftest import CHROMIUM, CHROMIUM_ARGS, open_page
+    from riderlive.web import CHROMIUM, CHROMIUM_ARGS
+    from tests.web.conftest import open_page
 
     if not Path(CHROMIUM).exists():
         pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (.ci/run does it)")
@@ -70,7 +71,7 @@ def test_the_page_receives_the_tail_and_braid(tail_server: tuple[LiveServer, dic
 
     server, _ = tail_server
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
         try:
             page = open_page(browser, server.base)
             page.wait_for("window.riderlive && riderlive.frames > 5 && 'braid_10.tx' in riderlive.values", 20.0)
