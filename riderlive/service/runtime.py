@@ -206,7 +206,12 @@ class Service:
         self.stop_recording()
         name = name or datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
         path = take_path(self.config.takes.directory, name)
-        meta = {"session": self.session, "tick_rate": self.config.tick.rate, "preset": self.params.name}
+        meta = {
+            "session": self.session,
+            "tick_rate": self.config.tick.rate,
+            "preset": self.params.name,
+            "length_scale": self.config.tick.length_scale,
+        }
         self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels)
         self.take_name = path.stem
         return path.stem

@@ -208,3 +208,16 @@ def to_godot(q: Quat) -> Quat:
     Positions map as ``(z, y, -x)``.
     """
     return (q[2], q[1], -q[0], q[3])
+
+
+def to_gltf(q: Quat) -> Quat:
+    """The same rotation in glTF's (and our BVH files') axes: x to the character's left, y up,
+    z forward; right-handed, so a proper rotation of ours: ``(-z, y, x, w)``.
+
+    Positions map as ``(-z, y, x)`` (:data:`GLTF_AXES`).
+    """
+    return (-q[2], q[1], q[0], q[3])
+
+
+GLTF_AXES = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+"""Rows: glTF x, y, z in our axes; ``gltf = GLTF_AXES @ ours`` for positions and quaternion vector parts."""

@@ -304,7 +304,8 @@ def solve(rig: Rig, values: Mapping[str, Any], ops: Ops = SCALAR) -> Pose:
 
 @dataclass(frozen=True, slots=True)
 class PoseArrays:
-    """N poses as arrays, in the rig's bone order: rotations (N, B, 4) x y z w, positions (N, B, 3) metres."""
+    """N poses as arrays, bone-major (one bone's track is contiguous): rotations (B, N, 4) x y z w,
+    positions and offsets (B, N, 3) metres, in the rig's bone order."""
 
     local_rotations: npt.NDArray[np.float64]
     local_offsets: npt.NDArray[np.float64]
@@ -313,12 +314,12 @@ class PoseArrays:
 
 
 def _stack(items: Sequence[Sequence[Any]], frames: int) -> npt.NDArray[np.float64]:
-    """Per-bone tuples of components (floats or (N,) arrays) -> (N, bones, components)."""
-    out = np.empty((frames, len(items), len(items[0])), dtype=np.float64)
+    """Per-bone tuples of components (floats or (N,) arrays) -> (bones, N, components)."""
+    out = np.empty((len(items), len(items[0]), frames), dtype=np.float64)
     for b, item in enumerate(items):
         for k, component in enumerate(item):
-            out[:, b, k] = component
-    return out
+            out[b, k] = component
+    return np.ascontiguousarray(out.transpose(0, 2, 1))
 
 
 def solve_frames(rig: Rig, columns: Mapping[str, npt.NDArray[np.float64]], frames: int) -> PoseArrays:

@@ -284,7 +284,7 @@ def test_the_array_path_poses_every_frame_like_the_float_path(rig: Rig) -> None:
     batch = solve_frames(rig, columns, frames)
     for f in range(frames):
         one = solve(rig, {n: float(v[f]) for n, v in columns.items()})
-        np.testing.assert_allclose(batch.local_rotations[f], one.local_rotations, atol=1e-12)
-        np.testing.assert_allclose(batch.local_offsets[f], one.local_offsets, atol=1e-12)
-        np.testing.assert_allclose(batch.world_rotations[f], one.world_rotations, atol=1e-12)
-        np.testing.assert_allclose(batch.world_positions[f], one.world_positions, atol=1e-12)
+        np.testing.assert_allclose(batch.local_rotations[:, f], one.local_rotations, atol=1e-12)
+        np.testing.assert_allclose(batch.local_offsets[:, f], one.local_offsets, atol=1e-12)
+        np.testing.assert_allclose(batch.world_rotations[:, f], one.world_rotations, atol=1e-12)
+        np.testing.assert_allclose(batch.world_positions[:, f], one.world_positions, atol=1e-12)
