@@ -14,6 +14,21 @@ if ! command -v chromium >/dev/null 2>&1; then
     fi
 fi
 
+# mono's C# compiler checks the Unity sample client's syntax (tests/clients).
+if ! command -v mcs >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "install: Debian mono-mcs for the C# client's syntax check"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get install -y -qq mono-mcs >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq mono-mcs >/dev/null; }
+    else
+        echo "install: mcs is missing; the C# client check skips: sudo apt-get install mono-mcs" >&2
+    fi
+fi
+
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/pip install -q --disable-pip-version-check -e '.[dev]'
+# The Khronos glTF validator for the export tests (npm, into the venv; skipped without node).
+if command -v npm >/dev/null 2>&1 && [ ! -d .venv/npm/node_modules/gltf-validator ]; then
+    npm install --silent --no-audit --no-fund --prefix .venv/npm gltf-validator@2.0.0-dev.3.10 >/dev/null
+fi
 echo "install: ready. Test: .venv/bin/pytest   Run: .venv/bin/riderlive serve"

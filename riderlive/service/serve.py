@@ -10,7 +10,7 @@ import sys
 
 import uvicorn
 
-from riderlive.configfile import ConfigError
+from riderlive.configfile import ConfigError, validate
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--tail", action="store_true", help="run the tail and braid physics (physics.tail = true; see docs/tail.md)"
     )
+    parser.add_argument("--vmc", metavar="HOST:PORT", help="send the rider as a VMC performer (docs/vmc.md)")
+    parser.add_argument("--vmc-horse", metavar="HOST:PORT", help="send the horse too, to another port")
+    parser.add_argument("--vmc-rate", type=float, metavar="HZ", help="VMC bundles per second (default 60)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,12 +62,22 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         overrides = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
-        if overrides or getattr(args, "tail", False):
+        vmc = {
+            k: v
+            for k, v in (
+                ("target", getattr(args, "vmc", None)),
+                ("horse_target", getattr(args, "vmc_horse", None)),
+                ("rate", getattr(args, "vmc_rate", None)),
+            )
+            if v is not None
+        }
+        if overrides or vmc or getattr(args, "tail", False):
             data = config.model_dump()
             data["server"].update(overrides)
+            data["vmc"].update(vmc)
             if getattr(args, "tail", False):
                 data["physics"]["tail"] = True
-            config = ServiceConfig.model_validate(data)
+            config = validate(ServiceConfig, data, "command line")
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)
         return 2
