@@ -24,7 +24,7 @@ import numpy as np
 import polars as pl
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
-from riderlive.horse import generate_gait
+from riderlive.horse import DEFAULT_SCALE, generate_gait
 from riderlive.rules import RiderModel
 from riderlive.skeleton import horse_pose, rider_pose
 
@@ -32,7 +32,7 @@ from riderlive.skeleton import horse_pose, rider_pose
 def make_take(directory: Path, minutes: float, rate: float) -> tuple[Path, np.ndarray, np.ndarray]:
     horse_table = generate_gait("canter", minutes * 60.0, rate, seed=1)
     horse = np.column_stack([horse_table.column(n) for n in HORSE_NAMES])
-    rider = RiderModel().evaluate_batch(horse)
+    rider = RiderModel(scale=DEFAULT_SCALE).evaluate_batch(horse)
     t = np.arange(len(horse)) / rate
     columns = {"t": t, **dict(zip(HORSE_NAMES, horse.T, strict=True)), **dict(zip(RIDER_NAMES, rider.T, strict=True))}
     path = directory / "long.csv"

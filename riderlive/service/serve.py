@@ -82,6 +82,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"riderlive serve: {exc}", file=sys.stderr)
         return 2
     try:
+        app = create_app(config)
+    except (ConfigError, ValueError) as exc:
+        print(f"riderlive serve: {exc}", file=sys.stderr)
+        return 2
+    try:
         sock = socket.socket(socket.AF_INET6 if ":" in config.server.host else socket.AF_INET)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((config.server.host, config.server.port))
@@ -98,11 +103,6 @@ def run(args: argparse.Namespace) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
         except OSError as exc:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
-    try:
-        app = create_app(config)
-    except (ConfigError, ValueError) as exc:
-        print(f"riderlive serve: {exc}", file=sys.stderr)
-        return 2
     server = RiderServer(uvicorn_config(app, config), app.state.service)
     try:
         server.run(sockets=[sock])

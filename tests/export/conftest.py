@@ -10,7 +10,7 @@ import pytest
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.export import TakePoses, load_take
-from riderlive.horse import generate_gait
+from riderlive.horse import DEFAULT_SCALE, generate_gait
 from riderlive.rules import RiderModel
 from riderlive.takes.recorder import TakeRecorder
 
@@ -19,7 +19,7 @@ def write_take(directory: Path, name: str, seconds: float = 1.0, rate: float = 1
     """A canter take (horse and rider) of ``seconds``, recorded row by row, closed."""
     horse = generate_gait("canter", seconds, rate, seed=3)
     frames = np.column_stack([horse.column(n) for n in HORSE_NAMES])
-    rider = RiderModel().evaluate_batch(frames)
+    rider = RiderModel(scale=DEFAULT_SCALE).evaluate_batch(frames)
     recorder = TakeRecorder(directory / f"{name}.csv", meta={"tick_rate": rate, "length_scale": 25.0})
     for k in range(len(frames)):
         recorder.add(10.0 + k / rate, frames[k], rider[k])
