@@ -23,7 +23,7 @@ from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 
 pytest.importorskip("pythonosc")
-from tests.vmc.receiver import VmcReceiver  # noqa: E402
+from tests.vmc.receiver import VmcReceiver
 
 
 @pytest.fixture
