@@ -31,4 +31,11 @@ fi
 if command -v npm >/dev/null 2>&1 && [ ! -d .venv/npm/node_modules/gltf-validator ]; then
     npm install --silent --no-audit --no-fund --prefix .venv/npm gltf-validator@2.0.0-dev.3.10 >/dev/null
 fi
+# Blender as a Python module (PyPI bpy) for the add-on's test (tests/clients), in its own venv:
+# each bpy release targets one Python minor version (4.2-5.0: Python 3.11) and pins numpy < 2.
+if [ ! -x .venv/blender/bin/python ] && python3 -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+    echo "install: Blender as a module (bpy, ~370 MB) into .venv/blender"
+    python3 -m venv .venv/blender && .venv/blender/bin/pip install -q --disable-pip-version-check 'bpy>=4.2,<5.1' ||
+        { rm -rf .venv/blender; echo "install: bpy is unavailable here; the Blender test skips" >&2; }
+fi
 echo "install: ready. Test: .venv/bin/pytest   Run: .venv/bin/riderlive serve"
