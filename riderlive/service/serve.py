@@ -103,9 +103,13 @@ def run(args: argparse.Namespace) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
         except OSError as exc:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
-    server = RiderServer(uvicorn_config(app, config), app.state.service)
+    service = app.state.service
+    server = RiderServer(uvicorn_config(app, config), service)
     try:
         server.run(sockets=[sock])
     except KeyboardInterrupt:  # uvicorn re-raises Ctrl+C after its clean shutdown
         return 130
+    finally:
+        if service.vmc is not None:
+            print(f"riderlive serve: VMC out: {service.vmc.status()}", file=sys.stderr, flush=True)
     return 0
