@@ -60,8 +60,11 @@ def test_pose_frames_carry_both_skeletons_as_the_solver_poses_them(server: LiveS
         np.testing.assert_allclose(horse.ravel(), pose_floats(horse_pose(f["horse"])), atol=1e-12)
         np.testing.assert_allclose(np.linalg.norm(rider[:, 3:], axis=1), 1.0, atol=1e-12)
         np.testing.assert_allclose(np.linalg.norm(horse[:, 3:], axis=1), 1.0, atol=1e-12)
-        # The squash joints and the hips translate: the stream carries it, no reconstruction needed.
-        assert not np.allclose(rider[:, :3], [b.offset for b in rider_rig().bones])
+        # The hips translate with the seat: the stream carries it, no reconstruction needed.
+        values = dict(zip(RIDER_NAMES, f["values"], strict=False))
+        neutral = rider_rig().neutral
+        seat = (values["cog.tx"] - neutral["cog.tx"], values["cog.ty"] - neutral["cog.ty"], 0.0)
+        np.testing.assert_allclose(rider[0, :3], np.add(rider_rig().bones[0].offset, seat), atol=1e-12)
 
 
 def test_binary_pose_follows_the_bones_block_and_decodes_back() -> None:
@@ -102,3 +105,29 @@ def test_length_units_are_symbols() -> None:
     assert units(0.25) == ("cm", 0.01)
     assert units(0.025) == ("mm", 0.001)
     assert units(10.0) == ("0.4 m", 0.4)
+
+
+def test_the_protocol_doc_states_the_rigs_axis_mapping() -> None:
+    """docs/protocol.md's channel -> bone table matches the rider rig's drives, sign by sign."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "protocol.md").read_text()
+    section = text.split("### Channels and bones: the axis mapping", 1)[1].split("\n### ", 1)[0]
+    drives = {d.channel: d for d in (*rider_rig().rotations, *rider_rig().translations)}
+    seen = set()
+    for line in section.splitlines():
+        if not line.startswith("| `"):
+            continue
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        channels = [c.strip(" `") for c in cells[0].split(",")]
+        bones = [b.strip() for b in cells[1].split(",")]
+        axes = [a.strip() for a in cells[2].split(",")]
+        signs = [float(s) for s in cells[3].split(",")]
+        for k, channel in enumerate(channels):
+            drive = drives[channel]
+            assert drive.bone == bones[min(k, len(bones) - 1)], channel
+            axis = "xyz"[list(drive.axis).index(1.0)]
+            assert axis == axes[min(k, len(axes) - 1)], channel
+            assert drive.sign == signs[min(k, len(signs) - 1)], channel
+            seen.add(channel)
+    assert seen == set(drives), f"undocumented: {sorted(set(drives) - seen)}"
