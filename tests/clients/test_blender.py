@@ -80,9 +80,11 @@ def test_blender_drives_armatures_from_the_stream_and_imports_a_take(tmp_path: P
     finally:
         server.stop()
     assert result["error"] is None
-    samples = result["samples"]
-    assert len(samples) >= 40, "about 50 frames a second for 2 s"
-    assert len({s["seq"] for s in samples}) == len(samples)
+    samples, applied = result["samples"], result["applied"]
+    # It drove for the whole 2 s of stream, newest frames only (how many depends on the machine's load).
+    assert applied[-1]["t"] - applied[0]["t"] >= 1.5
+    assert [a["seq"] for a in applied] == sorted({a["seq"] for a in applied})
+    assert len(samples) >= 3
     rig, saddle = rider_rig(), HORSE_RIG.index["saddle"]
     for sample in samples:
         rider = rider_pose(sample["values"][: len(RIDER_NAMES)])
