@@ -49,10 +49,9 @@ def test_the_khronos_validator_finds_no_error_or_warning(glb: Path) -> None:
     assert {m["code"] for m in issues["messages"]} <= {"UNUSED_OBJECT"}
 
 
-def _read(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
+def _read(gltf: pygltflib.GLTF2, index: int, blob: bytes) -> np.ndarray:
     accessor = gltf.accessors[index]
     view = gltf.bufferViews[accessor.bufferView]
-    blob = gltf.binary_blob()
     width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[accessor.type]
     start = view.byteOffset + (accessor.byteOffset or 0)
     data = np.frombuffer(blob, dtype="<f4", count=accessor.count * width, offset=start)
@@ -78,11 +77,12 @@ def test_node_animation_read_by_pygltflib_poses_both_skeletons_like_the_solver(
     gltf = pygltflib.GLTF2().load(str(glb))
     assert gltf.asset.version == "2.0"
     animation = gltf.animations[0]
-    times = _read(gltf, animation.samplers[0].input)[:, 0]
+    blob = gltf.binary_blob()
+    times = _read(gltf, animation.samplers[0].input, blob)[:, 0]
     np.testing.assert_allclose(times, take.t, atol=1e-5)
     local = {i: (np.array(n.translation or [0, 0, 0], float), np.eye(3)) for i, n in enumerate(gltf.nodes)}
     for ch in animation.channels:
-        values = _read(gltf, animation.samplers[ch.sampler].output)[frame].astype(float)
+        values = _read(gltf, animation.samplers[ch.sampler].output, blob)[frame].astype(float)
         t, r = local[ch.target.node]
         if ch.target.path == "rotation":
             assert abs(np.linalg.norm(values) - 1.0) < 1e-6
