@@ -96,8 +96,7 @@ def _depth_first(track: SkeletonTrack) -> list[int]:
 
 def _euler(q: FloatArray) -> FloatArray:
     """(..., N, 4) local rotations in file axes -> (..., N, 3) channel values Z, Y, X, unwrapped over time."""
-    zyx = np.radians(to_euler_xyz(q)[..., ::-1])
-    return np.asarray(np.degrees(np.unwrap(zyx, axis=-2)), dtype=np.float64)
+    return np.asarray(np.unwrap(to_euler_xyz(q)[..., ::-1], axis=-2, period=360.0), dtype=np.float64)
 
 
 def motion(track: SkeletonTrack, unit: str = "m") -> FloatArray:
