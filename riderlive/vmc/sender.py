@@ -66,7 +66,7 @@ class VmcSender:
     """Bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error``."""
     last_error: str | None = None
     _socket: socket.socket = field(init=False)
-    _start: float | None = None
+    _start: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         family = self.rider[0]
