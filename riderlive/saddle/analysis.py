@@ -35,6 +35,9 @@ ComplexArray = npt.NDArray[np.complex128]
 TAU = 2.0 * math.pi
 BEAT_GRID: FloatArray = np.geomspace(1.2, 3.4, 54)
 """Candidate beat frequencies (Hz), 2 % apart."""
+NEAR_GRID: FloatArray = np.exp(np.linspace(-0.06, 0.06, 9))
+"""Around a locked beat: 9 candidates 1.5 % apart."""
+NEAR_EXPLAINED = 0.6
 PHASES: FloatArray = np.arange(128, dtype=np.float64) / 128.0
 RANGE_PENALTY = 4.0
 """Score lost per unit of relative distance outside a gait's stride frequency range."""
@@ -235,11 +238,16 @@ def analyse(
     quiet: float = 0.15,
     current: Gait | None = None,
     stay: float = 0.03,
+    near: float | None = None,
+    sure: float = 0.85,
 ) -> Fit | None:
     """Analyse a history (``times`` increasing, ``values`` (N, 6) with NaN for missing axes).
 
     None when the history is too short for even the beat. ``current`` (the gait the
-    caller is locked to) gets ``stay`` of score as hysteresis.
+    caller is locked to) gets ``stay`` of score as hysteresis; ``near`` (its beat, Hz)
+    narrows the beat search to within 6 % of it while that explains the motion well,
+    and then the other stride (one beat or two) is tried only if the current gait
+    scores below ``sure``.
     """
     if len(times) < 8:
         return None
@@ -251,7 +259,17 @@ def analyse(
     if seen < min_beats / BEAT_GRID[-1]:
         return None
     vertical = values[recent][:, [1, 5]] / CHANNEL_SCALE[[1, 5]]
-    beat, _ = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]])
+    beat = 0.0
+    hypotheses: tuple[int, ...] = (2, 1)
+    if near is not None and current is not None:  # locked: look around the locked beat first
+        grid = near * NEAR_GRID
+        beat, explained = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]], grid)
+        if grid[0] < beat < grid[-1] and explained >= NEAR_EXPLAINED:
+            hypotheses = (templates[current].beats,)  # the other stride only if this one fails (below)
+        else:
+            beat = 0.0
+    if beat == 0.0:
+        beat, _ = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]])
     if seen < min_beats / beat:
         return None
     span = -float(tau[0])
@@ -265,7 +283,11 @@ def analyse(
     )
     scores: list[tuple[Gait, float]] = []
     activity = 0.0
-    for beats in (2, 1):
+    if len(hypotheses) == 1:
+        hypotheses = (hypotheses[0], 3 - hypotheses[0])  # the other only if the locked gait fits badly
+    for beats in hypotheses:
+        if beats != hypotheses[0] and near is not None and best[1] is current and best[0] - stay >= sure:
+            break
         stride = beat / beats
         if span < min_strides / stride:
             continue

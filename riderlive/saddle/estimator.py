@@ -48,8 +48,8 @@ class Model:
     """Static parameters (seconds, metres, degrees); ``docs/saddle.md`` explains each."""
 
     point: SaddlePoint = field(default_factory=SaddlePoint)
-    analysis_period: float = 0.05  # between analyses while locked ...
-    search_period: float = 0.05  # ... and while searching
+    analysis_period: float = 0.1  # between analyses while locked and sure ...
+    search_period: float = 0.05  # ... and otherwise
     history: float = 3.0
     resolution: float = 0.005
     max_interval: float = 0.2  # a longer wait between samples is a gap
@@ -317,9 +317,11 @@ def _analyse(model: Model, state: State) -> State:
             window_strides=model.window_strides,
             beat_window=window,
             current=current,
+            near=tr.track.frequency * model.templates[tr.track.gait].beats if current and tr.track else None,
         )
     tr = replace(tr, fit=fit, counters=replace(tr.counters, analyses=tr.counters.analyses + 1))
-    period = model.analysis_period if tr.lock is Lock.LOCKED else model.search_period
+    sure = tr.lock is Lock.LOCKED and tr.fit is not None and tr.fit.score >= model.lock_score
+    period = model.analysis_period if sure else model.search_period
     state = state._replace(rows=(), next_analysis=t + period)
     if fit is None:
         return _settle(model, state, tr, Lock.NO_SIGNAL, miss=True)
@@ -405,13 +407,17 @@ def _baseline(model: Model, tr: Tracking, fit: Fit) -> Tracking:
     valid = np.isfinite(turns).all(axis=1)
     base, slope = list(fit.level), list(fit.slope)
     if np.count_nonzero(valid) >= 3:
-        r = np.nan_to_num(turns[valid])
-        lever = saddle_from_trunk((0.0, 0.0, 0.0, r[:, 0], r[:, 1], r[:, 2]), 0.0, model.point, ARRAY)
-        x = np.column_stack([np.ones(np.count_nonzero(valid)), tau[valid]])
-        (c0, c1), *_ = np.linalg.lstsq(x, np.column_stack(lever[:3]), rcond=None)
+        r, tau = turns[valid], tau[valid]
+        lever = np.column_stack(
+            saddle_from_trunk((0.0, 0.0, 0.0, r[:, 0], r[:, 1], r[:, 2]), 0.0, model.point, ARRAY)[:3]
+        )
+        centred = tau - tau.mean()
+        spread = float(centred @ centred)
+        lever_slope = centred @ lever / spread if spread > 0.0 else np.zeros(3)
+        lever_level = lever.mean(axis=0) - lever_slope * tau.mean()  # the line at tau = 0 (fit.t)
         for i in range(3):
-            base[i] -= float(c0[i])
-            slope[i] -= float(c1[i])
+            base[i] -= float(lever_level[i])
+            slope[i] -= float(lever_slope[i])
     return replace(tr, base=tuple(base), base_slope=tuple(slope), base_t=fit.t, level=level)
 
 
