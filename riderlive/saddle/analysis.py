@@ -83,12 +83,18 @@ def _design(tau: FloatArray, frequency: float, harmonics: int) -> FloatArray:
     return np.column_stack(columns)
 
 
-def _solve(x: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+def _solve(
+    x: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], weight: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray]:
     """Least squares of every channel of ``y`` (N, C) on its valid rows against ``x`` (N, P).
 
-    Returns the coefficients (C, P) and the sum of squares each fit explains (C,).
-    Channels with the same valid rows (all of them, usually) share one solve.
+    Returns the coefficients (C, P) and the (weighted) sum of squares each fit explains
+    (C,). Rows count with ``weight`` (N,) if given. Channels with the same valid rows
+    (all of them, usually) share one solve.
     """
+    if weight is not None:
+        root = np.sqrt(weight)
+        x, y = x * root[:, None], y * root[:, None]
     beta = np.zeros((y.shape[1], x.shape[1]))
     explained = np.zeros(y.shape[1])
     groups: dict[bytes, list[int]] = {}
@@ -109,7 +115,11 @@ def _solve(x: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_]) -> tuple[F
 
 
 def beat_frequency(
-    tau: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], grid: FloatArray = BEAT_GRID
+    tau: FloatArray,
+    y: FloatArray,
+    mask: npt.NDArray[np.bool_],
+    grid: FloatArray = BEAT_GRID,
+    weight: FloatArray | None = None,
 ) -> tuple[float, float]:
     """``(Hz, fraction of variance explained)`` of the strongest sinusoid in ``y`` (N, C) over ``grid``.
 
@@ -123,13 +133,15 @@ def beat_frequency(
         w = mask[:, c].astype(np.float64)
         if np.count_nonzero(w) < 8:
             continue
+        if weight is not None:
+            w *= weight
         v = np.where(mask[:, c], y[:, c], 0.0)
         s0, s1, s2 = w.sum(), w @ tau, w @ (tau * tau)
-        sy, sty, syy = v.sum(), tau @ v, v @ v
+        sy, sty, syy = w @ v, (w * tau) @ v, w @ (v * v)
         base = np.array([[s0, s1], [s1, s2]])
         base_rhs = np.array([sy, sty])
         total = syy - base_rhs @ np.linalg.solve(base, base_rhs)  # variance after constant and trend
-        columns = np.column_stack([w, w * tau, v])  # (N, 3)
+        columns = np.column_stack([w, w * tau, w * v])  # (N, 3)
         c_sums, s_sums = cos @ columns, sin @ columns  # (J, 3): sum w cos, sum w tau cos, sum y cos
         gram = np.empty((len(grid), 4, 4))
         gram[:, 0, 0], gram[:, 0, 1], gram[:, 1, 1] = s0, s1, s2
@@ -167,10 +179,12 @@ class StrideFit:
     smooth: float
 
 
-def stride_fit(tau: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], stride: float) -> StrideFit:
+def stride_fit(
+    tau: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], stride: float, weight: FloatArray | None = None
+) -> StrideFit:
     """The first two harmonics of ``stride`` (Hz) in every channel, referred to ``tau = 0``."""
     x = _design(tau, stride, 2)
-    beta, _ = _solve(x, y, mask)
+    beta, _ = _solve(x, y, mask, weight)
     harmonics = (beta[:, 2::2] - 1j * beta[:, 3::2]).astype(np.complex128)
     residual = np.where(mask, y - x @ beta.T, 0.0)
     r = residual[:, [1, 5]] / CHANNEL_SCALE[[1, 5]]
@@ -240,6 +254,9 @@ def analyse(
     stay: float = 0.03,
     near: float | None = None,
     sure: float = 0.85,
+    recency_beats: float = 0.0,
+    recency_strides: float = 0.0,
+    changed_window: float = 0.6,
 ) -> Fit | None:
     """Analyse a history (``times`` increasing, ``values`` (N, 6) with NaN for missing axes).
 
@@ -263,11 +280,14 @@ def analyse(
     hypotheses: tuple[int, ...] = (2, 1)
     if near is not None and current is not None:  # locked: look around the locked beat first
         grid = near * NEAR_GRID
-        beat, explained = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]], grid)
+        weight = np.exp(tau[recent] * (near / recency_beats)) if recency_beats else None
+        beat, explained = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]], grid, weight)
         if grid[0] < beat < grid[-1] and explained >= NEAR_EXPLAINED:
             hypotheses = (templates[current].beats,)  # the other stride only if this one fails (below)
-        else:
+        else:  # the motion changed: judge by the newest samples only
             beat = 0.0
+            recent = recent[tau[recent] >= -changed_window]
+            vertical = values[recent][:, [1, 5]] / CHANNEL_SCALE[[1, 5]]
     if beat == 0.0:
         beat, _ = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]])
     if seen < min_beats / beat:
@@ -293,7 +313,8 @@ def analyse(
             continue
         window = min(window_strides / stride, span)
         rows = _thin(tau >= -window, STRIDE_SAMPLES)
-        fit = stride_fit(tau[rows], values[rows], mask[rows], stride)
+        weight = np.exp(tau[rows] * (stride / recency_strides)) if recency_strides else None
+        fit = stride_fit(tau[rows], values[rows], mask[rows], stride, weight)
         if best[4] is None:
             best = (-math.inf, None, stride, None, fit, window)
         for template in templates.values():

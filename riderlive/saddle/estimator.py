@@ -57,7 +57,7 @@ class Model:
     continuous: float = 0.5  # the stream must run without gaps this long before its pose is used
     hold: float = 0.5  # the estimate runs on this long after the last sample, then eases out
     ease: float = 0.25  # s: hooves and pose ease in and out, gaits blend, over this long at most ...
-    ease_strides: float = 0.3  # ... or over this many strides of the locked gait, if shorter
+    ease_strides: float = 0.2  # ... or over this many strides of the locked gait, if shorter
     lock_score: float = 0.85
     keep_score: float = 0.7
     confirm_phase: float = 0.08  # strides: two analyses agreeing this well confirm a lock
@@ -71,9 +71,12 @@ class Model:
     smooth_residual: float = 0.5  # lag-1 autocorrelation above which unexplained motion is motion, not noise
     level_time: float = 20.0  # pitch and roll keep their level; it follows the mean this slowly
     window_strides: float = 1.25  # the stride fit's window
+    stay: float = 0.01  # score bonus of the locked gait (hysteresis between look-alike gaits)
     beat_beats: float = 1.6  # the beat fit's window, in beats of the last beat found ...
     beat_window: tuple[float, float] = (0.7, 1.2)  # ... within these seconds
     min_rate: float = 8.0  # samples per second a window needs
+    recency_beats: float = 0.0  # recent samples weigh more: e-fold over this many beats (0: all alike)
+    recency_strides: float = 0.0  # ... and in the stride fit over this many strides
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_templates", templates(self.point))
@@ -317,7 +320,10 @@ def _analyse(model: Model, state: State) -> State:
             window_strides=model.window_strides,
             beat_window=window,
             current=current,
+            stay=model.stay,
             near=tr.track.frequency * model.templates[tr.track.gait].beats if current and tr.track else None,
+            recency_beats=model.recency_beats,
+            recency_strides=model.recency_strides,
         )
     tr = replace(tr, fit=fit, counters=replace(tr.counters, analyses=tr.counters.analyses + 1))
     sure = tr.lock is Lock.LOCKED and tr.fit is not None and tr.fit.score >= model.lock_score
