@@ -18,6 +18,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -65,6 +66,7 @@ class Model:
     pll_gain: float = 0.5
     frequency_gain: float = 0.5
     smoothing: float = 0.016  # time constant of the pose's smoothing (s)
+    limits: tuple[float, ...] = (5.0, 5.0, 5.0, 360.0, 360.0, 360.0)  # beyond: the axis is missing
     glitch_distance: float = 0.3  # m (and x 100 deg): a sample that far off the last ...
     glitch_speed: float = 3.0  # ... plus this many m/s (x 100 deg/s) of the gap, is a glitch
     rebase_samples: int = 3  # ... unless that many samples in a row stay there: a re-zero
@@ -208,21 +210,28 @@ def _far(model: Model, a: tuple[float, ...], b: tuple[float, ...], dt: float) ->
     return False
 
 
-def step(model: Model, state: State, t: float, values: Any) -> State:
-    """The state after one sample at time ``t`` (s) of the six saddle values (NaN: axis missing)."""
+def step(model: Model, state: State, t: float, values: Sequence[float]) -> State:
+    """The state after one sample at time ``t`` (s) of the six saddle values (m, deg).
+
+    An axis that is NaN, infinite or beyond ``model.limits`` counts as missing; a
+    sample with no usable axis, the wrong length, or a time not after the last is
+    counted (``empty``) and otherwise ignored.
+    """
     t = float(t)
+    dt = t - state.t
+    if len(values) != CHANNELS or not (dt > 0.0 and t - t == 0.0):
+        return _counted(state._replace(samples=state.samples + 1), empty=1)
     offset = state.offset
     sample: list[float] = []
     missing = False
-    for v, o in zip(values, offset, strict=False):
+    for v, o, limit in zip(values, offset, model.limits, strict=True):
         x = float(v)
-        if x - x == 0.0:  # finite
+        if -limit <= x <= limit:  # False for NaN too
             sample.append(x - o)
         else:
             sample.append(math.nan)
             missing = True
-    dt = t - state.t
-    if len(sample) != CHANNELS or not (dt > 0.0 and t - t == 0.0) or (missing and all(math.isnan(x) for x in sample)):
+    if missing and all(math.isnan(x) for x in sample):
         return _counted(state._replace(samples=state.samples + 1), empty=1)
     fresh = state.t == -math.inf
     if not fresh and _far(model, state.last, tuple(sample), dt):
@@ -275,7 +284,8 @@ def _glitch(model: Model, state: State, sample: tuple[float, ...], dt: float) ->
         suspect = (sample,)
     if len(suspect) < model.rebase_samples:
         return _counted(state._replace(suspect=suspect), glitches=1), None
-    jump = tuple(0.0 if math.isnan(s) or math.isnan(p) else s - p for s, p in zip(sample, state.last, strict=True))
+    first = suspect[0]  # the step happened between the last good sample and the first suspect
+    jump = tuple(0.0 if math.isnan(s) or math.isnan(p) else s - p for s, p in zip(first, state.last, strict=True))
     offset = tuple(o + d for o, d in zip(state.offset, jump, strict=True))
     shifted = tuple(s - d for s, d in zip(sample, jump, strict=True))
     state = _counted(state._replace(offset=offset, suspect=()), glitches=1 - len(suspect), rebases=1)
@@ -409,7 +419,8 @@ def _baseline(model: Model, tr: Tracking, fit: Fit) -> Tracking:
         level = tuple(p + a * (f - p) for p, f in zip(tr.level, level_now, strict=True))
     rows = tr.times >= fit.t - fit.span
     tau = tr.times[rows] - fit.t
-    turns = tr.values[rows][:, 3:]
+    turns = tr.values[rows][:, 3:] - np.array([level[3], fit.level[4], level[5]])  # the rotation that is motion
+    turns[:, 1] -= fit.slope[4] * tau
     valid = np.isfinite(turns).all(axis=1)
     base, slope = list(fit.level), list(fit.slope)
     if np.count_nonzero(valid) >= 3:

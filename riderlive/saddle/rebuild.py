@@ -49,6 +49,19 @@ def _fade(model: Model, state: State, t: float) -> float:
     return 1.0 - u * u * (3.0 - 2.0 * u)
 
 
+def _distance(model: Model, state: State, t: float) -> float:
+    """Distance travelled (m): the oscillator's speed, slowing to a stop (smoothstep) once the stream stops."""
+    track = state.tracking.track
+    if track is None:
+        return 0.0
+    held = state.t + model.hold
+    if t <= held:
+        return track.distance(t)
+    u = min((t - held) / model.ease, 1.0)
+    coasted = u - u * u * u + 0.5 * u * u * u * u  # the integral of 1 - smoothstep over [0, u]
+    return track.distance(held) + track.speed * model.ease * coasted
+
+
 def _legs(model: Model, track: Track, t: float) -> list[float]:
     layer = model.templates[track.gait].layer
     return to_rig_sides(layer.pose_at(track.phase(t), track.speed, HORSE_SCALAR))
@@ -94,8 +107,7 @@ def horse_frame(model: Model, state: State, t: float) -> list[float]:
     body = _body(model, state, t, tr.hooves.at(t) * fade)
     saddle = measured_saddle(model, state, t, tr.pose.at(t) * fade)
     trunk = trunk_from_saddle(saddle, body[BEND], model.point, SCALAR)
-    track = tr.track
-    distance = track.distance(t) if track is not None else 0.0
+    distance = _distance(model, state, t)
     frame = [*body[:HOOVES], *trunk, body[BEND], distance, 0.0, 0.0, 0.0]
     assert len(frame) == len(HORSE)
     return frame
