@@ -145,7 +145,7 @@ def test_samples_out_of_order_or_misshapen_are_counted_and_ignored(trot) -> None
         (math.nan, v[300].tolist()),
         (t[300], [math.nan] * 6),  # nothing usable
         (t[300], [1e9, -1e9, 1e12, 5e3, -9e3, 1e300]),  # nothing plausible
-        (t[300], v[300].tolist() + [0.0]),  # seven values
+        (t[300], [*v[300].tolist(), 0.0]),  # seven values
         (t[300], v[300].tolist()[:5]),
     ]:
         state = step(MODEL, state, bad_t, bad_row)
