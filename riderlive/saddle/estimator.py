@@ -65,7 +65,7 @@ class Model:
     misses: int = 3  # analyses without a fit before a lock is let go
     pll_gain: float = 0.5
     frequency_gain: float = 0.5
-    smoothing: float = 0.016  # time constant of the pose's smoothing (s)
+    smoothing: float = 0.004  # time constant of the pose's smoothing (s): noise off, little delay
     limits: tuple[float, ...] = (5.0, 5.0, 5.0, 360.0, 360.0, 360.0)  # beyond: the axis is missing
     glitch_distance: float = 0.3  # m (and x 100 deg): a sample that far off the last ...
     glitch_speed: float = 3.0  # ... plus this many m/s (x 100 deg/s) of the gap, is a glitch

@@ -91,3 +91,17 @@ def test_rate_changes_from_1000_to_10_hz_keep_the_lock() -> None:
     assert run.rebuilt.final.tracking.counters.losses == 0
     for channel, value in run.correlations(locked + 0.3).items():
         assert value >= 0.85, (channel, value)
+
+
+def test_the_estimate_is_data_the_service_can_publish() -> None:
+    import orjson
+
+    from riderlive.saddle.estimator import estimate
+
+    run = GaitCase.draw("canter", seed=3).run(4.0, IMU_STRAP, MODEL)
+    published = estimate(run.rebuilt.final).as_dict()
+    assert published["gait"] == "canter" and published["lock"] == "locked"
+    assert GAIT_TABLE[Gait.CANTER].frequency[0] <= published["stride_hz"] <= GAIT_TABLE[Gait.CANTER].frequency[1]
+    assert 0.0 <= published["phase"] < 1.0 and published["score"] > 0.85
+    assert set(published["counters"]) >= {"samples", "missing", "gaps", "glitches", "rebases", "locks", "losses"}
+    assert orjson.loads(orjson.dumps(published)) == published
