@@ -83,18 +83,12 @@ def _design(tau: FloatArray, frequency: float, harmonics: int) -> FloatArray:
     return np.column_stack(columns)
 
 
-def _solve(
-    x: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], weight: FloatArray | None = None
-) -> tuple[FloatArray, FloatArray]:
+def _solve(x: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
     """Least squares of every channel of ``y`` (N, C) on its valid rows against ``x`` (N, P).
 
-    Returns the coefficients (C, P) and the (weighted) sum of squares each fit explains
-    (C,). Rows count with ``weight`` (N,) if given. Channels with the same valid rows
-    (all of them, usually) share one solve.
+    Returns the coefficients (C, P) and the sum of squares each fit explains (C,).
+    Channels with the same valid rows (all of them, usually) share one solve.
     """
-    if weight is not None:
-        root = np.sqrt(weight)
-        x, y = x * root[:, None], y * root[:, None]
     beta = np.zeros((y.shape[1], x.shape[1]))
     explained = np.zeros(y.shape[1])
     groups: dict[bytes, list[int]] = {}
@@ -119,7 +113,6 @@ def beat_frequency(
     y: FloatArray,
     mask: npt.NDArray[np.bool_],
     grid: FloatArray = BEAT_GRID,
-    weight: FloatArray | None = None,
 ) -> tuple[float, float]:
     """``(Hz, fraction of variance explained)`` of the strongest sinusoid in ``y`` (N, C) over ``grid``.
 
@@ -130,8 +123,6 @@ def beat_frequency(
     cos, sin = np.cos(angle), np.sin(angle)
     w = mask.astype(np.float64)  # (N, C)
     used = np.count_nonzero(w, axis=0) >= 8
-    if weight is not None:
-        w *= weight[:, None]
     v = np.where(mask, y, 0.0)
     wt = w * tau[:, None]
     s0, s1, s2 = w.sum(axis=0), tau @ w, tau @ wt  # (C,)
@@ -178,12 +169,10 @@ class StrideFit:
     smooth: float
 
 
-def stride_fit(
-    tau: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], stride: float, weight: FloatArray | None = None
-) -> StrideFit:
+def stride_fit(tau: FloatArray, y: FloatArray, mask: npt.NDArray[np.bool_], stride: float) -> StrideFit:
     """The first two harmonics of ``stride`` (Hz) in every channel, referred to ``tau = 0``."""
     x = _design(tau, stride, 2)
-    beta, _ = _solve(x, y, mask, weight)
+    beta, _ = _solve(x, y, mask)
     harmonics = (beta[:, 2::2] - 1j * beta[:, 3::2]).astype(np.complex128)
     residual = np.where(mask, y - x @ beta.T, 0.0)
     r = residual[:, [1, 5]] / CHANNEL_SCALE[[1, 5]]
@@ -253,8 +242,6 @@ def analyse(
     stay: float = 0.03,
     near: float | None = None,
     sure: float = 0.85,
-    recency_beats: float = 0.0,
-    recency_strides: float = 0.0,
     changed_window: float = 0.6,
 ) -> Fit | None:
     """Analyse a history (``times`` increasing, ``values`` (N, 6) with NaN for missing axes).
@@ -279,8 +266,7 @@ def analyse(
     hypotheses: tuple[int, ...] = (2, 1)
     if near is not None and current is not None:  # locked: look around the locked beat first
         grid = near * NEAR_GRID
-        weight = np.exp(tau[recent] * (near / recency_beats)) if recency_beats else None
-        beat, explained = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]], grid, weight)
+        beat, explained = beat_frequency(tau[recent], vertical, mask[recent][:, [1, 5]], grid)
         if grid[0] < beat < grid[-1] and explained >= NEAR_EXPLAINED:
             hypotheses = (templates[current].beats,)  # the other stride only if this one fails (below)
         else:  # the motion changed: judge by the newest samples only
@@ -312,8 +298,7 @@ def analyse(
             continue
         window = min(window_strides / stride, span)
         rows = _thin(tau >= -window, STRIDE_SAMPLES)
-        weight = np.exp(tau[rows] * (stride / recency_strides)) if recency_strides else None
-        fit = stride_fit(tau[rows], values[rows], mask[rows], stride, weight)
+        fit = stride_fit(tau[rows], values[rows], mask[rows], stride)
         if best[4] is None:
             best = (-math.inf, None, stride, None, fit, window)
         for template in templates.values():

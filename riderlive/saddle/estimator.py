@@ -77,8 +77,6 @@ class Model:
     beat_beats: float = 1.6  # the beat fit's window, in beats of the last beat found ...
     beat_window: tuple[float, float] = (0.7, 1.2)  # ... within these seconds
     min_rate: float = 8.0  # samples per second a window needs
-    recency_beats: float = 0.0  # recent samples weigh more: e-fold over this many beats (0: all alike)
-    recency_strides: float = 0.0  # ... and in the stride fit over this many strides
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_templates", templates(self.point))
@@ -135,6 +133,41 @@ class Ease:
 
 
 @dataclass(frozen=True, slots=True)
+class Line:
+    """Per channel ``level + slope * (t - t0)``."""
+
+    level: tuple[float, ...]
+    slope: tuple[float, ...]
+    t0: float
+
+    def at(self, i: int, t: float) -> float:
+        return self.level[i] + self.slope[i] * (t - self.t0)
+
+
+@dataclass(frozen=True, slots=True)
+class Drift:
+    """The baseline: the line from the last analysis, eased in from the one before over ``blend`` s."""
+
+    line: Line
+    prior: Line
+    since: float
+    blend: float
+
+    def at(self, i: int, t: float) -> float:
+        new = self.line.at(i, t)
+        u = (t - self.since) / self.blend
+        if u >= 1.0:
+            return new
+        u = max(u, 0.0)
+        old = self.prior.at(i, t)
+        return old + (new - old) * u * u * (3.0 - 2.0 * u)
+
+    def now(self, t: float) -> Line:
+        """The baseline at ``t`` as one line (the start of the next blend)."""
+        return Line(tuple(self.at(i, t) for i in range(CHANNELS)), self.line.slope, t)
+
+
+@dataclass(frozen=True, slots=True)
 class Counters:
     """Everything odd the estimator saw, counted (published with the estimate)."""
 
@@ -154,10 +187,9 @@ class Tracking:
     times: FloatArray = field(default_factory=lambda: np.empty(0))
     values: FloatArray = field(default_factory=lambda: np.empty((0, CHANNELS)))
     fit: Fit | None = None
-    base: tuple[float, ...] = _ZERO6  # drift line at base_t: translations and yaw
-    base_slope: tuple[float, ...] = _ZERO6
-    base_t: float = 0.0
+    drift: Drift | None = None  # the baseline of translations and yaw (a line per channel)
     level: tuple[float, ...] | None = None  # pitch and roll level (slow mean)
+    levels: int = 0  # lines that went into the level
     lock: Lock = Lock.NO_SIGNAL
     track: Track | None = None
     previous: Track | None = None  # the track a switch blends from
@@ -320,7 +352,8 @@ def _analyse(model: Model, state: State) -> State:
     t = state.t
     tr = _history(model, state)
     fit = None
-    if _dense_enough(model, tr.times, t):
+    dense = _dense_enough(model, tr.times, t)
+    if dense:
         current = tr.track.gait if tr.lock is Lock.LOCKED and tr.track else None
         window = min(max(model.beat_beats / tr.fit.beat, model.beat_window[0]), model.beat_window[1]) if tr.fit else 1.2
         fit = analyse(
@@ -332,16 +365,14 @@ def _analyse(model: Model, state: State) -> State:
             current=current,
             stay=model.stay,
             near=tr.track.frequency * model.templates[tr.track.gait].beats if current and tr.track else None,
-            recency_beats=model.recency_beats,
-            recency_strides=model.recency_strides,
         )
+        tr = _baseline(model, tr, t, fit)
     tr = replace(tr, fit=fit, counters=replace(tr.counters, analyses=tr.counters.analyses + 1))
     sure = tr.lock is Lock.LOCKED and tr.fit is not None and tr.fit.score >= model.lock_score
     period = model.analysis_period if sure else model.search_period
     state = state._replace(rows=(), next_analysis=t + period)
-    if fit is None:
-        return _settle(model, state, tr, Lock.NO_SIGNAL, miss=True)
-    tr = _baseline(model, tr, fit)
+    if fit is None:  # too sparse a stream, or too short a history for the beat found
+        return _settle(model, state, tr, Lock.SEARCHING if dense else Lock.NO_SIGNAL, miss=True)
     if fit.gait is None:
         return _settle(model, state, tr, Lock.STILL, miss=True, force=True)
     template = model.templates[fit.gait]
@@ -402,40 +433,58 @@ def _settle(model: Model, state: State, tr: Tracking, lock: Lock, *, miss: bool 
     return state._replace(tracking=tr)
 
 
-def _baseline(model: Model, tr: Tracking, fit: Fit) -> Tracking:
+def _baseline(model: Model, tr: Tracking, t: float, fit: Fit | None) -> Tracking:
     """The drift line of the translations and the yaw, and the slow level of pitch and roll.
 
-    The fit's constant and trend per channel over its window, less (for the
-    translations) the line that the saddle's own rotation about the hips explains:
-    pitching up 50 deg in a rear lifts a saddle 0.6 m ahead of the hips by 0.45 m, and
-    that is motion, not drift. Pitch and roll keep their level (gravity holds an IMU's);
-    it follows the fits' constant with the time constant ``level_time``.
+    While a gait fits (score at least ``keep_score``), each channel's constant and
+    trend from the stride fit, which are free of the stride's oscillation; otherwise a
+    straight line through the whole history (``model.history`` s), so that a jump or a
+    rear stays motion. For the translations, less the line that the saddle's own
+    rotation about the hips explains: pitching up 50 deg in a rear lifts a saddle 0.6 m
+    ahead of the hips by 0.45 m, and that is motion, not drift. Pitch and roll keep
+    their level (gravity holds an IMU's): the running mean of the lines' level, then
+    (once that mean spans ``level_time``) an exponential one with that time constant.
+    Each new line eases in over ``analysis_period``.
     """
-    level_now = fit.level
-    if tr.level is None:
-        level = level_now
+    tau = tr.times - t
+    if fit is not None and fit.gait is not None and fit.score >= model.keep_score:
+        level = np.array(fit.level) + np.array(fit.slope) * (t - fit.t)
+        slope = np.array(fit.slope)
+        rows = tau >= -fit.span
     else:
-        a = 1.0 - math.exp(-model.analysis_period / model.level_time)
-        level = tuple(p + a * (f - p) for p, f in zip(tr.level, level_now, strict=True))
-    rows = tr.times >= fit.t - fit.span
-    tau = tr.times[rows] - fit.t
-    turns = tr.values[rows][:, 3:] - np.array([level[3], fit.level[4], level[5]])  # the rotation that is motion
-    turns[:, 1] -= fit.slope[4] * tau
+        level, slope = _line(tau, tr.values)
+        rows = np.ones(len(tau), dtype=bool)
+    count = tr.levels + 1  # a running mean at first (early lines are short and rough), then slow
+    a = max(1.0 - math.exp(-model.analysis_period / model.level_time), 1.0 / count)
+    previous = tr.level or tuple(level.tolist())
+    held = tuple(p + a * (f - p) for p, f in zip(previous, level.tolist(), strict=True))
+    turns = tr.values[rows][:, 3:] - np.array([held[3], level[4], held[5]])  # the rotation that is motion
+    turns[:, 1] -= slope[4] * tau[rows]
     valid = np.isfinite(turns).all(axis=1)
-    base, slope = list(fit.level), list(fit.slope)
     if np.count_nonzero(valid) >= 3:
-        r, tau = turns[valid], tau[valid]
+        r = turns[valid]
         lever = np.column_stack(
             saddle_from_trunk((0.0, 0.0, 0.0, r[:, 0], r[:, 1], r[:, 2]), 0.0, model.point, ARRAY)[:3]
         )
-        centred = tau - tau.mean()
-        spread = float(centred @ centred)
-        lever_slope = centred @ lever / spread if spread > 0.0 else np.zeros(3)
-        lever_level = lever.mean(axis=0) - lever_slope * tau.mean()  # the line at tau = 0 (fit.t)
-        for i in range(3):
-            base[i] -= float(lever_level[i])
-            slope[i] -= float(lever_slope[i])
-    return replace(tr, base=tuple(base), base_slope=tuple(slope), base_t=fit.t, level=level)
+        lever_level, lever_slope = _line(tau[rows][valid], lever)
+        level[:3] -= lever_level
+        slope[:3] -= lever_slope
+    line = Line(tuple(level.tolist()), tuple(slope.tolist()), t)
+    prior = tr.drift.now(t) if tr.drift is not None else line
+    return replace(tr, drift=Drift(line, prior, t, model.analysis_period), level=held, levels=count)
+
+
+def _line(tau: FloatArray, values: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least-squares ``(level at tau = 0, slope)`` per column of ``values`` (NaN rows skipped)."""
+    valid = np.isfinite(values)
+    w = valid.astype(np.float64)
+    v = np.where(valid, values, 0.0)
+    s0, s1, s2 = w.sum(axis=0), tau @ w, (tau * tau) @ w
+    det = s0 * s2 - s1 * s1
+    ok = (s0 >= 3) & (det > 1e-12)
+    slope = np.where(ok, (s0 * (tau @ v) - s1 * v.sum(axis=0)) / np.where(ok, det, 1.0), 0.0)
+    level = np.where(s0 > 0, (v.sum(axis=0) - slope * s1) / np.maximum(s0, 1.0), 0.0)
+    return level, slope
 
 
 @dataclass(frozen=True, slots=True)

@@ -86,16 +86,16 @@ def _body(model: Model, state: State, t: float, weight: float) -> list[float]:
 def measured_saddle(model: Model, state: State, t: float, weight: float) -> list[float]:
     """The measured saddle pose at ``t``: smoothed, baseline removed, weighted (m, deg)."""
     tr = state.tracking
-    if weight <= 0.0:
+    drift, level = tr.drift, tr.level
+    if weight <= 0.0 or drift is None or level is None:
         return [0.0] * 6
-    level = tr.level or tr.base
     out = []
     for i, drifting in enumerate(DRIFTING):
         value = state.smooth[i]
         if math.isnan(value):  # an axis never seen
             out.append(0.0)
             continue
-        base = tr.base[i] + tr.base_slope[i] * (t - tr.base_t) if drifting else level[i]
+        base = drift.at(i, t) if drifting else level[i]
         out.append((value - base) * weight)
     return out
 
