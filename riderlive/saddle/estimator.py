@@ -26,8 +26,10 @@ import numpy.typing as npt
 
 from riderlive.horse.gaits import Gait
 from riderlive.saddle.analysis import Fit, analyse
-from riderlive.saddle.pose import ARRAY, SaddlePoint, saddle_from_trunk
+from riderlive.saddle.baseline import Drift, baseline
+from riderlive.saddle.pose import SaddlePoint
 from riderlive.saddle.templates import Template, templates
+from riderlive.saddle.track import Ease, Track
 
 FloatArray = npt.NDArray[np.float64]
 CHANNELS = 6
@@ -92,82 +94,6 @@ class Model:
 
 
 @dataclass(frozen=True, slots=True)
-class Track:
-    """The stride oscillator: ``phase(t) = phase0 + rate * (t - t0)`` (strides)."""
-
-    gait: Gait
-    phase0: float
-    t0: float
-    rate: float  # the oscillator's Hz (frequency plus the phase correction)
-    frequency: float  # the estimated stride frequency (Hz)
-    speed: float  # m/s, from the gait's frequency law
-    distance0: float = 0.0  # m travelled by t0
-
-    def phase(self, t: float) -> float:
-        return self.phase0 + self.rate * (t - self.t0)
-
-    def distance(self, t: float) -> float:
-        return self.distance0 + self.speed * (t - self.t0)
-
-
-@dataclass(frozen=True, slots=True)
-class Ease:
-    """A weight easing (smoothstep) from ``start`` to ``target`` from ``t0`` over ``duration`` s."""
-
-    start: float = 0.0
-    target: float = 0.0
-    t0: float = -math.inf
-    duration: float = 1.0
-
-    def at(self, t: float) -> float:
-        u = (t - self.t0) / self.duration
-        if u >= 1.0:
-            return self.target
-        u = max(u, 0.0)
-        return self.start + (self.target - self.start) * u * u * (3.0 - 2.0 * u)
-
-    def toward(self, target: float, t: float, duration: float) -> Ease:
-        if target == self.target:
-            return self
-        return Ease(self.at(t), target, t, duration)
-
-
-@dataclass(frozen=True, slots=True)
-class Line:
-    """Per channel ``level + slope * (t - t0)``."""
-
-    level: tuple[float, ...]
-    slope: tuple[float, ...]
-    t0: float
-
-    def at(self, i: int, t: float) -> float:
-        return self.level[i] + self.slope[i] * (t - self.t0)
-
-
-@dataclass(frozen=True, slots=True)
-class Drift:
-    """The baseline: the line from the last analysis, eased in from the one before over ``blend`` s."""
-
-    line: Line
-    prior: Line
-    since: float
-    blend: float
-
-    def at(self, i: int, t: float) -> float:
-        new = self.line.at(i, t)
-        u = (t - self.since) / self.blend
-        if u >= 1.0:
-            return new
-        u = max(u, 0.0)
-        old = self.prior.at(i, t)
-        return old + (new - old) * u * u * (3.0 - 2.0 * u)
-
-    def now(self, t: float) -> Line:
-        """The baseline at ``t`` as one line (the start of the next blend)."""
-        return Line(tuple(self.at(i, t) for i in range(CHANNELS)), self.line.slope, t)
-
-
-@dataclass(frozen=True, slots=True)
 class Counters:
     """Everything odd the estimator saw, counted (published with the estimate)."""
 
@@ -196,8 +122,8 @@ class Tracking:
     switched: float = -math.inf
     candidate: Track | None = None
     missed: int = 0
-    hooves: Ease = Ease()  # weight of the gait's hooves (1 when locked)
-    pose: Ease = Ease()  # weight of the measured pose (0 when it is noise or gone)
+    hooves: Ease = field(default_factory=Ease)  # weight of the gait's hooves (1 when locked)
+    pose: Ease = field(default_factory=Ease)  # weight of the measured pose (0 when it is noise or gone)
     counters: Counters = Counters()
 
 
@@ -434,57 +360,21 @@ def _settle(model: Model, state: State, tr: Tracking, lock: Lock, *, miss: bool 
 
 
 def _baseline(model: Model, tr: Tracking, t: float, fit: Fit | None) -> Tracking:
-    """The drift line of the translations and the yaw, and the slow level of pitch and roll.
-
-    While a gait fits (score at least ``keep_score``), each channel's constant and
-    trend from the stride fit, which are free of the stride's oscillation; otherwise a
-    straight line through the whole history (``model.history`` s), so that a jump or a
-    rear stays motion. For the translations, less the line that the saddle's own
-    rotation about the hips explains: pitching up 50 deg in a rear lifts a saddle 0.6 m
-    ahead of the hips by 0.45 m, and that is motion, not drift. Pitch and roll keep
-    their level (gravity holds an IMU's): the running mean of the lines' level, then
-    (once that mean spans ``level_time``) an exponential one with that time constant.
-    Each new line eases in over ``analysis_period``.
-    """
-    tau = tr.times - t
-    if fit is not None and fit.gait is not None and fit.score >= model.keep_score:
-        level = np.array(fit.level) + np.array(fit.slope) * (t - fit.t)
-        slope = np.array(fit.slope)
-        rows = tau >= -fit.span
-    else:
-        level, slope = _line(tau, tr.values)
-        rows = np.ones(len(tau), dtype=bool)
-    count = tr.levels + 1  # a running mean at first (early lines are short and rough), then slow
-    a = max(1.0 - math.exp(-model.analysis_period / model.level_time), 1.0 / count)
-    previous = tr.level or tuple(level.tolist())
-    held = tuple(p + a * (f - p) for p, f in zip(previous, level.tolist(), strict=True))
-    turns = tr.values[rows][:, 3:] - np.array([held[3], level[4], held[5]])  # the rotation that is motion
-    turns[:, 1] -= slope[4] * tau[rows]
-    valid = np.isfinite(turns).all(axis=1)
-    if np.count_nonzero(valid) >= 3:
-        r = turns[valid]
-        lever = np.column_stack(
-            saddle_from_trunk((0.0, 0.0, 0.0, r[:, 0], r[:, 1], r[:, 2]), 0.0, model.point, ARRAY)[:3]
-        )
-        lever_level, lever_slope = _line(tau[rows][valid], lever)
-        level[:3] -= lever_level
-        slope[:3] -= lever_slope
-    line = Line(tuple(level.tolist()), tuple(slope.tolist()), t)
-    prior = tr.drift.now(t) if tr.drift is not None else line
-    return replace(tr, drift=Drift(line, prior, t, model.analysis_period), level=held, levels=count)
-
-
-def _line(tau: FloatArray, values: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Least-squares ``(level at tau = 0, slope)`` per column of ``values`` (NaN rows skipped)."""
-    valid = np.isfinite(values)
-    w = valid.astype(np.float64)
-    v = np.where(valid, values, 0.0)
-    s0, s1, s2 = w.sum(axis=0), tau @ w, (tau * tau) @ w
-    det = s0 * s2 - s1 * s1
-    ok = (s0 >= 3) & (det > 1e-12)
-    slope = np.where(ok, (s0 * (tau @ v) - s1 * v.sum(axis=0)) / np.where(ok, det, 1.0), 0.0)
-    level = np.where(s0 > 0, (v.sum(axis=0) - slope * s1) / np.maximum(s0, 1.0), 0.0)
-    return level, slope
+    """The baseline after an analysis at ``t`` (:func:`riderlive.saddle.baseline.baseline`)."""
+    periodic = fit is not None and fit.gait is not None and fit.score >= model.keep_score
+    window = fit if periodic else None
+    drift, level = baseline(
+        tr.times,
+        tr.values,
+        t,
+        window=window,
+        point=model.point,
+        drift=tr.drift,
+        level=tr.level,
+        levels=tr.levels,
+        timing=model,
+    )
+    return replace(tr, drift=drift, level=level, levels=tr.levels + 1)
 
 
 @dataclass(frozen=True, slots=True)

@@ -30,8 +30,9 @@ import numpy.typing as npt
 from riderlive.channels import HORSE
 from riderlive.horse.curves import SCALAR as HORSE_SCALAR
 from riderlive.horse.model import to_rig_sides
-from riderlive.saddle.estimator import Model, State, Track, estimate, step
+from riderlive.saddle.estimator import Model, State, estimate, step
 from riderlive.saddle.pose import SCALAR, trunk_from_saddle
+from riderlive.saddle.track import Track
 
 FloatArray = npt.NDArray[np.float64]
 BODY = 19
