@@ -40,7 +40,7 @@ _ZERO6 = (0.0,) * CHANNELS
 class Lock(enum.Enum):
     """What the estimator knows: published as the lock state."""
 
-    NO_SIGNAL = "no_signal"  # no usable stream: nothing yet, stopped, or too sparse (gaps)
+    NO_SIGNAL = "no_signal"  # no usable stream: nothing yet, or too sparse (gaps)
     STILL = "still"  # a steady stream without periodic motion (a halt, a constant stream)
     SEARCHING = "searching"  # moving, but no gait fits (a transition, a jump, noise)
     LOCKED = "locked"  # a gait, its stride frequency and phase
@@ -379,7 +379,12 @@ def _baseline(model: Model, tr: Tracking, t: float, fit: Fit | None) -> Tracking
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """What the estimator publishes: gait, stride frequency (Hz), phase (0-1), lock, counters."""
+    """What the estimator publishes.
+
+    Gait, stride frequency (Hz), phase (0-1), speed (m/s), lock, the match's score,
+    ``age`` (s since the last sample, None before the first: a stopped stream shows
+    here, and the rebuilt frame eases to standing after ``Model.hold``) and the counters.
+    """
 
     gait: str | None
     stride_hz: float
@@ -387,6 +392,7 @@ class Estimate:
     speed: float
     lock: str
     score: float
+    age: float | None
     counters: dict[str, int]
 
     def as_dict(self) -> dict[str, Any]:
@@ -397,6 +403,7 @@ class Estimate:
             "speed": self.speed,
             "lock": self.lock,
             "score": self.score,
+            "age": self.age,
             "counters": self.counters,
         }
 
@@ -415,5 +422,6 @@ def estimate(state: State, t: float | None = None) -> Estimate:
         speed=track.speed if track else 0.0,
         lock=tr.lock.value,
         score=tr.fit.score if tr.fit else 0.0,
+        age=t - state.t if state.t > -math.inf else None,
         counters=counters,
     )

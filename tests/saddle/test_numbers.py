@@ -102,6 +102,6 @@ def test_the_estimate_is_data_the_service_can_publish() -> None:
     published = estimate(run.rebuilt.final).as_dict()
     assert published["gait"] == "canter" and published["lock"] == "locked"
     assert GAIT_TABLE[Gait.CANTER].frequency[0] <= published["stride_hz"] <= GAIT_TABLE[Gait.CANTER].frequency[1]
-    assert 0.0 <= published["phase"] < 1.0 and published["score"] > 0.85
+    assert 0.0 <= published["phase"] < 1.0 and published["score"] > 0.85 and published["age"] == 0.0
     assert set(published["counters"]) >= {"samples", "missing", "gaps", "glitches", "rebases", "locks", "losses"}
     assert orjson.loads(orjson.dumps(published)) == published
