@@ -46,20 +46,20 @@ def test_saddle_of_a_horse_take_and_of_the_procedural_horse_agree(tmp_path: Path
     np.testing.assert_allclose(read_frames(str(direct)).values, expected, atol=1e-12)
 
 
-def test_a_strap_recording_baked_into_a_rider_and_rebuilt_into_a_horse(tmp_path: Path) -> None:
+def test_a_strap_recording_baked_into_a_rider_and_rebuilt_into_a_horse(tmp_path: Path, cli) -> None:
     rec, rider, horse = tmp_path / "rec.csv", tmp_path / "rider.csv", tmp_path / "horse.csv"
-    result = run_cli("saddle", "--gait", "trot", "--seconds", "6", "--imu-strap", "--seed", "2", "-o", str(rec))
-    assert result.returncode == 0, result.stderr
+    code, err = cli("saddle", "--gait", "trot", "--seconds", "6", "--imu-strap", "--seed", "2", "-o", str(rec))
+    assert code == 0, err
     recording = read_frames(str(rec))
     assert 0.85 < len(recording) / 720 < 0.95  # 10 % dropped
-    result = run_cli("bake", str(rec), "--saddle", "-o", str(rider))
+    result = run_cli("bake", str(rec), "--saddle", "-o", str(rider))  # the installed command, end to end
     assert result.returncode == 0, result.stderr
     baked = read_frames(str(rider))
     assert baked.names[-6:] == SADDLE_NAMES and baked.names[0] == "lower_back.rz"
     np.testing.assert_array_equal(baked.values[:, -6:], recording.values)  # the saddle as recorded
-    result = run_cli("saddle", "--rebuild", str(rec), "-o", str(horse))
-    assert result.returncode == 0, result.stderr
-    assert "locked:trot" in result.stderr and "counters:" in result.stderr
+    code, err = cli("saddle", "--rebuild", str(rec), "-o", str(horse))
+    assert code == 0, err
+    assert "locked:trot" in err and "counters:" in err
     rebuilt = read_frames(str(horse))
     assert rebuilt.names == HORSE_NAMES
     rider_model = RiderModel(scale=DEFAULT_SCALE)  # a saddle take bakes with 25 units per metre

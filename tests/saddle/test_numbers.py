@@ -31,7 +31,7 @@ def _stride_hz(gait: str) -> float:
 @pytest.mark.parametrize(("faults", "floor"), [(None, 0.9), (IMU_STRAP, 0.85)], ids=["clean", "imu-strap"])
 def test_lock_within_two_strides_then_the_rider_follows(gait: str, faults, floor: float) -> None:
     case = GaitCase.draw(gait, seed=1)
-    run = case.run(9.0, faults, MODEL)
+    run = case.run(7.0, faults, MODEL)
     locked = run.locked_from(gait)
     assert locked is not None, run.rebuilt.lock[-1]
     hooves_in = locked + MODEL.ease_time(case.stride_hz)
@@ -43,8 +43,8 @@ def test_lock_within_two_strides_then_the_rider_follows(gait: str, faults, floor
 @pytest.mark.parametrize("gait", GAITS)
 def test_phase_and_frequency_after_lock(gait: str) -> None:
     case = GaitCase.draw(gait, seed=2)
-    run = case.run(8.0, None, MODEL)
-    script = gait_script(gait, 8.0, case.speed, seed=case.seed + 1)
+    run = case.run(6.0, None, MODEL)
+    script = gait_script(gait, 6.0, case.speed, seed=case.seed + 1)
     layer = script.start(script.model()).layer
     assert isinstance(layer, GaitLayer)
     locked = run.locked_from(gait)
@@ -71,7 +71,7 @@ def test_phase_and_frequency_after_lock(gait: str) -> None:
 )
 def test_relock_within_two_strides_of_a_gait_change(before: str, after: str, strides: float) -> None:
     change = 5.0
-    script = ShotScript(seed=4, segment=[Segment(gait=before, seconds=change), Segment(gait=after, seconds=6.0)])
+    script = ShotScript(seed=4, segment=[Segment(gait=before, seconds=change), Segment(gait=after, seconds=4.0)])
     run = trial(script, 120.0, start=0.2, imperfections=IMU_STRAP, seed=4, model=MODEL)
     assert run.rebuilt.gait[int(np.searchsorted(run.t, change))] == before
     locked = run.locked_from(after, after=change)
