@@ -38,6 +38,7 @@ BEAT_GRID: FloatArray = np.geomspace(1.2, 3.4, 54)
 NEAR_GRID: FloatArray = np.exp(np.linspace(-0.06, 0.06, 9))
 """Around a locked beat: 9 candidates 1.5 % apart."""
 NEAR_EXPLAINED = 0.6
+_LOWER = np.tril_indices(4, -1)
 PHASES: FloatArray = np.arange(128, dtype=np.float64) / 128.0
 RANGE_PENALTY = 4.0
 """Score lost per unit of relative distance outside a gait's stride frequency range."""
@@ -139,8 +140,7 @@ def beat_frequency(
     gram[..., 0, 2], gram[..., 0, 3] = c_sums[:, :channels], s_sums[:, :channels]
     gram[..., 1, 2], gram[..., 1, 3] = c_sums[:, channels : 2 * channels], s_sums[:, channels : 2 * channels]
     gram[..., 2, 2], gram[..., 3, 3], gram[..., 2, 3] = cc, s0 - cc, cs
-    lower = np.tril_indices(4, -1)
-    gram[..., lower[0], lower[1]] = gram[..., lower[1], lower[0]]
+    gram[..., _LOWER[0], _LOWER[1]] = gram[..., _LOWER[1], _LOWER[0]]
     gram += np.eye(4) * (1e-12 * np.maximum(s0, 1e-12))[:, None, None]
     rhs = np.empty((n, channels, 4))
     rhs[..., 0], rhs[..., 1] = sy, sty
@@ -325,8 +325,8 @@ def analyse(
         phase=found.phase,
         score=found.score,
         size=found.size,
-        level=tuple(np.nan_to_num(fit.level).tolist()),
-        slope=tuple(np.nan_to_num(fit.slope).tolist()),
+        level=tuple(fit.level.tolist()),
+        slope=tuple(fit.slope.tolist()),
         smooth=fit.smooth,
         span=window,
         half=found.half,
