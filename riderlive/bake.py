@@ -46,15 +46,23 @@ def bake_table(
     return FrameTable(names, picked, times)
 
 
+def with_saddle(rider: FrameTable, saddle: FrameTable) -> FrameTable:
+    """``rider``'s columns followed by the saddle's six (same rows)."""
+    return FrameTable(rider.names + saddle.names, np.column_stack([rider.values, saddle.values]), rider.t)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="horse take: .csv or .jsonl, or - for stdin")
+    parser.add_argument("input", help="horse or saddle take: .csv or .jsonl, or - for stdin")
     parser.add_argument("-o", "--output", required=True, help="rider take to write (.csv, .jsonl, or -)")
     parser.add_argument("--preset", default="kuhnel2003", help="preset name or TOML path (default kuhnel2003)")
-    parser.add_argument("--scale", type=float, default=1.0, help="input length units -> thesis rig units")
+    parser.add_argument(
+        "--scale", type=float, help="input length units -> thesis rig units (default 1; a saddle take: 25 per metre)"
+    )
     parser.add_argument("--channels", help="comma-separated rider channels to write (default all)")
     parser.add_argument("--offsets", help="TOML with [offsets] and [gains] per rider channel")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
     parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+    parser.add_argument("--saddle", action="store_true", help="also write the saddle channels (saddle.tx .. rz)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,14 +72,36 @@ def run(args: argparse.Namespace) -> int:
             if name not in RIDER_INDEX:
                 raise FrameFileError("--channels", f"unknown rider channel {name!r}")
         animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
-        model = RiderModel(params=load_preset(args.preset), scale=args.scale, animator=animator)
-        table = read_frames(args.input, required=RULE_INPUTS, fmt=args.format)
+        table = read_frames(args.input, fmt=args.format)
+        saddle, scale = None, 1.0
+        from riderlive.saddle.takes import horse_take, is_saddle_take, saddle_take
+
+        if is_saddle_take(table):  # a rider from the saddle alone (docs/saddle.md)
+            from riderlive.horse import DEFAULT_SCALE
+
+            saddle, scale = FrameTable(table.names, table.values, table.t), DEFAULT_SCALE
+            table, _ = horse_take(table, rate=args.rate)
+        else:
+            missing = [name for name in RULE_INPUTS if name not in table.names]
+            if missing:
+                raise FrameFileError(args.input, f"missing required channel(s): {', '.join(missing)}", line=1)
+        model = RiderModel(
+            params=load_preset(args.preset), scale=scale if args.scale is None else args.scale, animator=animator
+        )
         result = bake_table(table, model, channels, rate=args.rate)
+        if args.saddle:
+            result = with_saddle(result, saddle_take(table) if saddle is None else _saddle_columns(saddle))
         _write_with_progress(args.output, result, args.format)
     except (FrameFileError, ConfigError, ValueError) as exc:
         print(f"riderlive bake: {exc}", file=sys.stderr)
         return 2
     return 0
+
+
+def _saddle_columns(table: FrameTable) -> FrameTable:
+    from riderlive.channels import SADDLE_NAMES
+
+    return FrameTable(SADDLE_NAMES, table.values[:, [table.names.index(n) for n in SADDLE_NAMES]], table.t)
 
 
 def _write_with_progress(path: str, table: FrameTable, fmt: str | None) -> None:

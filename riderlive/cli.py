@@ -12,6 +12,7 @@ from riderlive import __version__
 COMMANDS: dict[str, tuple[str, str]] = {
     "bake": ("riderlive.bake", "evaluate the rider rules on a horse take"),
     "horse": ("riderlive.horse.cli", "write a procedural horse take (gait or shot script)"),
+    "saddle": ("riderlive.saddle.cli", "write the saddle pose of a horse; rebuild a horse from a saddle"),
     "plot": ("riderlive.plot", "plot channels of a frame file over time"),
     "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),

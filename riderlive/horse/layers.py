@@ -75,6 +75,10 @@ class GaitLayer:
 
     def pose(self, t: Any, ops: Ops) -> list[Any]:
         phase, v = self.phase(t, ops)
+        return self.pose_at(phase, v, ops)
+
+    def pose_at(self, phase: Any, v: Any, ops: Ops) -> list[Any]:
+        """The body channels at stride ``phase`` and ground speed ``v`` (m/s): the leg cycle and trunk."""
         a, b = self.spec.frequency_slope
         half_step = v / (2.0 * (a + b * v))  # reach = duty * half_step: half the support sweep
         vary, where, floor, scalar = self.variation, ops.where, ops.floor, not ops.is_array

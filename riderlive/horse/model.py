@@ -242,6 +242,11 @@ _TO_RIG_SIDE = tuple(
 """The layers count sideways + to the horse's left; the rig is right-handed (+Z right)."""
 
 
+def to_rig_sides(pose: list[Any]) -> list[Any]:
+    """A layer's body channels (sideways + left) in the rig's convention (+Z right)."""
+    return [v if sign > 0.0 else -v for v, sign in zip(pose, _TO_RIG_SIDE, strict=True)]
+
+
 def frame(state: State, t: Any, ops: Ops) -> list[Any]:
     """All channels of ``channels.HORSE`` at ``t`` (float or array) from ``state``.
 
@@ -249,9 +254,7 @@ def frame(state: State, t: Any, ops: Ops) -> list[Any]:
     right, so ``tz`` is + right and ``rearPivot.rx`` is + when the horse rolls right.
     """
     _, _, x = state.ramp.at(t, ops)
-    pose = state.layer.pose(t, ops)
-    body = [v if sign > 0.0 else -v for v, sign in zip(pose, _TO_RIG_SIDE, strict=True)]
-    return [*body, state.x0 + x, 0.0, 0.0, 0.0]
+    return [*to_rig_sides(state.layer.pose(t, ops)), state.x0 + x, 0.0, 0.0, 0.0]
 
 
 def step(model: Model, state: State, t: float) -> tuple[State, list[float]]:

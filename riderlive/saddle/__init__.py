@@ -1,13 +1,21 @@
 """The saddle motion stream: the saddle pose out of any horse, and a rider from a saddle alone.
 
-- :mod:`riderlive.saddle.pose`: ``channels.SADDLE`` (``saddle.tx ty tz rx ry rz``) from
-  any horse frame, and back (pure, scalar and NumPy from one source).
+- :mod:`~riderlive.saddle.pose`: ``channels.SADDLE`` (``saddle.tx ty tz rx ry rz``,
+  metres and degrees) from any horse frame, and back; one source for floats and NumPy.
+- :mod:`~riderlive.saddle.estimator`: ``Model`` / ``State`` / ``step(model, state, t,
+  values)``: saddle samples in, gait, stride frequency, phase and lock out; no clock.
+  ``estimate(state, t)`` is the publishable view.
+- :mod:`~riderlive.saddle.rebuild`: ``horse_frame(model, state, t)``, the horse the
+  rules ride (the procedural horse's hooves at the estimated gait and phase, the
+  measured trunk); ``rebuild`` for a whole take.
+- :mod:`~riderlive.saddle.synthetic`: seeded, realistic synthetic recordings.
 
 See ``docs/saddle.md``.
 """
 
 from __future__ import annotations
 
+from riderlive.saddle.estimator import Lock, Model, State, estimate, step
 from riderlive.saddle.pose import (
     BACK_MID,
     WITHERS,
@@ -17,13 +25,21 @@ from riderlive.saddle.pose import (
     saddle_matrix,
     trunk_from_saddle,
 )
+from riderlive.saddle.rebuild import horse_frame, rebuild
 
 __all__ = [
     "BACK_MID",
     "WITHERS",
+    "Lock",
+    "Model",
     "SaddlePoint",
+    "State",
+    "estimate",
+    "horse_frame",
+    "rebuild",
     "saddle_from_horse",
     "saddle_from_trunk",
     "saddle_matrix",
+    "step",
     "trunk_from_saddle",
 ]

@@ -83,7 +83,7 @@ def test_the_back_bend_tilts_a_saddle_on_the_front_segment_only() -> None:
     st.floats(0.0, 0.95),
     st.floats(-0.3, 0.5),
 )
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 def test_inverse_round_trip_and_scalar_equals_batch(
     t: list[float], r: list[float], bend: float, forward: float, up: float
 ) -> None:
