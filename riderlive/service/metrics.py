@@ -8,6 +8,9 @@ from dataclasses import dataclass, field
 from riderlive.realtime.pacing import LATENESS_BUCKETS
 
 LATENCY_BUCKETS: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5)
+MAX_PRODUCER_LABELS = 32
+"""Producer names with their own ``riderlive_frames_in_total`` series; later names count as ``other``."""
+OTHER = "other"
 
 
 @dataclass
@@ -52,12 +55,20 @@ class ServiceMetrics:
 
     bad_frames: Counter[str] = field(default_factory=Counter)
     frames_in: Counter[str] = field(default_factory=Counter)
-    """Accepted horse frames per producer name."""
+    """Accepted horse frames per producer name (at most ``MAX_PRODUCER_LABELS`` names, then ``other``)."""
+    clock_jumps: Counter[str] = field(default_factory=Counter)
+    """Producer clock jumps by direction (``forward``, ``backward``): new stream segments."""
     ticks_published: int = 0
     ticks_coalesced: int = 0
     """Ticks that arrived together with a newer one (the web process was late)."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+
+    def count_frame_in(self, producer: str) -> None:
+        """One accepted frame; the label set stays bounded however many names producers choose."""
+        if producer not in self.frames_in and len(self.frames_in) >= MAX_PRODUCER_LABELS:
+            producer = OTHER
+        self.frames_in[producer] += 1
 
 
 def _escape(value: str) -> str:
@@ -104,6 +115,8 @@ def render(
         ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
         ("physics_errors", "Tail physics restarts from rest after a failed or non-finite step."),
         ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
+        ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
+        ("outputs_clamped", "Rider values clamped to their plausible range."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
@@ -146,6 +159,12 @@ def render(
         "counter",
         "Rejected messages by reason.",
         [f'riderlive_bad_frames_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.bad_frames.items())],
+    )
+    metric(
+        "riderlive_clock_jumps_total",
+        "counter",
+        "Producer clock jumps (a new stream segment each), by direction.",
+        [f'riderlive_clock_jumps_total{{direction="{d}"}} {metrics.clock_jumps[d]}' for d in ("backward", "forward")],
     )
     metric(
         "riderlive_clients_cut_off_total",

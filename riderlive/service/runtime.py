@@ -10,7 +10,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from riderlive.channels import HORSE_NAMES
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
@@ -37,7 +37,9 @@ def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[
         blend_time=config.input.blend_time,
         resume_after=source.resume_after,
         fallback_procedural=source.fallback_procedural,
+        param_blend=config.tick.param_blend_time,
     )
+    low, high = config.ranges.ranges().limits(RIDER_NAMES, config.tick.length_scale)
     return TickSetup(
         rate=config.tick.rate,
         start=time.perf_counter(),
@@ -58,6 +60,7 @@ def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[
         tail=config.physics.tail,
         physics_file=config.physics.file,
         extra_channels=extra_channels,
+        rider_bounds=(tuple(low), tuple(high)),
     )
 
 
@@ -78,7 +81,8 @@ class Service:
         self.metrics = ServiceMetrics()
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
-        self.ingest = IngestEndpoint(self)
+        self.ranges = config.ranges.ranges()
+        self.ingest = IngestEndpoint(self, self.ranges)
         self.source: dict[str, Any] = {"kind": config.source.kind}
         if config.source.kind == "procedural":
             self.source.update(gait=config.source.gait, speed=config.source.speed)

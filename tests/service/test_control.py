@@ -20,6 +20,10 @@ from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
 
+PARAM_BLEND = 0.5
+"""``tick.param_blend_time`` (the default)."""
+HEAD = RIDER_INDEX["head.rz"]
+
 
 def test_openapi_documents_the_control_paths(server: LiveServer) -> None:
     paths = server.get("/openapi.json").json()["paths"]
@@ -48,13 +52,27 @@ def test_params_patch_changes_the_next_frames(server: LiveServer) -> None:
         assert server.request("PUT", "/api/source", json={"kind": "procedural", "gait": "walk"}).status_code == 200
         bad = server.request("PATCH", "/api/params", json={"head.no_such": 1.0})
         assert bad.status_code == 422
+        old = RiderModel(params=load_preset("kuhnel2003"), scale=25.0)
+        asked = time.perf_counter()
         response = server.request("PATCH", "/api/params", json={"head.offset": 12.5})
         assert response.status_code == 200 and response.json()["head.offset"] == 12.5
-        changed = time.perf_counter()
         params = load_preset("kuhnel2003").with_values({"head.offset": 12.5})
         model = RiderModel(params=params, scale=25.0)
-        frame = follower.wait_for(lambda f: f["at"] > changed + 0.05)
-        np.testing.assert_allclose(frame["values"], model.evaluate(frame["horse"]), atol=1e-9)
+        follower.wait_for(lambda f: f["at"] > asked + PARAM_BLEND + 0.2, timeout=5)
+        frames = [f for f in follower.frames if f["at"] > asked - 0.05]
+        first = next(i for i, f in enumerate(frames) if abs(f["values"][HEAD] - old.evaluate(f["horse"])[HEAD]) > 1e-9)
+        start = frames[first - 1]  # the tick that took the change still shows the old model (the fade starts at 1)
+        np.testing.assert_allclose(start["values"], old.evaluate(start["horse"]), atol=1e-9)
+        delta = np.subtract(old.evaluate(start["horse"]), model.evaluate(start["horse"]))
+        assert abs(delta[HEAD]) > 5.0, "the change is large enough to see a jump"
+        for frame in frames[first - 1 :]:
+            x = min(max((frame["t"] - start["t"]) / PARAM_BLEND, 0.0), 1.0)
+            fade = 1.0 - x * x * (3.0 - 2.0 * x)
+            expected = np.add(model.evaluate(frame["horse"]), delta * fade)
+            np.testing.assert_allclose(frame["values"], expected, atol=1e-9, err_msg="blends over param_blend_time")
+        steps = np.abs(np.diff([f["values"][HEAD] for f in frames[first - 1 :]]))
+        assert steps.max() < abs(delta[HEAD]) / 10, "no jump (without the blend, one tick would move the whole delta)"
+        np.testing.assert_allclose(frames[-1]["values"], model.evaluate(frames[-1]["horse"]), atol=1e-9)
         assert server.get("/api/params").json()["head.offset"] == 12.5
         assert server.request("PUT", "/api/preset", json={"name": "child"}).json() == {"current": "child"}
         assert "child" in server.get("/api/presets").json()["presets"]
