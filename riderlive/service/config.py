@@ -54,6 +54,9 @@ class TickSection(StrictModel):
     length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
     """Thesis rig units per service length unit (25 = the service speaks metres)."""
     preset: str = "kuhnel2003"
+    preset_dirs: list[str] = pydantic.Field(default_factory=list)
+    """Directories of the deployment's presets; ``PUT /api/preset`` loads only from these
+    and the shipped ``config/presets`` (by name, never by path)."""
     param_blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=10.0)
     """Seconds over which a change of preset, parameters or animator layer blends in."""
 
@@ -132,7 +135,8 @@ class PublishSection(StrictModel):
 
 class TakesSection(StrictModel):
     directory: str = "takes"
-    flush_interval: float = pydantic.Field(default=0.5, gt=0.0, le=1.0)
+    flush_interval: float = pydantic.Field(default=0.25, gt=0.0, le=1.0)
+    """Seconds between writes of a take: a killed server loses at most this plus one tick."""
 
 
 class RigSection(StrictModel):

@@ -60,7 +60,7 @@ class ServiceMetrics:
     """Producer clock jumps by direction (``forward``, ``backward``): new stream segments."""
     ticks_published: int = 0
     ticks_coalesced: int = 0
-    """Ticks that arrived together with a newer one (the web process was late)."""
+    """Ticks not sent: the web process fell more than ``publish.MAX_CATCH_UP`` ticks behind."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
 
@@ -175,7 +175,7 @@ def render(
     metric(
         "riderlive_ticks_coalesced_total",
         "counter",
-        "Ticks that reached the web process together with a newer one.",
+        "Ticks not sent because the web process fell more than MAX_CATCH_UP (64) ticks behind.",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
     metric(

@@ -53,6 +53,8 @@ _ids = itertools.count(1)
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
+MAX_CATCH_UP = 64
+"""Ticks sent at once after the web process was late; older ones are skipped (coalesced)."""
 
 
 @dataclass(eq=False)
@@ -166,60 +168,54 @@ class Hub:
         return [*RIDER, *(lookup(name) for name in self.service.extra_channels)]
 
     def publish(self, records: list[np.ndarray]) -> None:
-        """Offer the newest of ``records`` (new ticks, oldest first) to every client.
+        """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.
 
-        A client with decimation N gets the newest record whose ``seq % N == 0``, so
-        its frames stay evenly spaced even when the web process was late and several
-        ticks arrived at once. Each (subscription, record) is encoded once.
+        A client with decimation N gets every record whose ``seq % N == 0``, in order:
+        when the web process was late and several ticks arrived at once, a client that
+        keeps up still gets all of them (at most the newest :data:`MAX_CATCH_UP`; older
+        ones are counted as coalesced). Each (subscription, record) is encoded once.
+        A client that is behind has frames dropped in :meth:`_write`, not here.
         """
-        rx_so_far = []
-        newest_rx = self._seen_input_rx
-        for record in records:
-            newest_rx = max(newest_rx, float(record[L.OUT_INPUT_RX]))
-            rx_so_far.append(newest_rx)
-        chosen: dict[int, int | None] = {}
-        encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
-        bones: dict[int, np.ndarray] = {}
+        metrics = self.service.metrics
+        if len(records) > MAX_CATCH_UP:
+            metrics.ticks_coalesced += len(records) - MAX_CATCH_UP
+            records = records[-MAX_CATCH_UP:]
+        clients = [c for c in self.clients.values() if not c.closed]
         now = time.perf_counter()
         timeout = self.service.config.publish.send_timeout
-        fresh_rx = -1.0
-        for client in list(self.clients.values()):
-            if client.closed:
-                continue
-            sub = client.subscription
-            decimation = sub.decimation
-            if decimation not in chosen:
-                chosen[decimation] = next(
-                    (i for i in range(len(records) - 1, -1, -1) if int(records[i][L.OUT_SEQ]) % decimation == 0),
-                    None,
-                )
-            index = chosen[decimation]
-            if index is None:
-                continue
-            key = (*sub.key, index)
-            data = encoded.get(key)
-            if data is None:
-                if sub.bones and index not in bones:
-                    bones[index] = rider_bones(records[index], self.service.config.tick.length_scale)
-                message = encode_frame(sub, records[index], bones.get(index))
-                data = (message, wire_frame(message))
-                encoded[key] = data
-            input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
-            if client.transport is None:
-                client.offer_frame(data[0], input_rx)
-                continue
-            fresh_rx = max(fresh_rx, input_rx)
-            self._write(client, data[1], now, timeout)
-        self._seen_input_rx = newest_rx
-        if fresh_rx >= 0.0:
-            self.service.metrics.input_to_send.observe(self.service.link.engine_time() - fresh_rx)
+        length_scale = self.service.config.tick.length_scale
+        for record in records:
+            seq = int(record[L.OUT_SEQ])
+            input_rx = float(record[L.OUT_INPUT_RX])
+            fresh = input_rx > self._seen_input_rx
+            if fresh:
+                self._seen_input_rx = input_rx
+            encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+            bones: np.ndarray | None = None
+            written = False
+            for client in clients:
+                sub = client.subscription
+                if seq % sub.decimation:
+                    continue
+                data = encoded.get(sub.key)
+                if data is None:
+                    if sub.bones and bones is None:
+                        bones = rider_bones(record, length_scale)
+                    message = encode_frame(sub, record, bones)
+                    data = encoded[sub.key] = (message, wire_frame(message))
+                if client.transport is None:
+                    client.offer_frame(data[0], input_rx if fresh else -1.0)
+                else:
+                    written |= self._write(client, data[1], now, timeout)
+            if fresh and written:
+                metrics.input_to_send.observe(self.service.link.engine_time() - input_rx)
 
-    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> None:
-        """The fast path: write a frame's wire bytes, or drop it if the client is behind."""
+    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> bool:
+        """The fast path: write a frame's wire bytes (True), or drop it if the client is behind."""
         transport = client.transport
-        if transport.is_closing():
+        if client.closed or transport.is_closing():
             client.closed = True
-            return
+            return False
         if transport.get_write_buffer_size() > len(wire):
             client.dropped += 1
             if client.behind_since is None:
@@ -230,10 +226,11 @@ class Hub:
                 client.closed = True
                 client.wake.set()
                 transport.abort()
-            return
+            return False
         client.behind_since = None
         transport.write(wire)
         client.sent += 1
+        return True
 
     def publish_status(self, status: dict[str, Any]) -> None:
         text = orjson.dumps({"type": "status", **status}).decode()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 import uuid
 from datetime import UTC, datetime
@@ -17,12 +18,13 @@ from riderlive.realtime.core import Mode, Timing
 from riderlive.realtime.link import TickLink
 from riderlive.realtime.tick import TickSetup
 from riderlive.rules.animator import AnimatorLayer
+from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.publish import Hub
-from riderlive.takes.recorder import TakeRecorder, take_path
+from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, take_path
 from riderlive.takes.replay import Replay, load_replay
 
 log = logging.getLogger(__name__)
@@ -83,6 +85,10 @@ class Service:
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
         self.ingest = IngestEndpoint(self, self.ranges)
+        low, high = self.ranges.limits(HORSE_NAMES, config.tick.length_scale)
+        mixed = [a if i % 2 else b for i, (a, b) in enumerate(zip(low, high, strict=True))]
+        self._probes = [[0.0] * len(low), low, high, mixed]
+        """Horse frames ``set_model`` checks new parameters on: neutral and corners of the ranges."""
         self.source: dict[str, Any] = {"kind": config.source.kind}
         if config.source.kind == "procedural":
             self.source.update(gait=config.source.gait, speed=config.source.speed)
@@ -95,6 +101,7 @@ class Service:
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
+        self.recover_takes()
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels))
         loop = asyncio.get_running_loop()
         loop.add_reader(self.link.notify_fd, self.on_tick)
@@ -126,13 +133,12 @@ class Service:
         link.drain_notify()
         records = link.read_outputs()
         if self.recorder is not None:
+            start = link.start
             for record in records:
-                self.recorder.add(
-                    float(record[L.OUT_ENGINE_T]), record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :]
-                )
+                engine_t = float(record[L.OUT_ENGINE_T])
+                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :], engine_t + start)
         if records:
-            self.metrics.ticks_coalesced += len(records) - 1
-            self.metrics.ticks_published += 1
+            self.metrics.ticks_published += len(records)
             self.hub.publish(records)
         version = link.status_blob.version
         if version != self._status_version:
@@ -156,7 +162,13 @@ class Service:
             self.source = {"kind": "live"}
         else:
             path = take_path(self.config.takes.directory, request["take"])
-            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate)
+            if not path.is_file():
+                raise FileNotFoundError(path.name)
+            if self.recorder is not None and self.recorder.path == path:
+                raise TakeExists(f"take {path.stem!r} is being recorded; stop it first")
+            limits = self.ranges.limits(HORSE_NAMES, self.config.tick.length_scale)
+            await asyncio.to_thread(recover_take, path)
+            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate, limits)
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
             self.arbiter.replay_id = producer.id
             self.arbiter.selection = "replay"
@@ -201,17 +213,58 @@ class Service:
 
     # -- rules ----------------------------------------------------------------
     def set_model(self, params: RuleParams | None = None, animator: AnimatorLayer | None = None) -> None:
-        self.params = params or self.params
-        self.animator = animator or self.animator
+        """Send new parameters or animator layer to the tick (it blends to them).
+
+        ValueError, changing nothing, when they give a non-finite rider for a horse
+        at the corners of its plausible ranges (the tick would have to hold its last frame).
+        """
+        params = params or self.params
+        animator = animator or self.animator
+        model = RiderModel(params=params, scale=self.config.tick.length_scale, animator=animator)
+        for horse in self._probes:
+            rider = model.evaluate(horse)
+            bad = next((name for name, v in zip(RIDER_NAMES, rider, strict=True) if not math.isfinite(v)), None)
+            if bad is not None:
+                raise ValueError(f"these parameters make {bad} non-finite for a plausible horse; not applied")
+        self.params, self.animator = params, animator
         self.link.send(cmd.SetModel(self.params, self.animator))
 
     # -- takes ----------------------------------------------------------------
-    def start_recording(self, name: str | None) -> str:
+    def recover_takes(self) -> None:
+        """Takes a kill interrupted (sidecar not ``complete``): trim a cut last line, mark them."""
+        folder = Path(self.config.takes.directory)
+        for path in sorted(folder.glob("*.csv")) if folder.is_dir() else ():
+            try:
+                if recover_take(path):
+                    log.warning("take %s was interrupted (killed?): recovered", path.name)
+            except OSError as exc:
+                log.warning("take %s could not be recovered: %s", path.name, exc)
+
+    def start_recording(self, name: str | None, overwrite: bool = False) -> str:
+        """Start a take; the one being recorded is closed only once the new one is open.
+
+        A bad name (ValueError) or an existing take without ``overwrite``
+        (:class:`TakeExists`) changes nothing.
+        """
+        directory = self.config.takes.directory
+        if name is None:
+            stem = datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
+            path = take_path(directory, stem)
+            n = 1
+            while path.exists():
+                n += 1
+                path = take_path(directory, f"{stem}-{n}")
+        else:
+            path = take_path(directory, name)
+        meta = {
+            "session": self.session,
+            "tick_rate": self.config.tick.rate,
+            "preset": self.params.name,
+            "length_scale": self.config.tick.length_scale,
+        }
+        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels, overwrite)
         self.stop_recording()
-        name = name or datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
-        path = take_path(self.config.takes.directory, name)
-        meta = {"session": self.session, "tick_rate": self.config.tick.rate, "preset": self.params.name}
-        self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels)
+        self.recorder = recorder
         self.take_name = path.stem
         return path.stem
 
