@@ -217,6 +217,7 @@ class IngestEndpoint:
             while True:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
+                    service.metrics.count_disconnect(message)
                     break
                 data = message.get("text")
                 if data is None:
@@ -224,7 +225,10 @@ class IngestEndpoint:
                 now = time.perf_counter()
                 try:
                     result = self.handle(producer, parse_message(data, config.input.max_message_bytes), now)
-                except BadFrame as exc:
+                except Exception as exc:
+                    if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged, never a silent drop
+                        log.exception("ingest failed on a message from %s", producer.name)
+                        exc = BadFrame("internal_error", "the service failed on this message (see its log)")
                     if await self.reject(producer, exc, now):
                         break
                     continue

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from riderlive.realtime.pacing import LATENESS_BUCKETS
 
@@ -63,6 +65,11 @@ class ServiceMetrics:
     """Ticks not sent: the web process fell more than ``publish.MAX_CATCH_UP`` ticks behind."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+
+    def count_disconnect(self, message: Mapping[str, Any]) -> None:
+        """A websocket closed; uvicorn closes with 1009 a message beyond ``ws_max_size``: count it."""
+        if message.get("code") == 1009:
+            self.bad_frames["oversize"] += 1
 
     def count_frame_in(self, producer: str) -> None:
         """One accepted frame; the label set stays bounded however many names producers choose."""

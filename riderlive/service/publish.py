@@ -38,6 +38,7 @@ from riderlive.service.codecs import (
     PROTOCOL_VERSION,
     BadFrame,
     Subscription,
+    decode_ping_id,
     decode_subscription,
     encode_frame,
     parse_message,
@@ -286,10 +287,10 @@ class Hub:
         service = self.service
         config = service.config
         offered = list(websocket.scope.get("subprotocols", []))
+        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
         if len(self.clients) >= config.publish.max_clients:
             await websocket.close(code=1013, reason="too many clients")
             return
-        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
         if config.security.publish_requires_token and not auth.token_matches(
             config.security.token, auth.token_from_subprotocols(offered)
         ):
@@ -316,6 +317,7 @@ class Hub:
             while not client.closed:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
+                    service.metrics.count_disconnect(message)
                     break
                 self.handle(client, message.get("text") or message.get("bytes") or b"")
         except (WebSocketDisconnect, RuntimeError):
@@ -337,12 +339,16 @@ class Hub:
                 )
                 client.offer_control(client.subscription.describe(service.config.tick.rate, self.names))
             elif kind == "ping":
-                client.offer_control({"type": "pong", "id": obj.get("id"), "engine_time": service.link.engine_time()})
+                pong = {"type": "pong", "id": decode_ping_id(obj), "engine_time": service.link.engine_time()}
+                client.offer_control(pong)
             elif kind == "auth":
                 pass
             else:
-                raise BadFrame("unknown_type", f"unknown message type {kind!r}")
-        except BadFrame as exc:
+                raise BadFrame("unknown_type", f"unknown message type {str(kind)[:64]!r}")
+        except Exception as exc:
+            if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged, never a silent drop
+                log.exception("publish failed on a message from %s", client.id)
+                exc = BadFrame("internal_error", "the service failed on this message (see its log)")
             service.metrics.bad_frames[exc.reason] += 1
             client.offer_control({"type": "error", "reason": exc.reason, "message": str(exc)})
 

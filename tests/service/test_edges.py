@@ -7,6 +7,7 @@ import math
 import time
 
 import numpy as np
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from riderlive.channels import HORSE_INDEX, RIDER_INDEX
@@ -109,3 +110,67 @@ def test_a_clock_that_jumps_starts_a_new_segment_and_says_so(server: LiveServer)
         follower.close()
     assert server.metric("riderlive_clock_jumps_total", 'direction="backward"') == before + 1
     assert server.metric("riderlive_clock_jumps_total", 'direction="forward"') == forward_before + 1
+
+
+def test_producer_names_give_a_bounded_set_of_metric_labels(server: LiveServer) -> None:
+    for i in range(40):
+        with connect(server.ws + "/ws/horse") as ws:
+            ws.recv(timeout=5)
+            ws.send(json.dumps({"type": "hello", "name": f"churn-{i}"}))
+            ws.send(json.dumps({"t": float(i), "values": {"rearPivot.rz": 1.0}}))
+            ws.send(json.dumps({"type": "ping-me-back"}))  # answered with an error: the frame before was handled
+            next_of(ws, "error")
+    text = server.get("/metrics").text
+    labels = [line for line in text.splitlines() if line.startswith("riderlive_frames_in_total{")]
+    assert len(labels) <= 32 + 1
+    assert server.metric("riderlive_frames_in_total", 'producer="other"') >= 8
+
+
+def test_message_limits_count_bytes_and_huge_messages_are_counted_and_closed(server: LiveServer) -> None:
+    before = server.metric("riderlive_bad_frames_total", 'reason="oversize"')
+    with connect(server.ws + "/ws/horse") as ws:
+        ws.recv(timeout=5)
+        text = json.dumps({"t": 1.0, "values": {}, "pad": "é" * 40000}, ensure_ascii=False)
+        assert len(text) < 65536 < len(text.encode())
+        ws.send(text)
+        error = next_of(ws, "error")
+        assert error["reason"] == "oversize" and "65536 bytes" in error["message"]
+    with connect(server.ws + "/ws/horse", max_size=None) as ws:
+        ws.recv(timeout=5)
+        try:
+            ws.send(b"\x00" * (16 << 20))  # the server may close while it is still being sent
+            while True:
+                ws.recv(timeout=10)
+        except ConnectionClosed as closed:
+            assert closed.rcvd is not None and closed.rcvd.code == 1009, "a close frame, with its code"
+    deadline = time.perf_counter() + 5
+    while server.metric("riderlive_bad_frames_total", 'reason="oversize"') < before + 2:
+        assert time.perf_counter() < deadline, "the 16 MB message is counted"
+        time.sleep(0.05)
+
+
+def test_every_subscribe_field_is_range_checked_and_the_client_keeps_its_frames(server: LiveServer) -> None:
+    with connect(server.ws + "/ws/rider") as ws:
+        assert json.loads(ws.recv(timeout=5))["type"] == "hello"
+        for message, field in (
+            ({"rate": 1e-300}, "'rate'"),
+            ({"rate": 1e-10}, "'rate'"),
+            ({"rate": 1e300}, "'rate'"),
+            ({"decimation": 10**6}, "'decimation'"),
+            ({"channels": ["head.rz", "head.rz"]}, "'channels'"),
+            ({"encoding": ["json"]}, "'encoding'"),
+            ({"bones": "yes"}, "'bones'"),
+        ):
+            ws.send(json.dumps({"type": "subscribe", **message}))
+            error = next_of(ws, "error")
+            assert field in error["message"], (message, error)
+        ws.send(json.dumps({"type": "ping", "id": [1, 2]}))
+        assert "'id'" in next_of(ws, "error")["message"]
+        ws.send(json.dumps({"type": "subscribe", "rate": 0.2}))
+        assert next_of(ws, "subscribed")["decimation"] == 1000
+        ws.send(json.dumps({"type": "subscribe", "rate": 100000}))
+        assert "'rate'" in next_of(ws, "error")["message"]
+        ws.send(json.dumps({"type": "subscribe", "rate": 5000}))
+        assert next_of(ws, "subscribed")["decimation"] == 1
+        frames = [next_of(ws, "frame") for _ in range(20)]
+        assert len({f["seq"] for f in frames}) == 20
