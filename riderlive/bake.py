@@ -11,6 +11,7 @@ import numpy as np
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.frameunits import resolve_scale
 from riderlive.rules.animator import AnimatorLayer, damp_series
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
@@ -50,7 +51,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("input", help="horse take: .csv or .jsonl, or - for stdin")
     parser.add_argument("-o", "--output", required=True, help="rider take to write (.csv, .jsonl, or -)")
     parser.add_argument("--preset", default="kuhnel2003", help="preset name or TOML path (default kuhnel2003)")
-    parser.add_argument("--scale", type=float, default=1.0, help="input length units -> thesis rig units")
+    parser.add_argument(
+        "--scale",
+        type=float,
+        help="thesis rig units per input length unit (25: metres); default: the input's NAME.json, else 1",
+    )
     parser.add_argument("--channels", help="comma-separated rider channels to write (default all)")
     parser.add_argument("--offsets", help="TOML with [offsets] and [gains] per rider channel")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
@@ -64,8 +69,12 @@ def run(args: argparse.Namespace) -> int:
             if name not in RIDER_INDEX:
                 raise FrameFileError("--channels", f"unknown rider channel {name!r}")
         animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
-        model = RiderModel(params=load_preset(args.preset), scale=args.scale, animator=animator)
+        params = load_preset(args.preset)
         table = read_frames(args.input, required=RULE_INPUTS, fmt=args.format)
+        scale, warning = resolve_scale(args.input, table, args.scale)
+        if warning:
+            print(f"riderlive bake: warning: {warning}", file=sys.stderr)
+        model = RiderModel(params=params, scale=scale, animator=animator)
         result = bake_table(table, model, channels, rate=args.rate)
         _write_with_progress(args.output, result, args.format)
     except (FrameFileError, ConfigError, ValueError) as exc:

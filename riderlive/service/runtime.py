@@ -168,7 +168,8 @@ class Service:
                 raise TakeExists(f"take {path.stem!r} is being recorded; stop it first")
             limits = self.ranges.limits(HORSE_NAMES, self.config.tick.length_scale)
             await asyncio.to_thread(recover_take, path)
-            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate, limits)
+            length_scale = self.config.tick.length_scale
+            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate, limits, length_scale)
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
             self.arbiter.replay_id = producer.id
             self.arbiter.selection = "replay"
