@@ -80,7 +80,7 @@ def one_run(workdir: Path, name: str) -> dict[str, object]:
             proc.kill()
     take = workdir / "takes" / f"{name}.csv"
     meta = json.loads(take.with_suffix(".json").read_text())
-    complete_sidecar = SIDECAR_KEYS <= set(meta)
+    complete_sidecar = set(meta) >= SIDECAR_KEYS
     lines = take.read_bytes().split(b"\n")
     last_t = float(lines[-2].split(b",", 1)[0]) if len(lines) > 2 else 0.0
     lost = killed_at - (meta["monotonic_t0"] + last_t)
@@ -93,6 +93,7 @@ def one_run(workdir: Path, name: str) -> dict[str, object]:
             env=dict(os.environ, PYTHONPATH=str(ROOT)),
             capture_output=True,
             text=True,
+            check=False,
         )
         with connect(f"ws://{base}/ws/rider") as ws:
             ws.recv(timeout=5)
