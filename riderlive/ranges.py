@@ -84,6 +84,7 @@ class Ranges:
             check_range(key, value)
         for kind, value in self.kinds.items():
             check_range(kind.value, value)
+        object.__setattr__(self, "_hash", hash((tuple(self.overrides.items()), tuple(self.kinds.items()))))
 
     def of(self, name: str) -> Range:
         """The range of channel ``name`` in metres, degrees or plain numbers."""
@@ -102,7 +103,7 @@ class Ranges:
         return lows, highs
 
     def __hash__(self) -> int:
-        return hash((tuple(self.overrides.items()), tuple(self.kinds.items())))
+        return self._hash  # type: ignore[attr-defined,no-any-return]
 
 
 @lru_cache(maxsize=8192)

@@ -32,10 +32,10 @@ from riderlive.service.config import ServiceConfig
 from riderlive.service.metrics import render
 from riderlive.service.rest import (
     AnimatorBody,
-    BodyLimit,
     PerformRequest,
     PresetRequest,
     RecordStart,
+    RestGuard,
     SourceRequest,
     invalid_request,
 )
@@ -63,7 +63,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     app = FastAPI(title="riderlive", version=__version__, lifespan=lifespan)
     app.state.service = service
     app.add_exception_handler(RequestValidationError, invalid_request)
-    app.add_middleware(BodyLimit, limit=config.input.max_message_bytes)
+    app.add_middleware(RestGuard, limit=config.input.max_message_bytes, rejected=service.metrics.rest_rejected)
     if config.server.cors_origins:
         app.add_middleware(
             CORSMiddleware,

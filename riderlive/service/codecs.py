@@ -32,6 +32,8 @@ FLAG_HORSE = 1
 FLAG_BONES = 2
 
 DRIVERS = ("procedural", "input", "neutral")
+MAX_TIME = 1e10
+"""Largest producer time ``|t|`` in seconds (317 years: Unix time fits; float64 still resolves 2 us)."""
 
 
 class BadFrame(ValueError):
@@ -85,6 +87,8 @@ def decode_horse_frame(obj: dict[str, Any], order: Sequence[int] | None = None) 
     if "t" not in obj:
         raise BadFrame("missing_t", "a frame needs its time 't' in seconds")
     t = _number(obj["t"], "t")
+    if not -MAX_TIME <= t <= MAX_TIME:
+        raise BadFrame("out_of_range", f"'t' = {t!r} s is outside [-{MAX_TIME:g}, {MAX_TIME:g}]")
     out: dict[int, float] = {}
     if "values" in obj:
         values = obj["values"]

@@ -323,11 +323,12 @@ class IngestEndpoint:
             producer.errors.popleft()
         websocket = producer.websocket
         assert websocket is not None
+        await send_quietly(websocket, {"type": "error", "reason": exc.reason, "message": str(exc)}, 1.0)
         if len(producer.errors) > limits.max_errors:
+            service.metrics.bad_frames["abuse"] += 1
             await send_quietly(
                 websocket, {"type": "error", "reason": "abuse", "message": "too many bad messages; closing"}, 1.0
             )
             await websocket.close(code=1008, reason="too many bad messages")
             return True
-        await send_quietly(websocket, {"type": "error", "reason": exc.reason, "message": str(exc)}, 1.0)
         return False

@@ -58,6 +58,8 @@ class ServiceMetrics:
     bad_frames: Counter[str] = field(default_factory=Counter)
     frames_in: Counter[str] = field(default_factory=Counter)
     """Accepted horse frames per producer name (at most ``MAX_PRODUCER_LABELS`` names, then ``other``)."""
+    rest_rejected: Counter[int] = field(default_factory=Counter)
+    """REST answers 4xx, by status code."""
     clock_jumps: Counter[str] = field(default_factory=Counter)
     """Producer clock jumps by direction (``forward``, ``backward``): new stream segments."""
     ticks_published: int = 0
@@ -166,6 +168,12 @@ def render(
         "counter",
         "Rejected messages by reason.",
         [f'riderlive_bad_frames_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.bad_frames.items())],
+    )
+    metric(
+        "riderlive_rest_rejected_total",
+        "counter",
+        "REST requests answered 4xx, by status.",
+        [f'riderlive_rest_rejected_total{{status="{c}"}} {n}' for c, n in sorted(metrics.rest_rejected.items())],
     )
     metric(
         "riderlive_clock_jumps_total",

@@ -6,11 +6,13 @@
   where and why, without the offending input (it may be NaN, which JSON cannot carry,
   or something the client should not see echoed).
 - A body larger than ``limit`` bytes gets **413** before it is read
-  (:class:`BodyLimit`); a chunked one is cut off at the limit (400).
+  (:class:`RestGuard`); a chunked one is cut off at the limit (400).
+- Every 4xx answer is counted by status (``riderlive_rest_rejected_total``).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Annotated, Literal
 
 import orjson
@@ -97,22 +99,29 @@ class BodyTooLarge(Exception):
     """A request body beyond the limit (raised from ``receive``)."""
 
 
-class BodyLimit:
-    """ASGI middleware: request bodies of at most ``limit`` bytes."""
+class RestGuard:
+    """ASGI middleware: request bodies of at most ``limit`` bytes; every 4xx counted in ``rejected``."""
 
-    def __init__(self, app: ASGIApp, limit: int) -> None:
+    def __init__(self, app: ASGIApp, limit: int, rejected: Counter[int]) -> None:
         self.app = app
         self.limit = limit
+        self.rejected = rejected
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+
+        async def counted(message: Message) -> None:
+            if message["type"] == "http.response.start" and 400 <= message["status"] < 500:
+                self.rejected[message["status"]] += 1
+            await send(message)
+
         length = dict(scope.get("headers", ())).get(b"content-length")
         if length is not None and (not length.isdigit() or int(length) > self.limit):
             body = orjson.dumps({"detail": f"request body over {self.limit} bytes"})
             headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
-            await send({"type": "http.response.start", "status": 413, "headers": headers})
+            await counted({"type": "http.response.start", "status": 413, "headers": headers})
             await send({"type": "http.response.body", "body": body})
             return
         received = 0
@@ -125,5 +134,5 @@ class BodyLimit:
                 raise BodyTooLarge(f"request body over {self.limit} bytes")
             return message
 
-        await self.app(scope, limited, send)
+        await self.app(scope, limited, counted)
 
