@@ -24,7 +24,6 @@ import re
 import socket
 import struct
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -35,16 +34,13 @@ import msgpack
 import orjson
 from websockets.asyncio.client import connect
 
+from bench import serving
+from bench.serving import burn
+
 ROOT = Path(__file__).resolve().parents[1]
 LATENESS = "riderlive_tick_lateness_seconds"
 LATENCY = "riderlive_input_to_send_seconds"
 COALESCED = "riderlive_ticks_coalesced_total"
-
-
-def burn(stop_at: float) -> None:
-    x = 0
-    while time.perf_counter() < stop_at:
-        x += 1
 
 
 def start_server(rate: float, isolation: str, workdir: Path, nice: int) -> tuple[subprocess.Popen[str], int]:
@@ -53,29 +49,7 @@ def start_server(rate: float, isolation: str, workdir: Path, nice: int) -> tuple
         f'[server]\nlog_level = "warning"\nnice = {nice}\n[tick]\nrate = {rate}\nisolation = "{isolation}"\n'
         "[publish]\nsend_timeout = 2.0\nmax_clients = 1000\n"
     )
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--port", "0"],
-        cwd=workdir,
-        env=dict(os.environ, PYTHONPATH=str(ROOT)),
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stderr is not None
-    port = 0
-    for line in proc.stderr:
-        match = re.search(r"listening on port (\d+)", line)
-        if match:
-            port = int(match.group(1))
-            break
-    deadline = time.perf_counter() + 30
-    while time.perf_counter() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/api/state", timeout=2).json()["counters"]["ticks"] > rate:
-                return proc, port
-        except (httpx.HTTPError, KeyError, ValueError):
-            pass
-        time.sleep(0.2)
-    raise RuntimeError("server did not start")
+    return serving.start_server(config, min_ticks=rate, timeout=30.0)
 
 
 def cpu_seconds(pid: int) -> float:

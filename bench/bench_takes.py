@@ -19,7 +19,6 @@ import json
 import multiprocessing
 import os
 import random
-import re
 import signal
 import subprocess
 import sys
@@ -30,41 +29,16 @@ from pathlib import Path
 import httpx
 from websockets.sync.client import connect
 
-ROOT = Path(__file__).resolve().parents[1]
+from bench.serving import ROOT, burn, start_server
+
 SIDECAR_KEYS = {"name", "session", "tick_rate", "preset", "length_scale", "engine_t0", "monotonic_t0", "rows"}
-
-
-def burn(stop_at: float) -> None:
-    x = 0
-    while time.perf_counter() < stop_at:
-        x += 1
 
 
 def serve(workdir: Path) -> tuple[subprocess.Popen[str], str]:
     config = workdir / "service.toml"
     config.write_text('[server]\nlog_level = "warning"\n[tick]\nrate = 120.0\nrealtime_priority = false\n')
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--port", "0"],
-        cwd=workdir,
-        env=dict(os.environ, PYTHONPATH=str(ROOT)),
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        match = re.search(r"listening on port (\d+)", line)
-        if match:
-            base = f"127.0.0.1:{match.group(1)}"
-            break
-    deadline = time.perf_counter() + 60
-    while time.perf_counter() < deadline:
-        try:
-            if httpx.get(f"http://{base}/api/state", timeout=2).json()["counters"]["ticks"] > 20:
-                return proc, base
-        except (httpx.HTTPError, KeyError, ValueError):
-            pass
-        time.sleep(0.1)
-    raise RuntimeError("server did not start")
+    proc, port = start_server(config)
+    return proc, f"127.0.0.1:{port}"
 
 
 def one_run(workdir: Path, name: str) -> dict[str, object]:
