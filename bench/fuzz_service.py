@@ -367,9 +367,6 @@ async def hostile_rest(base: str, make: Callable[[], tuple[str, str, bytes]], qu
                 raise AssertionError(f"{method} {path} {body[:80]!r}: {response.status_code} {response.text[:200]}")
             if 400 <= response.status_code < 500:
                 tally.rest[response.status_code] += 1
-        await client.post("/api/record/stop")
-        await client.put("/api/source", json={"kind": "live"})
-        await client.patch("/api/params", json={"smoothing.time_constant": 0.0, "head.offset": 5.0})
 
 
 # -- the run ------------------------------------------------------------------------------
@@ -393,6 +390,7 @@ async def fuzz(
     """Run the hostile clients against a running service (``tick.length_scale``); return the findings."""
     async with httpx.AsyncClient(base_url=base_http, timeout=20.0) as client:
         before = (await client.get("/metrics")).text
+        kept = {path: (await client.get(path)).json() for path in ("/api/params", "/api/animator", "/api/presets")}
     low, high = DEFAULT_RANGES.limits(RIDER_NAMES, length_scale)
     reader = Reader(low, high)
     stop = asyncio.Event()
@@ -419,6 +417,13 @@ async def fuzz(
     async with httpx.AsyncClient(base_url=base_http, timeout=20.0) as client:
         after = (await client.get("/metrics")).text
         state = (await client.get("/api/state")).json()
+        # Put back what valid requests among the hostile ones changed (the tick blends back).
+        await client.post("/api/record/stop")
+        await client.put("/api/source", json={"kind": "live"})
+        await client.put("/api/preset", json={"name": kept["/api/presets"]["current"]})
+        await client.patch("/api/params", json=kept["/api/params"])
+        await client.put("/api/animator", json=kept["/api/animator"])
+    await asyncio.sleep(1.0)
     counted = delta(metrics(after, "riderlive_bad_frames_total"), metrics(before, "riderlive_bad_frames_total"))
     rest = delta(metrics(after, "riderlive_rest_rejected_total"), metrics(before, "riderlive_rest_rejected_total"))
     seen = Counter(tally.ws_errors)

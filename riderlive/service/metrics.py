@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -11,7 +11,7 @@ from riderlive.realtime.pacing import LATENESS_BUCKETS
 
 LATENCY_BUCKETS: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5)
 MAX_PRODUCER_LABELS = 32
-"""Producer names with their own ``riderlive_frames_in_total`` series; later names count as ``other``."""
+"""Producer names with their own ``riderlive_frames_in_total`` series; older ones are added to ``other``."""
 OTHER = "other"
 
 
@@ -56,8 +56,8 @@ class ServiceMetrics:
     """What the web process counts; per-client figures live on each client."""
 
     bad_frames: Counter[str] = field(default_factory=Counter)
-    frames_in: Counter[str] = field(default_factory=Counter)
-    """Accepted horse frames per producer name (at most ``MAX_PRODUCER_LABELS`` names, then ``other``)."""
+    frames_in: OrderedDict[str, int] = field(default_factory=OrderedDict)
+    """Accepted horse frames per producer name, least recently counted first (``count_frame_in``)."""
     rest_rejected: Counter[int] = field(default_factory=Counter)
     """REST answers 4xx, by status code."""
     clock_jumps: Counter[str] = field(default_factory=Counter)
@@ -74,10 +74,18 @@ class ServiceMetrics:
             self.bad_frames["oversize"] += 1
 
     def count_frame_in(self, producer: str) -> None:
-        """One accepted frame; the label set stays bounded however many names producers choose."""
-        if producer not in self.frames_in and len(self.frames_in) >= MAX_PRODUCER_LABELS:
-            producer = OTHER
-        self.frames_in[producer] += 1
+        """One accepted frame; the label set stays bounded however many names producers choose.
+
+        The ``MAX_PRODUCER_LABELS`` most recently counted names keep their series; the
+        least recently counted one gives its count to ``other`` when a new name comes.
+        """
+        frames_in = self.frames_in
+        if producer in frames_in:
+            frames_in.move_to_end(producer)
+        elif len(frames_in) >= MAX_PRODUCER_LABELS + (OTHER in frames_in):
+            oldest = next(name for name in frames_in if name != OTHER)
+            frames_in[OTHER] = frames_in.get(OTHER, 0) + frames_in.pop(oldest)
+        frames_in[producer] = frames_in.get(producer, 0) + 1
 
 
 def _escape(value: str) -> str:

@@ -201,7 +201,7 @@ class Service:
                 if delay > 0.0:
                     await asyncio.sleep(delay)
                 link.push_input(producer.id, float(t) + t_shift, link.engine_time(), frame)
-                self.metrics.frames_in[producer.name] += 1
+                self.metrics.count_frame_in(producer.name)
             if not loop:
                 break
             t_shift += replay.duration + period

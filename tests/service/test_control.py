@@ -77,7 +77,7 @@ def test_params_patch_changes_the_next_frames(server: LiveServer) -> None:
         assert server.get("/api/params").json()["head.offset"] == 12.5
         assert server.request("PUT", "/api/preset", json={"name": "child"}).json() == {"current": "child"}
         assert "child" in server.get("/api/presets").json()["presets"]
-        assert server.request("PUT", "/api/preset", json={"name": "nope"}).status_code == 400
+        assert server.request("PUT", "/api/preset", json={"name": "nope"}).status_code == 404
         animator = {"offsets": {"head.rz": 3.0}, "gains": {"cog.ty": 0.5}}
         assert server.request("PUT", "/api/animator", json=animator).status_code == 200
         assert server.get("/api/animator").json() == animator
