@@ -223,7 +223,7 @@ async def drive(port: int, args: argparse.Namespace, pid: int | None = None) -> 
     tasks = [asyncio.create_task(subscriber(port, args.client_rate, s, stop)) for s in stats]
     tasks.append(asyncio.create_task(producer(url, args.producer_rate, stop)))
     await asyncio.sleep(2.0)  # everyone connected and subscribed
-    async with httpx.AsyncClient() as client:
+    async with httpx.AsyncClient(timeout=60.0) as client:
         before = (await client.get(http + "/metrics")).text
         pids = [pid, *children(pid)] if pid else []
         cpu_before = [cpu_seconds(p) for p in pids]
