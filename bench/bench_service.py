@@ -327,7 +327,7 @@ def main() -> None:
         ("worst client delivery, stall", "worst_after", "{:.3f}"),
         ("mean client delivery, stall", "mean_after", "{:.3f}"),
         ("stalled clients cut off", "cut_off", "{:.0f}"),
-        ("ticks not sent (web process > 64 behind)", "coalesced", "{:.0f}"),
+        ("ticks not sent (web process 0.25 s behind)", "coalesced", "{:.0f}"),
         ("web process CPU (cores)", "web_cpu", "{:.2f}"),
         ("tick process(es) CPU (cores)", "tick_cpu", "{:.2f}"),
     )

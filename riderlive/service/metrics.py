@@ -64,7 +64,7 @@ class ServiceMetrics:
     """Producer clock jumps by direction (``forward``, ``backward``): new stream segments."""
     ticks_published: int = 0
     ticks_coalesced: int = 0
-    """Ticks not sent: the web process fell more than ``publish.MAX_CATCH_UP`` ticks behind."""
+    """Ticks not sent: the web process fell more than ``publish.CATCH_UP`` seconds behind."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
 
@@ -198,7 +198,7 @@ def render(
     metric(
         "riderlive_ticks_coalesced_total",
         "counter",
-        "Ticks not sent because the web process fell more than MAX_CATCH_UP (64) ticks behind.",
+        "Ticks not sent because the web process fell more than 0.25 s behind (publish.CATCH_UP).",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
     metric(

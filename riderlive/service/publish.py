@@ -54,8 +54,10 @@ _ids = itertools.count(1)
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
-MAX_CATCH_UP = 64
-"""Ticks sent at once after the web process was late; older ones are skipped (coalesced)."""
+CATCH_UP = 0.25
+"""Seconds of ticks sent at once after the web process was late (``input.hold``'s default):
+older ones are skipped and counted (coalesced), so an overloaded web process sheds work
+and its frames stay at most this stale."""
 
 
 @dataclass(eq=False)
@@ -173,14 +175,16 @@ class Hub:
 
         A client with decimation N gets every record whose ``seq % N == 0``, in order:
         when the web process was late and several ticks arrived at once, a client that
-        keeps up still gets all of them (at most the newest :data:`MAX_CATCH_UP`; older
-        ones are counted as coalesced). Each (subscription, record) is encoded once.
-        A client that is behind has frames dropped in :meth:`_write`, not here.
+        keeps up still gets all of them (those of the last :data:`CATCH_UP` seconds;
+        older ones are counted as coalesced). Each (subscription, record) is encoded
+        once. A client that is behind has frames dropped in :meth:`_write`, not here.
         """
         metrics = self.service.metrics
-        if len(records) > MAX_CATCH_UP:
-            metrics.ticks_coalesced += len(records) - MAX_CATCH_UP
-            records = records[-MAX_CATCH_UP:]
+        oldest = float(records[-1][L.OUT_ENGINE_T]) - CATCH_UP if records else 0.0
+        if records and float(records[0][L.OUT_ENGINE_T]) < oldest:
+            kept = [r for r in records if float(r[L.OUT_ENGINE_T]) >= oldest]
+            metrics.ticks_coalesced += len(records) - len(kept)
+            records = kept
         clients = [c for c in self.clients.values() if not c.closed]
         now = time.perf_counter()
         timeout = self.service.config.publish.send_timeout
