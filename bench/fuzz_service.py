@@ -31,6 +31,7 @@ import multiprocessing
 import random
 import re
 import subprocess
+import sys
 import tempfile
 import time
 from collections import Counter
@@ -476,9 +477,13 @@ def main() -> None:
         if not args.no_burner:
             burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + 7200,))
             burner.start()
-        result = asyncio.run(
-            fuzz(f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}", args.messages, args.connections, args.seed)
-        )
+        failure = None
+        try:
+            result = asyncio.run(
+                fuzz(f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}", args.messages, args.connections, args.seed)
+            )
+        except Exception as exc:  # the service went away under the hostile clients: say what it said
+            failure = exc
         alive = server.poll() is None
     finally:
         if burner is not None:
@@ -490,6 +495,10 @@ def main() -> None:
         except subprocess.TimeoutExpired:
             server.kill()
             _, log = server.communicate()
+    if failure is not None:
+        print(f"FAILED: {type(failure).__name__}: {failure}; server alive: {alive}, exit code {server.returncode}")
+        print("".join(log.splitlines(keepends=True)[-40:]))
+        sys.exit(1)
     reader: Reader = result["reader"]
     print(f"{result['sent']} hostile messages in {result['seconds']:.0f} s; other core busy: {not args.no_burner}")
     print(f"  rejects seen by the clients:  {dict(sorted(result['rejects_seen'].items()))}")

@@ -5,8 +5,9 @@
 - A body that fails validation gets **422** with ``{"detail": [{"loc", "msg", "type"}]}``:
   where and why, without the offending input (it may be NaN, which JSON cannot carry,
   or something the client should not see echoed).
-- A body larger than ``limit`` bytes gets **413** before it is read
-  (:class:`RestGuard`); a chunked one is cut off at the limit (400).
+- A body larger than ``limit`` bytes gets **413** (:class:`RestGuard`; read and dropped
+  up to 16 x the limit, so the answer arrives and the connection stays usable); a
+  chunked one is cut off at the limit (400).
 - Every 4xx answer is counted by status (``riderlive_rest_rejected_total``).
 """
 
@@ -119,8 +120,15 @@ class RestGuard:
 
         length = dict(scope.get("headers", ())).get(b"content-length")
         if length is not None and (not length.isdigit() or int(length) > self.limit):
+            # A body up to 16 x the limit is read and dropped, so the answer is not lost to
+            # a TCP reset and the connection stays usable; a larger one closes it.
+            drained = length.isdigit() and int(length) <= 16 * self.limit
+            while drained and (await receive()).get("more_body", False):
+                pass
             body = orjson.dumps({"detail": f"request body over {self.limit} bytes"})
             headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+            if not drained:
+                headers.append((b"connection", b"close"))
             await counted({"type": "http.response.start", "status": 413, "headers": headers})
             await send({"type": "http.response.body", "body": body})
             return
