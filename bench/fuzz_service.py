@@ -232,6 +232,8 @@ class Reader:
     non_finite: int = 0
     out_of_range: int = 0
     frozen_runs: int = 0
+    reconnects: int = 0
+    """Times the clean reader's connection was lost (the service must never drop it)."""
     first_seq: int = -1
     last_seq: int = -1
     _same_since: float | None = None
@@ -269,29 +271,54 @@ class Reader:
 
 
 async def clean_reader(url: str, reader: Reader, stop: asyncio.Event) -> None:
-    async with connect(url + "/ws/rider", max_size=2**24) as ws:
-        while not stop.is_set():
-            try:
-                message = await asyncio.wait_for(ws.recv(), 1.0)
-            except TimeoutError:
-                continue
-            obj = json.loads(message)
-            if obj.get("type") == "frame":
-                reader.take(obj)
+    while not stop.is_set():
+        try:
+            async with connect(url + "/ws/rider", max_size=2**24) as ws:
+                while not stop.is_set():
+                    try:
+                        message = await asyncio.wait_for(ws.recv(), 1.0)
+                    except TimeoutError:
+                        continue
+                    obj = json.loads(message)
+                    if obj.get("type") == "frame":
+                        reader.take(obj)
+        except (ConnectionClosed, OSError):
+            reader.reconnects += 1
+            await asyncio.sleep(0.1)
 
 
 async def clean_producer(url: str, stop: asyncio.Event) -> None:
-    async with connect(url + "/ws/horse") as ws:
-        await ws.recv()
-        await ws.send(json.dumps({"type": "hello", "name": "clean", "priority": 1000}))
-        t0 = time.perf_counter()
-        n = 0
+    t0 = time.perf_counter()
+    n = 0
+    while not stop.is_set():
+        try:
+            async with connect(url + "/ws/horse") as ws:
+                await ws.recv()
+                await ws.send(json.dumps({"type": "hello", "name": "clean", "priority": 1000}))
+                while not stop.is_set():
+                    n += 1
+                    await asyncio.sleep(max(0.0, t0 + n / 120.0 - time.perf_counter()))
+                    t = time.perf_counter() - t0
+                    values = {"rearPivot.rz": 4.0 * math.sin(5.0 * t), "lfHoof.ty": 0.1 + 0.1 * math.sin(9.0 * t)}
+                    await ws.send(msgpack.packb({"t": t, "values": values}))
+        except (ConnectionClosed, OSError):
+            await asyncio.sleep(0.1)
+
+
+def clean_side(url: str, low: list[float], high: list[float], stop: Any, out: Any) -> None:
+    """The clean producer and reader, in a process of their own (the hostile clients cannot starve them)."""
+
+    async def run() -> Reader:
+        reader = Reader(low, high)
+        done = asyncio.Event()
+        tasks = [asyncio.create_task(clean_reader(url, reader, done)), asyncio.create_task(clean_producer(url, done))]
         while not stop.is_set():
-            n += 1
-            await asyncio.sleep(max(0.0, t0 + n / 120.0 - time.perf_counter()))
-            t = time.perf_counter() - t0
-            values = {"rearPivot.rz": 4.0 * math.sin(5.0 * t), "lfHoof.ty": 0.1 + 0.1 * math.sin(9.0 * t)}
-            await ws.send(msgpack.packb({"t": t, "values": values}))
+            await asyncio.sleep(0.1)
+        done.set()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        return reader
+
+    out.put(asyncio.run(run()))
 
 
 # -- hostile connections ------------------------------------------------------------------
@@ -329,6 +356,7 @@ async def hostile_socket(
                         await ws.send(make())
                         left -= 1
                         tally.sent += 1
+                        await asyncio.sleep(0)  # let the reader and keepalive pings run
                         if rng.random() < 0.001:
                             break  # leave, and come back
                     marker = {"type": token} if path == "/ws/horse" else {"type": "ping", "id": token}
@@ -393,13 +421,11 @@ async def fuzz(
         before = (await client.get("/metrics")).text
         kept = {path: (await client.get(path)).json() for path in ("/api/params", "/api/animator", "/api/presets")}
     low, high = DEFAULT_RANGES.limits(RIDER_NAMES, length_scale)
-    reader = Reader(low, high)
-    stop = asyncio.Event()
-    background = [
-        asyncio.create_task(clean_reader(base_ws, reader, stop)),
-        asyncio.create_task(clean_producer(base_ws, stop)),
-    ]
-    await asyncio.sleep(1.0)
+    context = multiprocessing.get_context("spawn")
+    stop, out = context.Event(), context.Queue()
+    clean = context.Process(target=clean_side, args=(base_ws, low, high, stop, out), name="fuzz-clean-side")
+    clean.start()
+    await asyncio.sleep(2.0)
     tally = Tally()
     rest_quota = max(1, messages // 50)
     per = max(1, (messages - rest_quota) // connections)
@@ -414,7 +440,8 @@ async def fuzz(
     elapsed = time.perf_counter() - started
     await asyncio.sleep(1.5)  # the clean reader sees the rider settle
     stop.set()
-    await asyncio.gather(*background, return_exceptions=True)
+    reader: Reader = await asyncio.to_thread(out.get, True, 60.0)
+    await asyncio.to_thread(clean.join, 10.0)
     async with httpx.AsyncClient(base_url=base_http, timeout=20.0) as client:
         after = (await client.get("/metrics")).text
         state = (await client.get("/api/state")).json()
@@ -457,6 +484,7 @@ def verdict(result: dict[str, Any]) -> dict[str, bool]:
         "0 non-finite outputs": reader.non_finite == 0,
         "0 out-of-range outputs": reader.out_of_range == 0,
         "0 frozen outputs": reader.frozen_runs == 0,
+        "the clean reader never dropped": reader.reconnects == 0,
         "every websocket reject counted": result["rejects_seen"] == result["rejects_counted"],
         "every REST reject counted": result["rest_seen"] == result["rest_counted"],
     }
