@@ -67,6 +67,8 @@ class ServiceMetrics:
     """Ticks not sent: the web process fell more than ``publish.CATCH_UP`` seconds behind."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+    vmc: Counter[str] = field(default_factory=Counter)
+    """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed)."""
 
     def count_disconnect(self, message: Mapping[str, Any]) -> None:
         """A websocket closed; uvicorn closes with 1009 a message beyond ``ws_max_size``: count it."""
@@ -201,6 +203,13 @@ def render(
         "Ticks not sent because the web process fell more than 0.25 s behind (publish.CATCH_UP).",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
+    if metrics.vmc:
+        metric(
+            "riderlive_vmc_bundles_total",
+            "counter",
+            "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed).",
+            [f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}' for o in ("sent", "dropped", "error")],
+        )
     metric(
         "riderlive_input_to_send_seconds",
         "histogram",

@@ -23,6 +23,7 @@ from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
+from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, take_path
 from riderlive.takes.replay import Replay, load_replay
@@ -81,6 +82,13 @@ class Service:
         self.params = load_preset(config.tick.preset)
         self.animator = AnimatorLayer()
         self.metrics = ServiceMetrics()
+        self.poses = RecordPoses(config.tick.length_scale)
+        """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
+        self.vmc = None
+        if config.vmc.target is not None:
+            from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
+
+            self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
@@ -125,6 +133,8 @@ class Service:
         self.on_tick()
         self.stop_recording()
         self.link.close()
+        if self.vmc is not None:
+            self.vmc.close()
 
     # -- the tick's records ---------------------------------------------------
     def on_tick(self) -> None:
@@ -140,6 +150,8 @@ class Service:
         if records:
             self.metrics.ticks_published += len(records)
             self.hub.publish(records)
+            if self.vmc is not None:
+                self.vmc.publish(records)
         version = link.status_blob.version
         if version != self._status_version:
             self._status_version = version
@@ -297,4 +309,5 @@ class Service:
             "recording": None if self.recorder is None else {"name": self.take_name, "rows": self.recorder.rows},
             "preset": self.params.name,
             "horse_channels": list(HORSE_NAMES),
+            "vmc": None if self.vmc is None else self.vmc.status(),
         }

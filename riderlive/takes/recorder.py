@@ -20,6 +20,7 @@ Nothing is lost or overwritten without being asked:
 
 from __future__ import annotations
 
+import fcntl
 import os
 import time
 from collections.abc import Iterable
@@ -125,6 +126,7 @@ class TakeRecorder:
             self._fd = os.open(self._file, flags, 0o644)
         except FileExistsError:
             raise TakeExists(f"take {path.stem!r} exists; choose another name or pass overwrite") from None
+        fcntl.flock(self._fd, fcntl.LOCK_EX)  # "being recorded" for readers (riderlive export); gone with the process
         os.write(self._fd, (",".join((*COLUMNS, *extra)) + "\n").encode())
         self._lines: list[str] = []
         self._last_flush = time.monotonic()
