@@ -2,23 +2,28 @@
 
     python examples/record_rider.py rider.csv --seconds 10 --channels head.rz,lower_back.rz
 
-The file has ``t`` (engine time, s) and one column per channel; ``plot`` reads it.
+``--url`` is the service's websocket base URL, ``ws://HOST:PORT`` (default
+``ws://127.0.0.1:8000``, what ``riderlive serve`` listens on). A service that cannot be
+reached is a one-line error (exit 2) within ``--timeout`` (5 s). The file has ``t`` (engine time, s)
+and one column per channel; ``plot`` reads it.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 import time
 
 import numpy as np
 
-from riderlive.client import RiderSubscriber
-from riderlive.framefile import FrameTable, write_frames
+from riderlive.client import RiderSubscriber, ServiceUnreachable, probe
+from riderlive.framefile import FrameFileError, FrameTable, write_frames
 
 
 async def record(args: argparse.Namespace) -> None:
     channels = args.channels.split(",") if args.channels else None
+    await probe(args.url, "/ws/rider", args.token, args.timeout)
     sub = RiderSubscriber(args.url, channels=channels, rate=args.rate, token=args.token)
     times: list[float] = []
     rows: list[list[float]] = []
@@ -40,12 +45,17 @@ async def record(args: argparse.Namespace) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("output", help=".csv or .jsonl")
-    parser.add_argument("--url", default="ws://127.0.0.1:8000")
+    parser.add_argument("--url", default="ws://127.0.0.1:8000", help="ws://HOST:PORT of riderlive serve")
+    parser.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the service at start")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--channels", help="comma-separated rider channels (default all)")
     parser.add_argument("--rate", type=float, help="Hz (default: every tick)")
     parser.add_argument("--token")
-    asyncio.run(record(parser.parse_args()))
+    try:
+        asyncio.run(record(parser.parse_args()))
+    except (ServiceUnreachable, FrameFileError) as exc:
+        print(f"record_rider.py: {exc}", file=sys.stderr)
+        sys.exit(2)
 
 
 if __name__ == "__main__":

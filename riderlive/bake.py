@@ -11,6 +11,7 @@ import numpy as np
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.frameunits import resolve_scale
 from riderlive.rules.animator import AnimatorLayer, damp_series
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
@@ -56,7 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, help="rider take to write (.csv, .jsonl, or -)")
     parser.add_argument("--preset", default="kuhnel2003", help="preset name or TOML path (default kuhnel2003)")
     parser.add_argument(
-        "--scale", type=float, help="input length units -> thesis rig units (default 1; a saddle take: 25 per metre)"
+        "--scale",
+        type=float,
+        help="thesis rig units per input length unit (25: metres); default: the input's NAME.json, "
+        "else 1 (a saddle take: 25)",
     )
     parser.add_argument("--channels", help="comma-separated rider channels to write (default all)")
     parser.add_argument("--offsets", help="TOML with [offsets] and [gains] per rider channel")
@@ -72,22 +76,26 @@ def run(args: argparse.Namespace) -> int:
             if name not in RIDER_INDEX:
                 raise FrameFileError("--channels", f"unknown rider channel {name!r}")
         animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
+        params = load_preset(args.preset)
         table = read_frames(args.input, fmt=args.format)
-        saddle, scale = None, 1.0
+        saddle = None
         from riderlive.saddle.takes import horse_take, is_saddle_take, saddle_take
 
-        if is_saddle_take(table):  # a rider from the saddle alone (docs/saddle.md)
+        if is_saddle_take(table):  # a rider from the saddle alone (docs/saddle.md): metres in
             from riderlive.horse import DEFAULT_SCALE
 
             saddle, scale = FrameTable(table.names, table.values, table.t), DEFAULT_SCALE
             table, _ = horse_take(table, rate=args.rate)
+            if args.scale is not None:
+                scale = args.scale
         else:
             missing = [name for name in RULE_INPUTS if name not in table.names]
             if missing:
                 raise FrameFileError(args.input, f"missing required channel(s): {', '.join(missing)}", line=1)
-        model = RiderModel(
-            params=load_preset(args.preset), scale=scale if args.scale is None else args.scale, animator=animator
-        )
+            scale, warning = resolve_scale(args.input, table, args.scale)
+            if warning:
+                print(f"riderlive bake: warning: {warning}", file=sys.stderr)
+        model = RiderModel(params=params, scale=scale, animator=animator)
         result = bake_table(table, model, channels, rate=args.rate)
         if args.saddle:
             result = with_saddle(result, saddle_take(table) if saddle is None else _saddle_columns(saddle))

@@ -33,6 +33,46 @@ from riderlive.service.codecs import decode_binary_frame
 
 log = logging.getLogger(__name__)
 _RETRYABLE = (OSError, ConnectionClosed, InvalidHandshake, TimeoutError)
+OPEN_TIMEOUT = 5.0
+"""Seconds for a first connection (TCP, websocket handshake and the service's first message)."""
+
+
+class ServiceUnreachable(ConnectionError):
+    """The first connection to a service failed; ``str()`` says why in one line."""
+
+
+def _unreachable(url: str, exc: BaseException, timeout: float) -> ServiceUnreachable:
+    if isinstance(exc, InvalidURI):
+        why = "not a websocket URL (use ws://HOST:PORT)"
+    elif isinstance(exc, TimeoutError):
+        why = f"no answer within {timeout:g} s"
+    elif isinstance(exc, InvalidHandshake):
+        why = f"not a riderlive service ({exc})"
+    elif isinstance(exc, ValueError | KeyError):
+        why = "not a riderlive service (unexpected first message)"
+    else:
+        why = str(exc) or type(exc).__name__
+    return ServiceUnreachable(f"cannot reach riderlive at {url}: {why}")
+
+
+async def probe(
+    url: str = "ws://127.0.0.1:8000", path: str = "/ws/rider", token: str | None = None, timeout: float = OPEN_TIMEOUT
+) -> dict[str, Any]:
+    """Connect once and return the service's first message (hello or welcome).
+
+    Raises :class:`ServiceUnreachable` with a one-line reason instead of retrying:
+    for tools that should fail fast on a wrong ``--url``.
+    """
+    full = url.rstrip("/") + path
+    try:
+        async with asyncio.timeout(timeout):
+            async with connect(full, subprotocols=_subprotocols(token), open_timeout=timeout) as ws:
+                first = json.loads(await ws.recv())
+                if not isinstance(first, dict) or first.get("type") not in ("hello", "welcome"):
+                    raise ValueError("unexpected first message")
+                return first
+    except (InvalidURI, ValueError, KeyError, *_RETRYABLE) as exc:
+        raise _unreachable(url, exc, timeout) from None
 
 
 def _subprotocols(token: str | None) -> list[Any]:
@@ -174,6 +214,7 @@ class HorseProducer:
         length_scale: float | None = None,
         token: str | None = None,
         binary: bool = True,
+        open_timeout: float = OPEN_TIMEOUT,
     ) -> None:
         self.url = url.rstrip("/") + "/ws/horse"
         self.hello: dict[str, Any] = {"type": "hello", "name": name, "priority": priority}
@@ -181,6 +222,7 @@ class HorseProducer:
             self.hello["length_scale"] = length_scale
         self.token = token
         self.binary = binary
+        self.open_timeout = open_timeout
         self.driving: bool | None = None
         self.errors: list[dict[str, Any]] = []
         self._ws: ClientConnection | None = None
@@ -189,7 +231,12 @@ class HorseProducer:
         self._retry_at = 0.0
 
     async def __aenter__(self) -> HorseProducer:
-        await self._connect()
+        """Connect; a first connection that fails raises :class:`ServiceUnreachable` (no retrying)."""
+        try:
+            async with asyncio.timeout(self.open_timeout):
+                await self._connect()
+        except (InvalidURI, ValueError, KeyError, *_RETRYABLE) as exc:
+            raise _unreachable(self.url.removesuffix("/ws/horse"), exc, self.open_timeout) from None
         return self
 
     async def __aexit__(
@@ -198,7 +245,7 @@ class HorseProducer:
         await self.close()
 
     async def _connect(self) -> None:
-        ws = await connect(self.url, subprotocols=_subprotocols(self.token))
+        ws = await connect(self.url, subprotocols=_subprotocols(self.token), open_timeout=self.open_timeout)
         self.welcome = json.loads(await ws.recv())
         await ws.send(json.dumps(self.hello))
         self._ws = ws

@@ -114,7 +114,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--bake", action="store_true", help="evaluate the rider rules on the take first")
     parser.add_argument("--preset", default="kuhnel2003", help="rider preset for --bake")
-    parser.add_argument("--scale", type=float, help="input length units -> rig units for --bake (default: the horse's)")
+    parser.add_argument(
+        "--scale", type=float, help="thesis rig units per input length unit for --bake (default: as riderlive bake)"
+    )
     parser.add_argument("--title", default="", help="figure title")
     parser.add_argument("--size", type=_size, default=(900, 500), help="WIDTHxHEIGHT pixels (default 900x500)")
     parser.add_argument("--dpi", type=int, default=80, help="dots per inch (default 80)")
@@ -131,10 +133,12 @@ def run(args: argparse.Namespace) -> int:
         rider = None
         if args.bake:
             from riderlive.bake import bake_table
-            from riderlive.horse import DEFAULT_SCALE
+            from riderlive.frameunits import resolve_scale
             from riderlive.rules import RiderModel, load_preset
 
-            scale = args.scale if args.scale is not None else DEFAULT_SCALE
+            scale, warning = resolve_scale(args.input, horse, args.scale)
+            if warning:
+                print(f"riderlive plot: warning: {warning}", file=sys.stderr)
             model = RiderModel(params=load_preset(args.preset), scale=scale)
             wanted = [c for c in channels if c in RIDER_INDEX] or None
             rider = bake_table(horse, model, wanted)

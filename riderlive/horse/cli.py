@@ -7,6 +7,7 @@ import sys
 
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, write_frames
+from riderlive.frameunits import METRES, record_scale
 from riderlive.horse.gaits import GAITS
 from riderlive.horse.script import ShotScript, gait_script, generate, load_script
 
@@ -19,7 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=float, help="m/s for --gait (default: the gait's)")
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
     parser.add_argument("--seed", type=int, help="turn on seeded stride-to-stride variation")
-    parser.add_argument("-o", "--output", required=True, help="frame file to write (.csv, .jsonl, or -)")
+    parser.add_argument(
+        "-o", "--output", required=True, help="frame file to write (.csv, .jsonl, or -); metres, recorded in NAME.json"
+    )
     parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
 
 
@@ -35,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             script = gait_script(args.gait, args.seconds, args.speed, args.seed)
         write_frames(args.output, generate(script, args.rate), args.format)
+        record_scale(args.output, METRES, source="riderlive horse", rate=args.rate)
     except (ConfigError, FrameFileError, ValueError) as exc:
         print(f"riderlive horse: {exc}", file=sys.stderr)
         return 2

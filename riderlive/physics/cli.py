@@ -16,6 +16,7 @@ import numpy as np
 from riderlive.bake import DEFAULT_RATE, horse_matrix
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.frameunits import recorded_scale, rescale_lengths
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.physics.config import PhysicsConfig, load_physics
 from riderlive.physics.drive import FixedStepper, TakeSource
@@ -94,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("--strands needs --reference")
         rules = None if args.no_rider else RiderModel(params=load_preset(args.preset), scale=DEFAULT_SCALE)
         table = read_frames(args.input, fmt=args.format)
+        recorded = recorded_scale(args.input)  # the physics works in metres
+        table = rescale_lengths(table, recorded / DEFAULT_SCALE) if recorded else table
         compiled = False if args.numpy else None
         result, vertices = run_take(table, config, rules, args.rate, args.reference, compiled=compiled)
         write_frames(args.output, result, args.format)

@@ -33,7 +33,7 @@ class Perform:
 
 @dataclass(frozen=True)
 class SetModel:
-    """New rule parameters and animator layer; the tick blends to them."""
+    """New rule parameters and animator layer; the tick blends to them over ``Timing.param_blend``."""
 
     params: RuleParams
     animator: AnimatorLayer

@@ -13,13 +13,26 @@ producer left) the rider eases to neutral over ``ease_time`` and, with
 ``fallback_procedural``, the procedural horse resumes ``resume_after`` seconds later
 (and gives way again as soon as input is fresh). In ``procedural`` mode the
 procedural horse is pinned. Every change of driver, and every takeover by another
-producer, blends the rider from its last output to the new driver's output with a
-smoothstep, so the output never jumps.
+producer (or a new stream segment of the same one), blends the rider from its last
+output to the new driver's output with a smoothstep, so the output never jumps.
+
+A change of the rule parameters or the animator layer (:meth:`TickCore.set_model`)
+blends too, over ``Timing.param_blend``: at the next tick the difference between the
+old and the new model on the current horse is added to the new model's output and
+fades out with a smoothstep, so the rider keeps moving while it changes.
+
+Outputs are finite and bounded: every rider value is clamped to its plausible range
+(:mod:`riderlive.ranges`, counted in ``clamped``) before and after the stateful
+stages; a stateful stage (smoothing, the blends) that goes non-finite anyway is reset
+and the rider eases from neutral over ``ease_time`` (counted in ``resets``, reported
+once in ``faults``). A rules output that is itself non-finite touches no state: the
+caller repeats its last good frame (``TickLoop._step``).
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -57,6 +70,8 @@ class Timing:
     blend_time: float = 0.5
     resume_after: float = 2.0
     fallback_procedural: bool = True
+    param_blend: float = 0.5
+    """Seconds over which a parameter or animator change blends in."""
 
 
 @dataclass(frozen=True)
@@ -78,10 +93,25 @@ def _smoothstep(x: float) -> float:
     return x * x * (3.0 - 2.0 * x)
 
 
+def _finite(values: Sequence[float]) -> bool:
+    return all(map(math.isfinite, values))
+
+
+Bounds = tuple[Sequence[float], Sequence[float]]
+"""Lowest and highest value of each rider channel, in the model's output units."""
+
+
 class TickCore:
     """The tick's state and its ``step``; every time argument is engine seconds."""
 
-    def __init__(self, model: RiderModel, timing: Timing, horse: ProceduralHorse, mode: Mode = Mode.INPUT) -> None:
+    def __init__(
+        self,
+        model: RiderModel,
+        timing: Timing,
+        horse: ProceduralHorse,
+        mode: Mode = Mode.INPUT,
+        bounds: Bounds | None = None,
+    ) -> None:
         self.timing = timing
         self.horse = horse
         self.mode = mode
@@ -96,16 +126,35 @@ class TickCore:
         self._damper: DamperState | None = None
         self._last_now: float | None = None
         self.last_rider: list[float] | None = None
+        """The last output (always finite)."""
+        self.model: RiderModel
+        self._previous_model: RiderModel | None = None
+        self._param_delta: list[float] | None = None
+        self._param_start = 0.0
+        n = len(model.evaluate([0.0] * len(HORSE_NAMES)))
+        self.low, self.high = bounds if bounds is not None else ([-math.inf] * n, [math.inf] * n)
+        self.clamped = 0
+        """Rider values clamped to their range so far."""
+        self.resets = 0
+        """Stateful stages reset after going non-finite so far."""
+        self._last_reset = -math.inf
+        self.faults: list[str] = []
+        """Reports of resets not yet taken by the caller (one per reset)."""
         self.set_model(model)
 
     def set_model(self, model: RiderModel) -> None:
-        """Change presets, weights or the animator layer; blends like a takeover."""
+        """Change presets, weights or the animator layer; blends over ``timing.param_blend``.
+
+        The smoothing filter keeps its state (a new time constant applies from the
+        next tick); see the module docstring for the blend.
+        """
+        if self.last_rider is not None and self.timing.param_blend > 0.0:
+            self._previous_model = self._previous_model or self.model
         self.model = model
         self.neutral_horse = [0.0] * len(HORSE_NAMES)
         self.neutral_rider = model.evaluate(self.neutral_horse)
         # The procedural horse speaks metres; inputs are in the model's length unit.
         self._procedural_gain = DEFAULT_SCALE / model.scale
-        self._damper = None
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
@@ -178,27 +227,83 @@ class TickCore:
             source_time, horse = now, self.procedural_frame(now)
         else:
             source_time, horse = now, self.neutral_horse
-        rider = self.neutral_rider if driver is Driver.NEUTRAL else self.model.evaluate(horse)
-        rider = self._smooth(rider, now)
+        producer = self.producer if driver is Driver.INPUT else -1
+        rider = self._rules(driver, horse, now)
+        if not _finite(rider):  # stateless so far: no state is touched, the caller repeats its last frame
+            return TickResult(driver, source_time, producer, list(horse), rider)
+        rider = self._smooth(self._bound(rider), now)
         if self._blend_from is not None:
             w = _smoothstep((now - self._blend_start) / self._blend_duration) if self._blend_duration > 0 else 1.0
             if w >= 1.0:
                 self._blend_from = None
             else:
                 rider = [a + (b - a) * w for a, b in zip(self._blend_from, rider, strict=True)]
+        if not _finite(rider):
+            self._recover(now, "the blend")
+            rider = list(self.neutral_rider)
+        rider = self._bound(rider)
         self.last_rider = rider
-        producer = self.producer if driver is Driver.INPUT else -1
         return TickResult(driver, source_time, producer, list(horse), rider)
 
-    def _smooth(self, rider: Sequence[float], now: float) -> list[float]:
+    def _rules(self, driver: Driver, horse: Sequence[float], now: float) -> list[float]:
+        """The model's rider for ``horse``, plus what is left of a parameter change's difference."""
+        rider = self.neutral_rider if driver is Driver.NEUTRAL else self.model.evaluate(horse)
+        if self._previous_model is not None:
+            old = self._with_param_delta(self._previous_model.evaluate(horse), now)
+            self._previous_model = None
+            delta = [a - b for a, b in zip(old, rider, strict=True)]
+            self._param_delta, self._param_start = (delta, now) if _finite(delta) else (None, now)
+        return self._with_param_delta(rider, now)
+
+    def _with_param_delta(self, rider: list[float], now: float) -> list[float]:
+        delta = self._param_delta
+        if delta is None:
+            return rider
+        w = _smoothstep((now - self._param_start) / self.timing.param_blend)
+        if w >= 1.0:
+            self._param_delta = None
+            return rider
+        return [r + d * (1.0 - w) for r, d in zip(rider, delta, strict=True)]
+
+    def _bound(self, rider: list[float]) -> list[float]:
+        """Clamp each finite value to its channel's range (counted)."""
+        low, high = self.low, self.high
+        if all(lo <= v <= hi for v, lo, hi in zip(rider, low, high, strict=True)):
+            return rider
+        out = [min(max(v, lo), hi) for v, lo, hi in zip(rider, low, high, strict=True)]
+        self.clamped += sum(a != b for a, b in zip(out, rider, strict=True))
+        return out
+
+    def _recover(self, now: float, stage: str) -> None:
+        """A stateful stage went non-finite: reset every one, ease from neutral.
+
+        Reported once per episode: resets within ``ease_time`` of the last one are
+        counted but not reported again.
+        """
+        self.resets += 1
+        if now - self._last_reset > self.timing.ease_time:
+            self.faults.append(f"{stage} went non-finite: reset, easing from neutral")
+        self._last_reset = now
+        self._damper = None
+        self._param_delta = None
+        self._blend_from = list(self.neutral_rider)
+        self._blend_start = now
+        self._blend_duration = self.timing.ease_time
+
+    def _smooth(self, rider: list[float], now: float) -> list[float]:
         tau = self.model.params.smoothing.time_constant
         last, self._last_now = self._last_now, now
         if tau <= 0.0:
-            return list(rider)
+            self._damper = None
+            return rider
         target = np.asarray(rider, dtype=np.float64)
         if self._damper is None or last is None:
             self._damper = damper_start(target)
         else:
-            self._damper = damper_step(self._damper, target, now - last, tau)
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._damper = damper_step(self._damper, target, now - last, tau)
+            if not (np.isfinite(self._damper.value).all() and np.isfinite(self._damper.velocity).all()):
+                self._recover(now, "the smoothing filter")
+                self._damper = damper_start(target)
         out: list[float] = self._damper.value.tolist()
         return out

@@ -56,6 +56,8 @@ COUNTERS: tuple[str, ...] = (
     "nonfinite_outputs",
     "physics_errors",
     "physics_skipped_steps",
+    "state_resets",
+    "outputs_clamped",
     "realtime",
     "alive",
     *(f"lateness_bucket_{i}" for i in range(len(LATENESS_BUCKETS) + 1)),

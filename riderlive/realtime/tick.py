@@ -73,6 +73,8 @@ class TickSetup:
     extra_channels: tuple[str, ...] = ()
     """Channels appended to each output record after the rider's (the tail's, when on)."""
     shm_names: dict[str, str] = field(default_factory=dict)
+    rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
 
 
 class TickLoop:
@@ -90,7 +92,7 @@ class TickLoop:
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
-        self.core = TickCore(model, setup.timing, self.horse, setup.mode)
+        self.core = TickCore(model, setup.timing, self.horse, setup.mode, setup.rider_bounds)
         self.running = True
         self.stopping_since: float | None = None
         self.estopped = False
@@ -209,6 +211,12 @@ class TickLoop:
                 newest_rx = max(newest_rx, rx)
             values[index["input_lapped"]] = self.inputs.lapped
             result = self._step(now, values, index)
+            if self.core.faults:
+                self.events.extend(self.core.faults)
+                self.core.faults.clear()
+                self._status_dirty = True
+            values[index["state_resets"]] = self.core.resets
+            values[index["outputs_clamped"]] = self.core.clamped
             if self.output is not None:
                 try:
                     status = self.output.tick(result.rider, deadline)

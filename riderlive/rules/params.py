@@ -9,12 +9,14 @@ angles in degrees.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import pydantic
 
 from riderlive.configfile import CONFIG_DIR, StrictModel, load, read_toml, validate
+from riderlive.names import check_name
 
 PRESET_DIR = CONFIG_DIR / "presets"
 """The shipped presets (the repository's ``config/presets``)."""
@@ -222,6 +224,17 @@ def load_preset(name_or_path: str | Path) -> RuleParams:
     return params
 
 
-def shipped_presets() -> list[str]:
-    """Names of the presets shipped with the package."""
-    return sorted(p.stem for p in PRESET_DIR.glob("*.toml"))
+def find_preset(name: str, directories: Sequence[Path] = ()) -> Path | None:
+    """The file of preset ``name`` (a name, never a path) in ``directories``, then the shipped ones."""
+    check_name(name, "preset")
+    for directory in (*directories, PRESET_DIR):
+        path = directory / f"{name}.toml"
+        if path.is_file():
+            return path
+    return None
+
+
+def shipped_presets(directories: Sequence[Path] = ()) -> list[str]:
+    """Names of the presets in ``directories`` and shipped with the package."""
+    names = {p.stem for d in (*directories, PRESET_DIR) for p in d.glob("*.toml") if not p.name.startswith(".")}
+    return sorted(n for n in names if find_preset(n, directories) is not None)

@@ -2,19 +2,21 @@
 
 REST paths are stable (the browser page calls them); every body is described in the
 OpenAPI schema at ``/openapi.json`` (browsable at ``/docs``). Mutating calls need
-``Authorization: Bearer <token>`` when a token is required (see ``auth``).
+``Authorization: Bearer <token>`` when a token is required (see ``auth``). Bad bodies
+get a 4xx with a JSON ``detail``, never a 500 (``service/rest.py``).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
-import pydantic
 from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import HTMLResponse, PlainTextResponse
 from fastapi.staticfiles import StaticFiles
@@ -22,60 +24,27 @@ from fastapi.staticfiles import StaticFiles
 import riderlive.horse as horse_module
 from riderlive import __version__
 from riderlive.configfile import ConfigError
-from riderlive.horse import GAITS
 from riderlive.realtime import commands as cmd
 from riderlive.rules.animator import AnimatorLayer
-from riderlive.rules.params import load_preset, shipped_presets
+from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.metrics import render
+from riderlive.service.rest import (
+    AnimatorBody,
+    PerformRequest,
+    PresetRequest,
+    RecordStart,
+    RestGuard,
+    SourceRequest,
+    invalid_request,
+)
 from riderlive.service.runtime import Service
-from riderlive.takes.recorder import list_takes
+from riderlive.takes.recorder import TakeExists, list_takes
+
+log = logging.getLogger(__name__)
 
 STATIC_DIR = Path(__file__).resolve().parent.parent / "web" / "static"
-
-
-class ProceduralSource(pydantic.BaseModel):
-    kind: Literal["procedural"]
-    gait: str | None = None
-    speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
-
-    @pydantic.field_validator("gait")
-    @classmethod
-    def _gait(cls, value: str | None) -> str | None:
-        if value is not None and value not in GAITS:
-            raise ValueError(f"unknown gait; choose one of {', '.join(GAITS)}")
-        return value
-
-
-class ReplaySource(pydantic.BaseModel):
-    kind: Literal["replay"]
-    take: str
-    loop: bool = False
-
-
-class LiveSource(pydantic.BaseModel):
-    kind: Literal["live"]
-
-
-SourceRequest = Annotated[ProceduralSource | ReplaySource | LiveSource, pydantic.Field(discriminator="kind")]
-
-
-class PerformRequest(pydantic.BaseModel):
-    move: str = pydantic.Field(min_length=1, max_length=64)
-
-
-class PresetRequest(pydantic.BaseModel):
-    name: str = pydantic.Field(min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
-
-
-class AnimatorBody(pydantic.BaseModel):
-    offsets: dict[str, float] = pydantic.Field(default_factory=dict)
-    gains: dict[str, float] = pydantic.Field(default_factory=dict)
-
-
-class RecordStart(pydantic.BaseModel):
-    name: str | None = pydantic.Field(default=None, max_length=100)
 
 
 def create_app(config: ServiceConfig | None = None) -> FastAPI:
@@ -93,6 +62,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
 
     app = FastAPI(title="riderlive", version=__version__, lifespan=lifespan)
     app.state.service = service
+    app.add_exception_handler(RequestValidationError, invalid_request)
+    app.add_middleware(RestGuard, limit=config.input.max_message_bytes, rejected=service.metrics.rest_rejected)
     if config.server.cors_origins:
         app.add_middleware(
             CORSMiddleware,
@@ -112,6 +83,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         if config.security.publish_requires_token:
             control(request)
 
+    preset_dirs = [Path(d) for d in config.tick.preset_dirs]
     ctl = [Depends(control)]
     obs = [Depends(observe)]
     app.add_api_websocket_route("/ws/horse", service.ingest)
@@ -125,6 +97,10 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def put_source(body: SourceRequest) -> dict[str, Any]:
         try:
             return await service.set_source(body.model_dump())
+        except TakeExists as exc:
+            raise HTTPException(409, str(exc)) from None
+        except FileNotFoundError:
+            raise HTTPException(404, "no such take") from None
         except (ValueError, OSError) as exc:
             raise HTTPException(400, str(exc)) from None
 
@@ -138,15 +114,21 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
 
     @app.get("/api/presets", dependencies=obs, summary="The shipped rule presets and the current one")
     async def presets() -> dict[str, Any]:
-        return {"presets": shipped_presets(), "current": service.params.name}
+        return {"presets": shipped_presets(preset_dirs), "current": service.params.name}
 
     @app.put("/api/preset", dependencies=ctl, summary="Load a preset by name (animator offsets are kept)")
     async def put_preset(body: PresetRequest) -> dict[str, Any]:
+        path = find_preset(body.name, preset_dirs)
+        if path is None:
+            raise HTTPException(404, f"no preset {body.name!r}; GET /api/presets lists them")
         try:
-            params = load_preset(body.name)
-        except ConfigError as exc:
-            raise HTTPException(400, str(exc)) from None
-        service.set_model(params=params)
+            params = load_preset(path)
+            service.set_model(params=params)
+        except ConfigError as exc:  # the file's contents stay in the server's log
+            log.warning("preset %s cannot be used: %s", path, exc)
+            raise HTTPException(422, f"preset {body.name!r} cannot be used (see the service log)") from None
+        except ValueError as exc:
+            raise HTTPException(422, str(exc)) from None
         return {"current": params.name}
 
     @app.get("/api/params", dependencies=obs, summary="All rule parameters as dotted keys")
@@ -159,9 +141,9 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             raise HTTPException(422, "parameters must be finite numbers")
         try:
             params = service.params.with_values(changes)
-        except (KeyError, ConfigError) as exc:
+            service.set_model(params=params)
+        except (KeyError, ValueError) as exc:
             raise HTTPException(422, str(exc)) from None
-        service.set_model(params=params)
         return params.flat()
 
     @app.get("/api/animator", dependencies=obs, summary="Animator offsets and gains per rider channel")
@@ -172,16 +154,19 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def put_animator(body: AnimatorBody) -> AnimatorBody:
         try:
             animator = AnimatorLayer(offsets=dict(body.offsets), gains=dict(body.gains))
+            service.set_model(animator=animator)
         except (KeyError, ValueError) as exc:
             raise HTTPException(422, str(exc)) from None
-        service.set_model(animator=animator)
         return body
 
-    @app.post("/api/record/start", dependencies=ctl, summary="Start recording a take")
+    @app.post("/api/record/start", dependencies=ctl, summary="Start recording a take (409 if it exists)")
     async def record_start(body: RecordStart | None = None) -> dict[str, Any]:
+        body = body or RecordStart()
         try:
-            name = service.start_recording(body.name if body else None)
-        except ValueError as exc:
+            name = service.start_recording(body.name, body.overwrite)
+        except TakeExists as exc:
+            raise HTTPException(409, str(exc)) from None
+        except (ValueError, OSError) as exc:
             raise HTTPException(400, str(exc)) from None
         return {"recording": name}
 

@@ -39,6 +39,8 @@ POSE_FLOATS_PER_BONE = 7
 """tx ty tz (local position, metres) then qx qy qz qw (local rotation from the rest)."""
 
 DRIVERS = ("procedural", "input", "neutral")
+MAX_TIME = 1e10
+"""Largest producer time ``|t|`` in seconds (317 years: Unix time fits; float64 still resolves 2 us)."""
 
 
 class BadFrame(ValueError):
@@ -49,10 +51,18 @@ class BadFrame(ValueError):
         super().__init__(message)
 
 
+def message_bytes(data: str | bytes, max_bytes: int) -> int:
+    """The size of a message in bytes (text counts as UTF-8); exact up to ``max_bytes``."""
+    if isinstance(data, bytes) or len(data) > max_bytes or 4 * len(data) <= max_bytes:
+        return len(data)  # a character is 1 to 4 bytes of UTF-8: no need to encode
+    return len(data.encode("utf-8", "surrogatepass"))
+
+
 def parse_message(data: str | bytes, max_bytes: int) -> dict[str, Any]:
-    """JSON text or msgpack binary -> a dict, or :class:`BadFrame`."""
-    if len(data) > max_bytes:
-        raise BadFrame("oversize", f"message of {len(data)} bytes exceeds {max_bytes}")
+    """JSON text or msgpack binary -> a dict, or :class:`BadFrame`. ``max_bytes`` counts bytes."""
+    size = message_bytes(data, max_bytes)
+    if size > max_bytes:
+        raise BadFrame("oversize", f"message of {size}+ bytes exceeds {max_bytes} bytes")
     try:
         obj = orjson.loads(data) if isinstance(data, str) else msgpack.unpackb(data, raw=False, strict_map_key=True)
     except (orjson.JSONDecodeError, ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as exc:
@@ -84,6 +94,8 @@ def decode_horse_frame(obj: dict[str, Any], order: Sequence[int] | None = None) 
     if "t" not in obj:
         raise BadFrame("missing_t", "a frame needs its time 't' in seconds")
     t = _number(obj["t"], "t")
+    if not -MAX_TIME <= t <= MAX_TIME:
+        raise BadFrame("out_of_range", f"'t' = {t!r} s is outside [-{MAX_TIME:g}, {MAX_TIME:g}]")
     out: dict[int, float] = {}
     if "values" in obj:
         values = obj["values"]
@@ -157,8 +169,15 @@ def _pick(names: Any, table: dict[str, int], what: str) -> tuple[int, ...]:
         raise BadFrame("wrong_type", f"'{what}' must be a list of channel names")
     unknown = [n for n in names if n not in table]
     if unknown:
-        raise BadFrame("unknown_channel", f"unknown {what} {unknown[0]!r}")
+        raise BadFrame("unknown_channel", f"unknown {what} {unknown[0][:64]!r}")
+    if len(set(names)) != len(names):
+        twice = next(n for n in names if names.count(n) > 1)
+        raise BadFrame("wrong_type", f"'{what}' lists {twice!r} twice")
     return tuple(table[n] for n in names)
+
+
+MAX_SUBSCRIBE_RATE = 10000.0
+"""Hz; a ``rate`` at or above the tick rate gets every tick."""
 
 
 def decode_subscription(
@@ -176,21 +195,36 @@ def decode_subscription(
     decimation = current.decimation
     if "decimation" in obj:
         value = obj["decimation"]
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 1000:
+        if isinstance(value, bool) or not isinstance(value, int):
             raise BadFrame("wrong_type", "'decimation' must be an integer 1..1000")
+        if not 1 <= value <= 1000:
+            raise BadFrame("out_of_range", f"'decimation' = {value!r} is outside [1, 1000]")
         decimation = value
     if "rate" in obj:
         rate = _number(obj["rate"], "rate")
-        if rate <= 0.0:
-            raise BadFrame("wrong_type", "'rate' must be > 0")
-        decimation = max(1, round(tick_rate / rate))
+        low = tick_rate / 1000.0
+        if not low <= rate <= MAX_SUBSCRIBE_RATE:
+            raise BadFrame("out_of_range", f"'rate' = {rate!r} Hz is outside [{low:g}, {MAX_SUBSCRIBE_RATE:g}]")
+        decimation = min(1000, max(1, round(tick_rate / rate)))
     encoding = obj.get("encoding", current.encoding)
-    if encoding not in ("json", "binary"):
+    if not isinstance(encoding, str) or encoding not in ("json", "binary"):
         raise BadFrame("wrong_type", "'encoding' must be 'json' or 'binary'")
     bones = obj.get("bones", current.bones)
     if not isinstance(bones, bool):
         raise BadFrame("wrong_type", "'bones' must be true or false")
     return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose))
+
+
+def decode_ping_id(obj: dict[str, Any]) -> str | int | float | None:
+    """A ping's ``id`` (echoed in the pong): a number, a string of at most 64 characters, or none."""
+    value = obj.get("id")
+    if value is None or (isinstance(value, str) and len(value) <= 64):
+        return value
+    if isinstance(value, int) and not isinstance(value, bool) and -(2**63) <= value < 2**63:
+        return value
+    if isinstance(value, float):
+        return _number(value, "id")
+    raise BadFrame("wrong_type", "'id' must be a number or a string of at most 64 characters")
 
 
 def _pose(obj: dict[str, Any], current: tuple[str, ...]) -> tuple[str, ...]:

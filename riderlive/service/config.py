@@ -12,8 +12,10 @@ from typing import Literal
 
 import pydantic
 
+from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS
+from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 
 
 class ServerSection(StrictModel):
@@ -52,6 +54,11 @@ class TickSection(StrictModel):
     length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
     """Thesis rig units per service length unit (25 = the service speaks metres)."""
     preset: str = "kuhnel2003"
+    preset_dirs: list[str] = pydantic.Field(default_factory=list)
+    """Directories of the deployment's presets; ``PUT /api/preset`` loads only from these
+    and the shipped ``config/presets`` (by name, never by path)."""
+    param_blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=10.0)
+    """Seconds over which a change of preset, parameters or animator layer blends in."""
 
 
 class InputSection(StrictModel):
@@ -67,6 +74,9 @@ class InputSection(StrictModel):
     max_errors: int = pydantic.Field(default=100, ge=1)
     """Rejected frames within ``error_window`` before the connection is closed."""
     error_window: float = pydantic.Field(default=10.0, gt=0.0)
+    clock_jump: float = pydantic.Field(default=0.5, ge=0.05, le=60.0)
+    """A producer clock that moves this many seconds more or less than the service's
+    between two frames starts a new stream segment (docs/protocol.md)."""
 
 
 class SourceSection(StrictModel):
@@ -87,6 +97,34 @@ class SourceSection(StrictModel):
         return value
 
 
+class RangesSection(StrictModel):
+    """Plausible channel ranges (``riderlive.ranges``): metres, degrees, unitless."""
+
+    channels: dict[str, Range] = pydantic.Field(default_factory=dict)
+    """Channel name or ``fnmatch`` pattern -> [low, high]; wins over the shipped defaults."""
+    length: Range = KIND_DEFAULTS[Kind.TRANSLATION]
+    rotation: Range = KIND_DEFAULTS[Kind.ROTATION]
+    unitless: Range = KIND_DEFAULTS[Kind.ATTRIBUTE]
+
+    @pydantic.field_validator("channels")
+    @classmethod
+    def _known(cls, value: dict[str, Range]) -> dict[str, Range]:
+        for key, bounds in value.items():
+            if not is_known(key) and not any(c in key for c in "*?["):
+                raise ValueError(f"unknown channel {key!r} (a name of riderlive.channels or a pattern)")
+            check_range(key, bounds)
+        return value
+
+    @pydantic.field_validator("length", "rotation", "unitless")
+    @classmethod
+    def _valid(cls, value: Range) -> Range:
+        return check_range("range", value)
+
+    def ranges(self) -> Ranges:
+        kinds = {Kind.TRANSLATION: self.length, Kind.ROTATION: self.rotation, Kind.ATTRIBUTE: self.unitless}
+        return Ranges(overrides=dict(self.channels), kinds=kinds)
+
+
 class PublishSection(StrictModel):
     send_timeout: float = pydantic.Field(default=2.0, gt=0.0, le=60.0)
     """A client whose send takes longer than this is cut off."""
@@ -97,7 +135,8 @@ class PublishSection(StrictModel):
 
 class TakesSection(StrictModel):
     directory: str = "takes"
-    flush_interval: float = pydantic.Field(default=0.5, gt=0.0, le=1.0)
+    flush_interval: float = pydantic.Field(default=0.25, gt=0.0, le=1.0)
+    """Seconds between writes of a take: a killed server loses at most this plus one tick."""
 
 
 class RigSection(StrictModel):
@@ -147,6 +186,7 @@ class ServiceConfig(StrictModel):
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
     physics: PhysicsSection = PhysicsSection()
+    ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
 
     @pydantic.model_validator(mode="after")

@@ -10,6 +10,12 @@ Arbitration (docs/protocol.md, "Several producers"):
 - Source ``procedural``: nobody drives; frames are validated and counted only.
 
 Each producer is told ``{"type": "control", "driving": true|false}`` when that changes.
+
+Every value is checked against its plausible range (:mod:`riderlive.ranges`) after
+conversion to the service's units; a frame with one value outside is rejected whole.
+A producer whose clock jumps (:func:`clock_jump`) starts a new *stream segment*: the
+tick sees a new stream id, re-anchors its clock mapping and blends, and the producer is
+told ``{"type": "segment", ...}`` (docs/protocol.md, "Clocks that jump").
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive.channels import HORSE, HORSE_NAMES, Kind
+from riderlive.ranges import Ranges
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_horse_frame, parse_message
@@ -36,6 +43,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 _TRANSLATION = frozenset(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
 _ids = itertools.count(1)
+LENGTH_SCALE_RANGE = (1e-6, 1e6)
+"""Accepted ``length_scale`` of a producer's hello (thesis rig units per its length unit)."""
 
 
 def next_producer_id() -> int:
@@ -54,6 +63,13 @@ class Producer:
     order: tuple[int, ...] | None = None
     last: list[float] = field(default_factory=lambda: [0.0] * len(HORSE_NAMES))
     last_frame_at: float = -1e9
+    stream: int = 0
+    """The id the tick knows this producer's current stream segment by (0: ``id``)."""
+    segment: int = 0
+    last_t: float | None = None
+    """Producer time of the last accepted frame (None before the first)."""
+    outbox: list[dict[str, Any]] = field(default_factory=list)
+    """Messages for the producer decided while handling a frame, sent right after."""
     accepted: int = 0
     rejected: int = 0
     errors: deque[float] = field(default_factory=deque)
@@ -61,12 +77,43 @@ class Producer:
     window_frames: int = 0
     websocket: WebSocket | None = None
 
-    def merge(self, values: dict[int, float]) -> list[float]:
-        """Apply a frame onto the last one (omitted channels keep their last value)."""
+    def __post_init__(self) -> None:
+        self.stream = self.stream or self.id
+
+    def convert(self, values: dict[int, float], low: list[float], high: list[float]) -> dict[int, float]:
+        """A frame's values in service units, or :class:`BadFrame` for the first one outside its range."""
         gain = self.length_gain
+        out = {}
         for index, value in values.items():
-            self.last[index] = value * gain if gain != 1.0 and index in _TRANSLATION else value
+            scaled = value * gain if gain != 1.0 and index in _TRANSLATION else value
+            if not low[index] <= scaled <= high[index]:
+                unit = gain if index in _TRANSLATION else 1.0
+                raise BadFrame(
+                    "out_of_range",
+                    f"{HORSE_NAMES[index]} = {value!r} is outside its plausible range "
+                    f"[{low[index] / unit:g}, {high[index] / unit:g}] (docs/protocol.md, ranges)",
+                )
+            out[index] = scaled
+        return out
+
+    def merge(self, values: dict[int, float]) -> list[float]:
+        """Apply converted values onto the last frame (omitted channels keep their last value)."""
+        for index, value in values.items():
+            self.last[index] = value
         return list(self.last)
+
+
+def clock_jump(last_t: float | None, last_rx: float, t: float, rx: float, threshold: float) -> float | None:
+    """How far a producer's clock jumped against the service's since its previous frame.
+
+    ``(t - last_t) - (rx - last_rx)`` seconds when that exceeds ``threshold`` either
+    way (positive: forward; negative: backward, or paused while the service's clock
+    went on), else None. Network jitter moves the difference by milliseconds.
+    """
+    if last_t is None:
+        return None
+    drift = (t - last_t) - (rx - last_rx)
+    return drift if abs(drift) > threshold else None
 
 
 class Arbiter:
@@ -111,8 +158,10 @@ async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: f
 class IngestEndpoint:
     """The ``/ws/horse`` handler, bound to the running service."""
 
-    def __init__(self, service: Service) -> None:
+    def __init__(self, service: Service, ranges: Ranges) -> None:
         self.service = service
+        self.low, self.high = ranges.limits(HORSE_NAMES, service.config.tick.length_scale)
+        """Plausible range of each horse channel in service units."""
 
     async def authenticate(self, websocket: WebSocket, offered: list[str]) -> dict[str, Any] | None:
         """Check the token (subprotocol or first message); return the first message if read."""
@@ -168,6 +217,7 @@ class IngestEndpoint:
             while True:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
+                    service.metrics.count_disconnect(message)
                     break
                 data = message.get("text")
                 if data is None:
@@ -175,10 +225,15 @@ class IngestEndpoint:
                 now = time.perf_counter()
                 try:
                     result = self.handle(producer, parse_message(data, config.input.max_message_bytes), now)
-                except BadFrame as exc:
+                except Exception as exc:
+                    if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged, never a silent drop
+                        log.exception("ingest failed on a message from %s", producer.name)
+                        exc = BadFrame("internal_error", "the service failed on this message (see its log)")
                     if await self.reject(producer, exc, now):
                         break
                     continue
+                while producer.outbox:
+                    await send_quietly(websocket, producer.outbox.pop(0), 1.0)
                 if result is not None and result != driving:
                     driving = result
                     await send_quietly(websocket, {"type": "control", "driving": driving}, 1.0)
@@ -186,7 +241,7 @@ class IngestEndpoint:
             pass
         finally:
             if service.arbiter.remove(producer.id):
-                service.link.send(cmd.ProducerGone(producer.id))
+                service.link.send(cmd.ProducerGone(producer.stream))
 
     def handle(self, producer: Producer, obj: dict[str, Any], now: float | None = None) -> bool | None:
         """Apply one decoded message; for a frame return whether it drives."""
@@ -204,15 +259,36 @@ class IngestEndpoint:
         if producer.window_frames > limits.max_rate:
             raise BadFrame("rate", f"more than {limits.max_rate:g} frames per second")
         frame = decode_horse_frame(obj, producer.order)
-        values = producer.merge(frame.values)
+        values = producer.merge(producer.convert(frame.values, self.low, self.high))
+        jump = clock_jump(producer.last_t, producer.last_frame_at, frame.t, now, limits.clock_jump)
+        if jump is not None:
+            self.new_segment(producer, frame.t, jump)
+        producer.last_t = frame.t
         producer.accepted += 1
-        self.service.metrics.frames_in[producer.name] += 1
+        self.service.metrics.count_frame_in(producer.name)
         arbiter = self.service.arbiter
         drives = arbiter.drives(producer, now)
         producer.last_frame_at = now
         if drives:
-            self.service.link.push_input(producer.id, frame.t, now - self.service.link.start, values)
+            self.service.link.push_input(producer.stream, frame.t, now - self.service.link.start, values)
         return drives
+
+    def new_segment(self, producer: Producer, t: float, jump: float) -> None:
+        """Re-anchor: the tick gets a new stream id (a fresh clock mapping, a blend)."""
+        direction = "forward" if jump > 0 else "backward"
+        producer.segment += 1
+        producer.stream = next_producer_id()
+        self.service.metrics.clock_jumps[direction] += 1
+        producer.outbox.append(
+            {
+                "type": "segment",
+                "segment": producer.segment,
+                "reason": f"clock_{direction}",
+                "t": t,
+                "previous_t": producer.last_t,
+                "jump": jump,
+            }
+        )
 
     def hello(self, producer: Producer, obj: dict[str, Any]) -> None:
         """Per-connection settings: name, priority, length_scale, channels (order of ``v``)."""
@@ -227,8 +303,11 @@ class IngestEndpoint:
             producer.priority = value
         if "length_scale" in obj:
             scale = obj["length_scale"]
-            if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale < 1e9:
-                raise BadFrame("wrong_type", "'length_scale' must be a number > 0")
+            if isinstance(scale, bool) or not isinstance(scale, int | float):
+                raise BadFrame("wrong_type", "'length_scale' must be a number (25 for metres)")
+            low, high = LENGTH_SCALE_RANGE
+            if not low <= scale <= high:
+                raise BadFrame("out_of_range", f"'length_scale' = {scale!r} is outside [{low:g}, {high:g}]")
             producer.length_gain = float(scale) / self.service.config.tick.length_scale
         if "channels" in obj:
             producer.order = channel_order(obj["channels"])
@@ -244,11 +323,12 @@ class IngestEndpoint:
             producer.errors.popleft()
         websocket = producer.websocket
         assert websocket is not None
+        await send_quietly(websocket, {"type": "error", "reason": exc.reason, "message": str(exc)}, 1.0)
         if len(producer.errors) > limits.max_errors:
+            service.metrics.bad_frames["abuse"] += 1
             await send_quietly(
                 websocket, {"type": "error", "reason": "abuse", "message": "too many bad messages; closing"}, 1.0
             )
             await websocket.close(code=1008, reason="too many bad messages")
             return True
-        await send_quietly(websocket, {"type": "error", "reason": exc.reason, "message": str(exc)}, 1.0)
         return False

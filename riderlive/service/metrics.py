@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
-from collections import Counter
+from collections import Counter, OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from riderlive.realtime.pacing import LATENESS_BUCKETS
 
 LATENCY_BUCKETS: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5)
+MAX_PRODUCER_LABELS = 32
+"""Producer names with their own ``riderlive_frames_in_total`` series; older ones are added to ``other``."""
+OTHER = "other"
 
 
 @dataclass
@@ -51,15 +56,38 @@ class ServiceMetrics:
     """What the web process counts; per-client figures live on each client."""
 
     bad_frames: Counter[str] = field(default_factory=Counter)
-    frames_in: Counter[str] = field(default_factory=Counter)
-    """Accepted horse frames per producer name."""
+    frames_in: OrderedDict[str, int] = field(default_factory=OrderedDict)
+    """Accepted horse frames per producer name, least recently counted first (``count_frame_in``)."""
+    rest_rejected: Counter[int] = field(default_factory=Counter)
+    """REST answers 4xx, by status code."""
+    clock_jumps: Counter[str] = field(default_factory=Counter)
+    """Producer clock jumps by direction (``forward``, ``backward``): new stream segments."""
     ticks_published: int = 0
     ticks_coalesced: int = 0
-    """Ticks that arrived together with a newer one (the web process was late)."""
+    """Ticks not sent: the web process fell more than ``publish.CATCH_UP`` seconds behind."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
     vmc: Counter[str] = field(default_factory=Counter)
     """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed)."""
+
+    def count_disconnect(self, message: Mapping[str, Any]) -> None:
+        """A websocket closed; uvicorn closes with 1009 a message beyond ``ws_max_size``: count it."""
+        if message.get("code") == 1009:
+            self.bad_frames["oversize"] += 1
+
+    def count_frame_in(self, producer: str) -> None:
+        """One accepted frame; the label set stays bounded however many names producers choose.
+
+        The ``MAX_PRODUCER_LABELS`` most recently counted names keep their series; the
+        least recently counted one gives its count to ``other`` when a new name comes.
+        """
+        frames_in = self.frames_in
+        if producer in frames_in:
+            frames_in.move_to_end(producer)
+        elif len(frames_in) >= MAX_PRODUCER_LABELS + (OTHER in frames_in):
+            oldest = next(name for name in frames_in if name != OTHER)
+            frames_in[OTHER] = frames_in.get(OTHER, 0) + frames_in.pop(oldest)
+        frames_in[producer] = frames_in.get(producer, 0) + 1
 
 
 def _escape(value: str) -> str:
@@ -106,6 +134,8 @@ def render(
         ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
         ("physics_errors", "Tail physics restarts from rest after a failed or non-finite step."),
         ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
+        ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
+        ("outputs_clamped", "Rider values clamped to their plausible range."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
@@ -150,6 +180,18 @@ def render(
         [f'riderlive_bad_frames_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.bad_frames.items())],
     )
     metric(
+        "riderlive_rest_rejected_total",
+        "counter",
+        "REST requests answered 4xx, by status.",
+        [f'riderlive_rest_rejected_total{{status="{c}"}} {n}' for c, n in sorted(metrics.rest_rejected.items())],
+    )
+    metric(
+        "riderlive_clock_jumps_total",
+        "counter",
+        "Producer clock jumps (a new stream segment each), by direction.",
+        [f'riderlive_clock_jumps_total{{direction="{d}"}} {metrics.clock_jumps[d]}' for d in ("backward", "forward")],
+    )
+    metric(
         "riderlive_clients_cut_off_total",
         "counter",
         "Clients closed after a send timeout.",
@@ -158,7 +200,7 @@ def render(
     metric(
         "riderlive_ticks_coalesced_total",
         "counter",
-        "Ticks that reached the web process together with a newer one.",
+        "Ticks not sent because the web process fell more than 0.25 s behind (publish.CATCH_UP).",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
     if metrics.vmc:

@@ -40,6 +40,7 @@ from riderlive.service.codecs import (
     SKELETONS,
     BadFrame,
     Subscription,
+    decode_ping_id,
     decode_subscription,
     encode_frame,
     parse_message,
@@ -59,6 +60,10 @@ HELLO_VERSION = 2
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
+CATCH_UP = 0.25
+"""Seconds of ticks sent at once after the web process was late (``input.hold``'s default):
+older ones are skipped and counted (coalesced), so an overloaded web process sheds work
+and its frames stay at most this stale."""
 
 
 @dataclass(eq=False)
@@ -185,65 +190,59 @@ class Hub:
         return [*RIDER, *(lookup(name) for name in self.service.extra_channels)]
 
     def publish(self, records: list[np.ndarray]) -> None:
-        """Offer the newest of ``records`` (new ticks, oldest first) to every client.
+        """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.
 
-        A client with decimation N gets the newest record whose ``seq % N == 0``, so
-        its frames stay evenly spaced even when the web process was late and several
-        ticks arrived at once. Each (subscription, record) is encoded once.
+        A client with decimation N gets every record whose ``seq % N == 0``, in order:
+        when the web process was late and several ticks arrived at once, a client that
+        keeps up still gets all of them (those of the last :data:`CATCH_UP` seconds;
+        older ones are counted as coalesced). Each (subscription, record) is encoded
+        once. A client that is behind has frames dropped in :meth:`_write`, not here.
         """
-        rx_so_far = []
-        newest_rx = self._seen_input_rx
-        for record in records:
-            newest_rx = max(newest_rx, float(record[L.OUT_INPUT_RX]))
-            rx_so_far.append(newest_rx)
-        chosen: dict[int, int | None] = {}
-        encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+        metrics = self.service.metrics
+        oldest = float(records[-1][L.OUT_ENGINE_T]) - CATCH_UP if records else 0.0
+        if records and float(records[0][L.OUT_ENGINE_T]) < oldest:
+            kept = [r for r in records if float(r[L.OUT_ENGINE_T]) >= oldest]
+            metrics.ticks_coalesced += len(records) - len(kept)
+            records = kept
+        clients = [c for c in self.clients.values() if not c.closed]
         poses = self.service.poses
         now = time.perf_counter()
         timeout = self.service.config.publish.send_timeout
-        fresh_rx = -1.0
-        for client in list(self.clients.values()):
-            if client.closed:
-                continue
-            sub = client.subscription
-            decimation = sub.decimation
-            if decimation not in chosen:
-                chosen[decimation] = next(
-                    (i for i in range(len(records) - 1, -1, -1) if int(records[i][L.OUT_SEQ]) % decimation == 0),
-                    None,
-                )
-            index = chosen[decimation]
-            if index is None:
-                continue
-            key = (*sub.key, index)
-            data = encoded.get(key)
-            if data is None:
-                record = records[index]
-                bones = np.asarray(poses.rider(record).local_rotations).ravel() if sub.bones else None
-                skeleton_poses = {name: pose_floats(self._pose(name, record)) for name in sub.pose}
-                message = encode_frame(sub, record, bones, skeleton_poses)
-                data = (message, wire_frame(message))
-                encoded[key] = data
-            input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
-            if client.transport is None:
-                client.offer_frame(data[0], input_rx)
-                continue
-            fresh_rx = max(fresh_rx, input_rx)
-            self._write(client, data[1], now, timeout)
-        self._seen_input_rx = newest_rx
-        if fresh_rx >= 0.0:
-            self.service.metrics.input_to_send.observe(self.service.link.engine_time() - fresh_rx)
+        for record in records:
+            seq = int(record[L.OUT_SEQ])
+            input_rx = float(record[L.OUT_INPUT_RX])
+            fresh = input_rx > self._seen_input_rx
+            if fresh:
+                self._seen_input_rx = input_rx
+            encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
+            written = False
+            for client in clients:
+                sub = client.subscription
+                if seq % sub.decimation:
+                    continue
+                data = encoded.get(sub.key)
+                if data is None:
+                    bones = np.asarray(poses.rider(record).local_rotations).ravel() if sub.bones else None
+                    skeleton_poses = {name: pose_floats(self._pose(name, record)) for name in sub.pose}
+                    message = encode_frame(sub, record, bones, skeleton_poses)
+                    data = encoded[sub.key] = (message, wire_frame(message))
+                if client.transport is None:
+                    client.offer_frame(data[0], input_rx if fresh else -1.0)
+                else:
+                    written |= self._write(client, data[1], now, timeout)
+            if fresh and written:
+                metrics.input_to_send.observe(self.service.link.engine_time() - input_rx)
 
     def _pose(self, skeleton: str, record: np.ndarray) -> Pose:
         poses = self.service.poses
         return poses.rider(record) if skeleton == "rider" else poses.horse(record)
 
-    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> None:
-        """The fast path: write a frame's wire bytes, or drop it if the client is behind."""
+    def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> bool:
+        """The fast path: write a frame's wire bytes (True), or drop it if the client is behind."""
         transport = client.transport
-        if transport.is_closing():
+        if client.closed or transport.is_closing():
             client.closed = True
-            return
+            return False
         if transport.get_write_buffer_size() > len(wire):
             client.dropped += 1
             if client.behind_since is None:
@@ -254,10 +253,11 @@ class Hub:
                 client.closed = True
                 client.wake.set()
                 transport.abort()
-            return
+            return False
         client.behind_since = None
         transport.write(wire)
         client.sent += 1
+        return True
 
     def publish_status(self, status: dict[str, Any]) -> None:
         text = orjson.dumps({"type": "status", **status}).decode()
@@ -313,10 +313,10 @@ class Hub:
         service = self.service
         config = service.config
         offered = list(websocket.scope.get("subprotocols", []))
+        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
         if len(self.clients) >= config.publish.max_clients:
             await websocket.close(code=1013, reason="too many clients")
             return
-        await websocket.accept(subprotocol=auth.accepted_subprotocol(offered))
         if config.security.publish_requires_token and not auth.token_matches(
             config.security.token, auth.token_from_subprotocols(offered)
         ):
@@ -343,6 +343,7 @@ class Hub:
             while not client.closed:
                 message = await websocket.receive()
                 if message["type"] == "websocket.disconnect":
+                    service.metrics.count_disconnect(message)
                     break
                 self.handle(client, message.get("text") or message.get("bytes") or b"")
         except (WebSocketDisconnect, RuntimeError):
@@ -364,12 +365,16 @@ class Hub:
                 )
                 client.offer_control(client.subscription.describe(service.config.tick.rate, self.names))
             elif kind == "ping":
-                client.offer_control({"type": "pong", "id": obj.get("id"), "engine_time": service.link.engine_time()})
+                pong = {"type": "pong", "id": decode_ping_id(obj), "engine_time": service.link.engine_time()}
+                client.offer_control(pong)
             elif kind == "auth":
                 pass
             else:
-                raise BadFrame("unknown_type", f"unknown message type {kind!r}")
-        except BadFrame as exc:
+                raise BadFrame("unknown_type", f"unknown message type {str(kind)[:64]!r}")
+        except Exception as exc:
+            if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged, never a silent drop
+                log.exception("publish failed on a message from %s", client.id)
+                exc = BadFrame("internal_error", "the service failed on this message (see its log)")
             service.metrics.bad_frames[exc.reason] += 1
             client.offer_control({"type": "error", "reason": exc.reason, "message": str(exc)})
 

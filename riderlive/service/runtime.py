@@ -4,26 +4,28 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 import uuid
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from riderlive.channels import HORSE_NAMES
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
 from riderlive.realtime.link import TickLink
 from riderlive.realtime.tick import TickSetup
 from riderlive.rules.animator import AnimatorLayer
+from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
-from riderlive.takes.recorder import TakeRecorder, take_path
+from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, take_path
 from riderlive.takes.replay import Replay, load_replay
 
 log = logging.getLogger(__name__)
@@ -38,7 +40,9 @@ def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[
         blend_time=config.input.blend_time,
         resume_after=source.resume_after,
         fallback_procedural=source.fallback_procedural,
+        param_blend=config.tick.param_blend_time,
     )
+    low, high = config.ranges.ranges().limits(RIDER_NAMES, config.tick.length_scale)
     return TickSetup(
         rate=config.tick.rate,
         start=time.perf_counter(),
@@ -59,6 +63,7 @@ def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[
         tail=config.physics.tail,
         physics_file=config.physics.file,
         extra_channels=extra_channels,
+        rider_bounds=(tuple(low), tuple(high)),
     )
 
 
@@ -86,7 +91,12 @@ class Service:
             self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
-        self.ingest = IngestEndpoint(self)
+        self.ranges = config.ranges.ranges()
+        self.ingest = IngestEndpoint(self, self.ranges)
+        low, high = self.ranges.limits(HORSE_NAMES, config.tick.length_scale)
+        mixed = [a if i % 2 else b for i, (a, b) in enumerate(zip(low, high, strict=True))]
+        self._probes = [[0.0] * len(low), low, high, mixed]
+        """Horse frames ``set_model`` checks new parameters on: neutral and corners of the ranges."""
         self.source: dict[str, Any] = {"kind": config.source.kind}
         if config.source.kind == "procedural":
             self.source.update(gait=config.source.gait, speed=config.source.speed)
@@ -99,6 +109,7 @@ class Service:
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
+        self.recover_takes()
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels))
         loop = asyncio.get_running_loop()
         loop.add_reader(self.link.notify_fd, self.on_tick)
@@ -132,13 +143,12 @@ class Service:
         link.drain_notify()
         records = link.read_outputs()
         if self.recorder is not None:
+            start = link.start
             for record in records:
-                self.recorder.add(
-                    float(record[L.OUT_ENGINE_T]), record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :]
-                )
+                engine_t = float(record[L.OUT_ENGINE_T])
+                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :], engine_t + start)
         if records:
-            self.metrics.ticks_coalesced += len(records) - 1
-            self.metrics.ticks_published += 1
+            self.metrics.ticks_published += len(records)
             self.hub.publish(records)
             if self.vmc is not None:
                 self.vmc.publish(records)
@@ -164,7 +174,14 @@ class Service:
             self.source = {"kind": "live"}
         else:
             path = take_path(self.config.takes.directory, request["take"])
-            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate)
+            if not path.is_file():
+                raise FileNotFoundError(path.name)
+            if self.recorder is not None and self.recorder.path == path:
+                raise TakeExists(f"take {path.stem!r} is being recorded; stop it first")
+            limits = self.ranges.limits(HORSE_NAMES, self.config.tick.length_scale)
+            await asyncio.to_thread(recover_take, path)
+            length_scale = self.config.tick.length_scale
+            replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate, limits, length_scale)
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
             self.arbiter.replay_id = producer.id
             self.arbiter.selection = "replay"
@@ -196,7 +213,7 @@ class Service:
                 if delay > 0.0:
                     await asyncio.sleep(delay)
                 link.push_input(producer.id, float(t) + t_shift, link.engine_time(), frame)
-                self.metrics.frames_in[producer.name] += 1
+                self.metrics.count_frame_in(producer.name)
             if not loop:
                 break
             t_shift += replay.duration + period
@@ -209,22 +226,58 @@ class Service:
 
     # -- rules ----------------------------------------------------------------
     def set_model(self, params: RuleParams | None = None, animator: AnimatorLayer | None = None) -> None:
-        self.params = params or self.params
-        self.animator = animator or self.animator
+        """Send new parameters or animator layer to the tick (it blends to them).
+
+        ValueError, changing nothing, when they give a non-finite rider for a horse
+        at the corners of its plausible ranges (the tick would have to hold its last frame).
+        """
+        params = params or self.params
+        animator = animator or self.animator
+        model = RiderModel(params=params, scale=self.config.tick.length_scale, animator=animator)
+        for horse in self._probes:
+            rider = model.evaluate(horse)
+            bad = next((name for name, v in zip(RIDER_NAMES, rider, strict=True) if not math.isfinite(v)), None)
+            if bad is not None:
+                raise ValueError(f"these parameters make {bad} non-finite for a plausible horse; not applied")
+        self.params, self.animator = params, animator
         self.link.send(cmd.SetModel(self.params, self.animator))
 
     # -- takes ----------------------------------------------------------------
-    def start_recording(self, name: str | None) -> str:
-        self.stop_recording()
-        name = name or datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
-        path = take_path(self.config.takes.directory, name)
+    def recover_takes(self) -> None:
+        """Takes a kill interrupted (sidecar not ``complete``): trim a cut last line, mark them."""
+        folder = Path(self.config.takes.directory)
+        for path in sorted(folder.glob("*.csv")) if folder.is_dir() else ():
+            try:
+                if recover_take(path):
+                    log.warning("take %s was interrupted (killed?): recovered", path.name)
+            except OSError as exc:
+                log.warning("take %s could not be recovered: %s", path.name, exc)
+
+    def start_recording(self, name: str | None, overwrite: bool = False) -> str:
+        """Start a take; the one being recorded is closed only once the new one is open.
+
+        A bad name (ValueError) or an existing take without ``overwrite``
+        (:class:`TakeExists`) changes nothing.
+        """
+        directory = self.config.takes.directory
+        if name is None:
+            stem = datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
+            path = take_path(directory, stem)
+            n = 1
+            while path.exists():
+                n += 1
+                path = take_path(directory, f"{stem}-{n}")
+        else:
+            path = take_path(directory, name)
         meta = {
             "session": self.session,
             "tick_rate": self.config.tick.rate,
             "preset": self.params.name,
             "length_scale": self.config.tick.length_scale,
         }
-        self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels)
+        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels, overwrite)
+        self.stop_recording()
+        self.recorder = recorder
         self.take_name = path.stem
         return path.stem
 

@@ -10,6 +10,7 @@ BASE_CONFIG = """
 [tick]
 rate = 200.0
 realtime_priority = false
+preset_dirs = ["presets"]
 
 [input]
 delay = 0.03

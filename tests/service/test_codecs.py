@@ -102,3 +102,28 @@ def test_subscription_rules() -> None:
     for bad in ({"encoding": "xml"}, {"decimation": 0}, {"rate": -1}, {"horse_channels": ["nope"]}):
         with pytest.raises(BadFrame):
             decode_subscription(bad, sub, 120.0)
+
+
+@given(text=st.text(max_size=400), limit=st.integers(1, 1200))
+def test_the_size_limit_counts_utf8_bytes(text: str, limit: int) -> None:
+    message = orjson.dumps({"pad": text}).decode()
+    size = len(message.encode("utf-8", "surrogatepass"))
+    if size > limit:
+        with pytest.raises(BadFrame, match="exceeds"):
+            parse_message(message, limit)
+    else:
+        assert parse_message(message, limit) == {"pad": text}
+
+
+@given(
+    rate=st.one_of(finite, st.sampled_from([1e-300, 1e-10, 5e-324, 0.0, -1.0, 1e308])),
+    decimation=st.integers(-(2**70), 2**70),
+)
+def test_subscribe_numbers_are_range_checked_naming_the_field(rate: float, decimation: int) -> None:
+    for obj, name in (({"rate": rate}, "'rate'"), ({"decimation": decimation}, "'decimation'")):
+        try:
+            sub = decode_subscription(obj, Subscription(), 120.0)
+        except BadFrame as exc:
+            assert name in str(exc)
+            continue
+        assert 1 <= sub.decimation <= 1000

@@ -27,6 +27,9 @@ def test_the_example_file_loads_and_matches_the_defaults() -> None:
         ("[source]\ngait = 'pace'\n", "source.gait"),
         ("[security]\ntoken = 'short'\n", "security.token"),
         ("[physics]\ntail = 'maybe'\n", "physics.tail"),
+        ("[ranges]\nlength = [5.0, 1.0]\n", "ranges.length"),
+        ("[ranges]\nchannels = { 'lfhoof.ty' = [0.0, 1.0] }\n", "ranges.channels"),
+        ("[input]\nclock_jump = 0.0\n", "input.clock_jump"),
     ],
 )
 def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> None:

@@ -102,7 +102,7 @@ def test_weight_slider_changes_the_next_frames(live_page: PageUnderTest, server:
     while server.get("/api/params")[key] != pytest.approx(before_param - 2.0, abs=0.02):
         assert time.monotonic() < deadline, "the slider never reached the service"
         time.sleep(0.05)
-    time.sleep(1.2)
+    time.sleep(0.5 + 1.2)  # the change blends in over tick.param_blend_time (0.5 s), then a second of frames
     after = _recent(live_page, "lf_knee.ty", 1.0)
     try:
         assert len(before) > 30 and len(after) > 30
