@@ -52,6 +52,12 @@ class TickSection(StrictModel):
     length_scale: float = pydantic.Field(default=DEFAULT_SCALE, gt=0.0)
     """Thesis rig units per service length unit (25 = the service speaks metres)."""
     preset: str = "kuhnel2003"
+    hang_ticks: float = pydantic.Field(default=5.0, ge=2.0, le=1000.0)
+    """A tick whose heartbeat is older than this many periods is hung: killed and
+    restarted (its devices stay safe and are not re-armed). Raise it on a machine
+    without real-time priority at high rates (docs/architecture.md, "Supervision")."""
+    restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
+    """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
 
 
 class InputSection(StrictModel):
@@ -104,6 +110,23 @@ class RigSection(StrictModel):
     file: str | None = None
     port: str | None = None
     park_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+    arm: bool = False
+    """Arm the rig once it is connected, at start only (``serve --arm``). Unattended use
+    only: the rig moves with nobody confirming it (docs/hardware.md)."""
+    rate_policy: Literal["divide", "refuse"] = "divide"
+    """A rig validated (``bus.tick_hz``) below ``tick.rate``: drive it every n-th tick,
+    or refuse to start."""
+
+
+class GuardianSection(StrictModel):
+    """The dead-man process that parks the devices when the tick or the web process dies."""
+
+    enabled: bool = True
+    tick_timeout: float = pydantic.Field(default=0.1, ge=0.02, le=10.0)
+    """Seconds without a tick heartbeat before the guardian acts on its own (the web
+    process kills a hung tick sooner: ``tick.hang_ticks``)."""
+    web_timeout: float = pydantic.Field(default=1.0, ge=0.1, le=60.0)
+    """Seconds without a web-process heartbeat before the guardian stops everything."""
 
 
 class PhysicsSection(StrictModel):
@@ -125,6 +148,7 @@ class ServiceConfig(StrictModel):
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
     physics: PhysicsSection = PhysicsSection()
+    guardian: GuardianSection = GuardianSection()
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:
@@ -134,6 +158,11 @@ class ServiceConfig(StrictModel):
                 "(or security.require_token = false to run open, at your own risk)"
             )
         return self
+
+    @property
+    def arming_token(self) -> str | None:
+        """Arming needs the token whenever one is configured, loopback or not."""
+        return self.security.token
 
     @property
     def token_required(self) -> bool:
