@@ -156,6 +156,8 @@ class TickDevices:
             raise Refused(Refusal.BAD_CONFIG, str(exc)) from None
         device.close(by)
         fresh = Device(plug, self.specs[index].period_s, self.latch)
+        fresh.counters = device.counters  # counters stay monotonic across a reload
+        fresh.counters["reloads"] += 1
         self.devices[index] = fresh
         fresh.connect(by)
         return f"{fresh.name} reloaded: connecting, then disarmed"

@@ -104,14 +104,15 @@ class TickLoop:
         notify_fd: int,
         devices: TickDevices | None,
         *,
-        latch: StopLatch,
+        latch: StopLatch | None = None,
         board: SafetyBoard | None = None,
     ) -> None:
         self.setup = setup
         self.commands = commands
         self.notify_fd = notify_fd
         self.devices = devices
-        self.latch = latch
+        self._own_latch = latch is None
+        self.latch = StopLatch() if latch is None else latch
         self.board = board
         self.wake_fds: list[int] = [commands.fileno()]
         names = setup.shm_names
@@ -354,6 +355,8 @@ class TickLoop:
             self.board["tick_clean_exit"] = float(self.setup.generation)
         for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
             shared.close()
+        if self._own_latch:
+            self.latch.close()
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:

@@ -56,6 +56,9 @@ class TickSection(StrictModel):
     """A tick whose heartbeat is older than this many periods is hung: killed and
     restarted (its devices stay safe and are not re-armed). Raise it on a machine
     without real-time priority at high rates (docs/architecture.md, "Supervision")."""
+    hang_floor: float = pydantic.Field(default=0.25, ge=0.0, le=60.0)
+    """Without real-time priority the hang threshold is at least this (seconds): a loaded
+    machine stalls a normal-priority process for tens of milliseconds."""
     restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
     """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
 
@@ -122,10 +125,11 @@ class GuardianSection(StrictModel):
     """The dead-man process that parks the devices when the tick or the web process dies."""
 
     enabled: bool = True
-    tick_timeout: float = pydantic.Field(default=0.1, ge=0.02, le=10.0)
-    """Seconds without a tick heartbeat before the guardian acts on its own (the web
-    process kills a hung tick sooner: ``tick.hang_ticks``)."""
-    web_timeout: float = pydantic.Field(default=1.0, ge=0.1, le=60.0)
+    tick_timeout: float = pydantic.Field(default=0.5, ge=0.02, le=10.0)
+    """Seconds without a tick heartbeat before the guardian acts on its own, for when the
+    web process is frozen too (a live web process kills a hung tick sooner, after
+    ``tick.hang_ticks``, and the guardian sees that death at once)."""
+    web_timeout: float = pydantic.Field(default=2.0, ge=0.1, le=60.0)
     """Seconds without a web-process heartbeat before the guardian stops everything."""
 
 

@@ -1,11 +1,14 @@
 """REST for the devices near people: arm, disarm, e-stop, reset, reload; health; metrics.
 
-    POST /api/arm     {"device": "bench3"}        the name is the confirmation; token
-                                                  always, when one is configured
+    POST /api/arm     {"device": "bench3"}        the name is the confirmation
     POST /api/disarm  {"device": "bench3"} | {}   ease to park, outputs off (all when omitted)
     POST /api/estop                               latched e-stop of every device
     POST /api/reset   {"device": ...} | {}        clear the e-stop / faults: disarmed, never armed
     POST /api/reload  {"device": "bench3"}        re-read its file (refused while it moves)
+
+Arm, reset and reload need the token whenever one is configured, even on loopback;
+disarm and e-stop (stopping) follow the other control calls (a token when bound beyond
+loopback).
     GET  /api/devices                             lifecycle of each device, supervision
     GET  /healthz, /readyz                        liveness and readiness (no token)
 
@@ -117,13 +120,13 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
 
     @app.post("/api/reset", summary="Clear the e-stop and device faults: disarmed (never arms)")
     async def reset(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
-        by = who(operator(request, "reset"), body)
+        by = who(operator(request, "reset", arming=True), body)
         result = await answer("reset", lambda r: cmd.Reset(body.device if body else None, by, r))
         return {**result, "estop": False}
 
     @app.post("/api/reload", summary="Re-read a device's file and connect it again (refused while it moves)")
     async def reload(request: Request, body: DeviceRequest) -> dict[str, Any]:
-        by = who(operator(request, "reload"), body)
+        by = who(operator(request, "reload", arming=True), body)
         return await answer("reload", lambda r: cmd.Reload(body.device, by, r))
 
     @app.get("/api/devices", summary="Each device's lifecycle state; tick supervision and guardian")

@@ -6,8 +6,10 @@ The web process supervises the tick process it spawned:
   exception, the OOM killer): noticed at once, on the event loop.
 - **hung**: its heartbeat on the safety board (written every tick) is older than
   ``tick.hang_ticks - 1`` periods, checked every half period: noticed within
-  ``hang_ticks`` periods of the missed beat (SIGSTOP, a loop stuck in a call). A hung
-  tick is killed (SIGKILL) before anything else touches its bus.
+  ``hang_ticks`` periods (SIGSTOP, a loop stuck in a call). That holds when the tick
+  runs at real-time priority; without it the threshold is at least ``tick.hang_floor``
+  (a loaded machine stalls a normal process for tens of ms: no false restarts). A
+  hung tick is killed (SIGKILL) before anything else touches its bus.
 
 Then the guardian (when devices are configured) parks the devices and releases their
 buses; the supervisor waits for that, then starts the next tick generation after a
@@ -49,6 +51,9 @@ UNHEALTHY_AFTER_S = 60.0
 """``/healthz`` fails when the tick has been down this long (the supervisor cannot bring it back)."""
 START_GRACE_S = 60.0
 """A new tick may take this long to its first heartbeat (imports, compiling kernels)."""
+WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
+"""For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
+of compiled kernels, page faults) without being taken for hung."""
 _ids = itertools.count(1)
 
 
@@ -75,6 +80,7 @@ class TickSupervisor:
         self.hangs = 0
         self.last_exit: str | None = None
         self.started_at = time.perf_counter()
+        self._first_beat: float | None = None
         self.down_since: float | None = None
         self._streak = 0
         self._recovery: asyncio.Task[None] | None = None
@@ -155,7 +161,9 @@ class TickSupervisor:
             board["web_beat"] = now
             if self.up and self._recovery is None and self.supervised:
                 age = self.link.beat_age()
-                if age is not None and age > self.hang_s:
+                if age is not None and self._first_beat is None:
+                    self._first_beat = now
+                if age is not None and age > self.hang_threshold():
                     self.hangs += 1
                     self._begin_recovery(f"hung (no heartbeat for {age * 1000:.0f} ms)")
                 elif age is None and now - self.started_at > START_GRACE_S:
@@ -164,6 +172,16 @@ class TickSupervisor:
             if self.up and now - self.started_at > STABLE_S:
                 self._streak = 0
             self._check_guardian(now)
+
+    def hang_threshold(self) -> float:
+        """Seconds without a heartbeat that make a tick hung (see the module docstring)."""
+        threshold = self.hang_s
+        if self.link.counters.values[self.link.counters.index["realtime"]] != 1.0:
+            threshold = max(threshold, self.config.tick.hang_floor)
+        first = self._first_beat
+        if first is None or time.perf_counter() - first < WARMUP_S:
+            threshold = max(threshold, WARMUP_HANG_S)
+        return threshold
 
     def _begin_recovery(self, why: str) -> None:
         self.up = False
@@ -193,6 +211,7 @@ class TickSupervisor:
         self.restarts += 1
         self.up = True
         self.started_at = time.perf_counter()
+        self._first_beat = None
         self.down_since = None
         self._recovery = None
         log.warning("tick restarted (generation %d): devices connect and stay disarmed", link.generation)
@@ -268,7 +287,7 @@ class TickSupervisor:
     def ready(self) -> bool:
         """Ticking now: up and a heartbeat within the hang threshold."""
         age = self.link.beat_age()
-        return self.up and age is not None and age <= max(self.hang_s, 0.25)
+        return self.up and age is not None and age <= max(self.hang_threshold(), 0.25)
 
     def live(self) -> bool:
         """Not stuck: the tick is up, or has been down for less than ``UNHEALTHY_AFTER_S``."""
@@ -279,14 +298,17 @@ class TickSupervisor:
         return {
             "up": self.up,
             "generation": self.link.generation,
+            "tick_pid": int(board["tick_pid"]),
             "restarts": self.restarts,
             "deaths": self.deaths,
             "hangs": self.hangs,
             "last_exit": self.last_exit,
             "down_for": None if self.down_since is None else time.perf_counter() - self.down_since,
+            "down_since": self.down_since,
             "guardian": {
                 "enabled": self.guardian_wanted,
                 "alive": self.guardian_alive() if self.guardian is not None else False,
+                "pid": None if self.guardian is None else self.guardian.pid,
                 "restarts": self.guardian_restarts,
                 "takeovers": int(board["guardian_takeovers"]),
             },

@@ -1,0 +1,63 @@
+"""Reply timeouts from measured round trips; the error budget's leaky bucket."""
+
+from __future__ import annotations
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from riderlive.devices.budget import ErrorBudget, ReplyTimer
+
+excess = st.floats(min_value=0.0, max_value=100.0, allow_nan=False)
+
+
+@given(st.lists(excess, min_size=1, max_size=200), st.integers(0, 6))
+def test_the_allowance_stays_between_floor_and_ceiling(samples: list[float], misses: int) -> None:
+    timer = ReplyTimer(floor_ms=2.0, ceiling_ms=25.0)
+    for s in samples:
+        timer.observe(s)
+    for _ in range(misses):
+        timer.missed()
+    assert 2.0 <= timer.allowance_ms() <= 25.0
+    assert timer.timeout_ms(3.0) == 3.0 + timer.allowance_ms()
+
+
+def test_the_allowance_follows_the_measured_delays() -> None:
+    quiet = ReplyTimer(floor_ms=1.0, ceiling_ms=50.0)
+    for _ in range(50):
+        quiet.observe(0.3)
+    assert quiet.allowance_ms() == 1.0  # steady, fast replies: the floor
+    loaded = ReplyTimer(floor_ms=1.0, ceiling_ms=50.0)
+    for i in range(200):
+        loaded.observe(2.0 if i % 2 else 8.0)  # a busy host: replies 2-8 ms late
+    # srtt -> 5 ms, rttvar -> 3 ms: srtt + 4 rttvar = 17 ms (hand-computed limit of the EWMAs)
+    assert abs(loaded.allowance_ms() - 17.0) < 1.0
+    assert loaded.allowance_ms() > 8.0  # every one of those replies would have been in time
+
+
+def test_a_miss_backs_off_and_a_reply_resets_it() -> None:
+    timer = ReplyTimer(floor_ms=2.0, ceiling_ms=100.0)
+    for _ in range(20):
+        timer.observe(0.0)
+    base = timer.allowance_ms()
+    timer.missed()
+    assert timer.allowance_ms() == 2 * base
+    timer.missed()
+    timer.missed()
+    assert timer.allowance_ms() == 4 * base  # max_backoff
+    timer.observe(0.0)
+    assert timer.allowance_ms() == base
+
+
+@given(st.floats(min_value=0.0, max_value=5.0), st.floats(min_value=1.0, max_value=60.0))
+def test_failures_slower_than_the_drain_never_spend_the_budget(rate: float, seconds: float) -> None:
+    budget = ErrorBudget(burst=20.0, drain_per_s=5.0)
+    n = int(rate * seconds)
+    assert not any(budget.fail(i / rate) for i in range(n)) if rate else True
+
+
+def test_persistent_failures_spend_it_in_the_stated_time() -> None:
+    budget = ErrorBudget(burst=20.0, drain_per_s=5.0)
+    rate = 25.0  # every read of a 100 Hz / 4 rig failing
+    spent_at = next(i / rate for i in range(10_000) if budget.fail(i / rate))
+    assert abs(spent_at - budget.seconds_to_spend(rate)) <= 1.0 / rate + 1e-9  # 20 / (25 - 5) = 1 s
+    assert budget.seconds_to_spend(5.0) == float("inf")
