@@ -31,10 +31,10 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 import dynamixel_sdk as sdk
+from riderlive.dynamixel.lifecycle import RigState
 
 from riderlive.channels import RIDER
 from riderlive.dynamixel.driver import RigDriver
-from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import READ_BYTES, RigConfig, load_rig, wire_bytes_per_tick
 from riderlive.dynamixel.sdkbus import RigPort
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse

@@ -395,7 +395,6 @@ class ServoMap:
         return [min(max(p, lo), hi) for p, lo, hi in zip(positions, self.low, self.high, strict=True)]
 
 
-
 def wire_budget(rig: RigConfig) -> str:
     """Three lines on what the rig asks of its bus per tick (printed at start)."""
     bus = rig.bus

@@ -69,10 +69,10 @@ def connected(latch: StopLatch) -> tuple[Device, MemoryPlug]:
 
 
 def test_the_names_are_those_of_the_lifecycle_document() -> None:
-    assert NAMES == {
+    assert {
         "disconnected", "connecting", "disarmed", "homing", "soft_start",
         "running", "parking", "parked", "estop", "fault",
-    }  # fmt: skip
+    } == NAMES  # fmt: skip
     assert set(TRANSITIONS) == set(DeviceState)
     for source, targets in TRANSITIONS.items():
         if source is not S.ESTOP:
@@ -97,7 +97,13 @@ def test_lifecycle_refuses_illegal_transitions_and_records_who_asked() -> None:
     drained = life.drain()
     assert [t.target for t in drained] == [S.CONNECTING, S.DISARMED, S.ESTOP]
     assert life.drain() == ()
-    assert drained[2].to_dict() == {"at": 2.0, "from": "disarmed", "to": "estop", "reason": "button", "by": "rest 127.0.0.1"}
+    assert drained[2].to_dict() == {
+        "at": 2.0,
+        "from": "disarmed",
+        "to": "estop",
+        "reason": "button",
+        "by": "rest 127.0.0.1",
+    }
 
 
 def test_connect_ends_disarmed_with_outputs_off_and_read_back(latch: StopLatch) -> None:

@@ -118,9 +118,7 @@ def connect(device: Device, timeout: float = 5.0) -> Run:
     return run
 
 
-def start_running(
-    device: Device, rider: Callable[[float], Sequence[float]] | None = None, timeout: float = 5.0
-) -> Run:
+def start_running(device: Device, rider: Callable[[float], Sequence[float]] | None = None, timeout: float = 5.0) -> Run:
     """Connect, arm, and tick until RUNNING (assert it gets there)."""
     run = connect(device, timeout)
     device.arm(device.name, "test")

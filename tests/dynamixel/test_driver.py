@@ -31,7 +31,6 @@ from tests.dynamixel.rig_harness import (
     connect,
     drive,
     goal_deg,
-    present_deg,
     rig_of,
     servo_setups,
     short_rig,
