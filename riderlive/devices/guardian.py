@@ -94,8 +94,8 @@ class Guardian:
                 why = self._tick_failed(now) or web_why
                 if why:
                     self.stop(generation, why)
-                    if web_why:
-                        return 0
+                    if web_why or not board["web_pid"]:
+                        return 0  # nobody left to hand the bus back to
             elif web_why:
                 log.warning("%s; no tick to stop: exiting", web_why)
                 return 0
