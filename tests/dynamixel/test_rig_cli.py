@@ -116,7 +116,7 @@ def test_a_killed_driver_is_parked_by_its_guardian(bus_factory: Callable[..., Em
     time.sleep(0.3)
     killed = time.perf_counter()
     cli.kill()  # SIGKILL: no handler, no goodbye
-    out, _ = cli.communicate(timeout=10)
+    cli.communicate(timeout=10)
     deadline = time.perf_counter() + 10.0
     while time.perf_counter() < deadline and any(emu.read_item(i, Item.TORQUE_ENABLE) for i in (1, 2, 3)):
         time.sleep(0.02)
