@@ -4,9 +4,10 @@
   margin (the estimator of TCP's retransmission timer, Jacobson/Karels 1988): the
   timeout follows the machine's real scheduling delays instead of a fixed few
   milliseconds that a loaded host overruns, and backs off after a miss.
-- :class:`ErrorBudget`: a leaky bucket per transport. Each failure adds one; the
-  bucket drains at a steady rate; the budget is spent when failures come faster than
-  they drain for long enough (persistent corruption), never by a scattered few.
+- :class:`ErrorBudget`: a bucket per transport. Each failure adds one, each success
+  takes one out: the budget is spent only when failures outnumber successes for long
+  enough (persistent corruption), never by scattered misses, however many over time
+  (a loaded host misses now and then; a broken bus misses always).
 
 Per-unit silence (a servo that stopped answering) is a time budget kept by the plug:
 retried every tick, faulted only after ``reply_budget_s`` without one answer. Pure
@@ -15,7 +16,7 @@ arithmetic; times in seconds unless the name says milliseconds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 
 @dataclass
@@ -66,36 +67,31 @@ class ReplyTimer:
 
 @dataclass
 class ErrorBudget:
-    """A leaky bucket of failures: ``burst`` failures at once, ``drain_per_s`` sustained."""
+    """A bucket of failures: each failure adds one, each success takes ``credit`` out (not
+    below 0); the budget is spent when the bucket holds more than ``burst``. Failures
+    that stay fewer than ``credit`` x the successes never spend it, however long; a
+    transport that fails (nearly) every time spends it after ``burst`` failures."""
 
     burst: float = 20.0
-    drain_per_s: float = 5.0
+    credit: float = 1.0
     level: float = 0.0
     failures: int = 0
-    _at: float | None = field(default=None, repr=False)
+    successes: int = 0
 
-    def _drain(self, now: float) -> None:
-        if self._at is not None:
-            self.level = max(0.0, self.level - (now - self._at) * self.drain_per_s)
-        self._at = now
-
-    def fail(self, now: float) -> bool:
-        """Count one failure at ``now``; True when the budget is spent."""
-        self._drain(now)
+    def fail(self) -> bool:
+        """Count one failure; True when the budget is spent."""
         self.level += 1.0
         self.failures += 1
         return self.level > self.burst
 
-    def current(self, now: float) -> float:
-        self._drain(now)
-        return self.level
+    def ok(self) -> None:
+        self.level = max(0.0, self.level - self.credit)
+        self.successes += 1
 
     def reset(self) -> None:
         self.level = 0.0
-        self._at = None
 
-    def seconds_to_spend(self, failures_per_s: float) -> float:
-        """How long failures arriving at this rate take to spend a full budget (inf if never)."""
-        if failures_per_s <= self.drain_per_s:
-            return float("inf")
-        return self.burst / (failures_per_s - self.drain_per_s)
+    def failures_to_spend(self, failure_ratio: float) -> float:
+        """How many failures at this share of attempts spend a full budget (inf if never)."""
+        net = failure_ratio - (1.0 - failure_ratio) * self.credit
+        return float("inf") if net <= 0 else self.burst / net * failure_ratio

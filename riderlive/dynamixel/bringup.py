@@ -29,7 +29,7 @@ from riderlive.dynamixel.rig import (
     watchdog_units,
 )
 from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
-from riderlive.dynamixel.tables import Item, ItemSpec, ModelSpec, OperatingMode, decode_hardware_error
+from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, ModelSpec, OperatingMode, decode_hardware_error
 
 log = logging.getLogger("riderlive.dynamixel")
 T = TypeVar("T")
@@ -77,11 +77,13 @@ def bring_up(bus: SdkBus, rig: RigConfig, detail: Callable[[str], None]) -> Step
         yield
 
 
-def read_present(bus: SdkBus, rig: RigConfig, ids: tuple[int, ...]) -> list[float]:
-    """Present Position of ``ids`` (degrees), one plain Sync Read."""
+def read_present(bus: SdkBus, rig: RigConfig, ids: tuple[int, ...]) -> tuple[list[float], list[int]]:
+    """Present Position of ``ids`` (degrees), one plain Sync Read; and the ids whose
+    status carried the Alert bit (a hardware error to read)."""
     position = first_spec(rig).spec(Item.PRESENT_POSITION)
     block = bus.read_block(position.address, position.size, ids, fast=False)
-    return [pulses_to_deg(int.from_bytes(block[sid][1], "little", signed=True)) for sid in ids]
+    present = [pulses_to_deg(int.from_bytes(block[sid][1], "little", signed=True)) for sid in ids]
+    return present, [sid for sid in ids if block[sid][0] & ALERT_BIT]
 
 
 def torque_on_here(bus: SdkBus, rig: RigConfig, ids: tuple[int, ...], present: list[float]) -> list[float]:

@@ -119,14 +119,14 @@ class RigPlug:
         deadline = time.perf_counter() + self.config.bus.reply_budget_s
         while True:
             try:
-                for sid in ids:
-                    raise_hardware_error(self.bus, sid, spec)
-                present = read_present(self.bus, self.config, ids)
+                present, alerts = read_present(self.bus, self.config, ids)
                 break
             except NoReply:
                 self.counters["arm_retries"] += 1
                 if time.perf_counter() > deadline:
                     raise
+        for sid in alerts:
+            raise_hardware_error(self.bus, sid, spec)
         with self._gate():
             self.goals = torque_on_here(self.bus, self.config, ids, present)
         self._arm_state()
@@ -210,8 +210,8 @@ class RigPlug:
             "clamps": sum(self.clamped),
             "read": self.read_this_tick,
             "fast_sync_read": rb.use_fast,
-            "reply_allowance_ms": round(self.timer.allowance_ms(), 3),
-            "bus_error_level": round(rb.budget.level, 2),
+            "reply_allowance_ms": {k: round(t.allowance_ms(), 3) for k, t in self.bus.timers.items()},
+            "bus_error_level": rb.budget.level,
             "transactions": self.bus.transactions,
         }
 

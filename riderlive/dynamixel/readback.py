@@ -10,9 +10,10 @@ Telling a miss from a failure (as ROS 2's Dynamixel hardware interface does):
 
 - A failed read is retried on the next tick and counted; a servo is declared silent
   only when it has missed every read for ``reply_budget_s``.
-- The bus has an error budget (:class:`~riderlive.devices.budget.ErrorBudget`): failed
-  reads may come in a burst of ``bus_error_burst`` and go on at ``bus_error_drain_per_s``
-  forever; faster for long enough (persistent corruption) is a ``bus_errors`` fault.
+- The bus has an error budget (:class:`~riderlive.devices.budget.ErrorBudget`): every
+  failed read adds one, every good one takes ``bus_error_credit`` out; failures that
+  outnumber good reads by ``bus_error_burst`` (persistent corruption) are a
+  ``bus_errors`` fault, scattered misses never are.
 - A failed Fast Sync Read is followed by a plain one (which names a culprit). Only
   ``fast_read_fallback_after`` fast failures in a row, with no fast success between,
   switch to the plain read; it tries the fast read again after ``fast_read_retry_s``
@@ -49,7 +50,7 @@ class Readback:
         self._temp_at = spec.spec(Item.PRESENT_TEMPERATURE).address - self.address
         self.status_spec: ItemSpec = spec.spec(Item.HARDWARE_ERROR_STATUS)
         self.fast_capable = rig.bus.fast_sync_read and all(s.spec.fast_sync_read for s in rig.servos.values())
-        self.budget = ErrorBudget(rig.bus.bus_error_burst, rig.bus.bus_error_drain_per_s)
+        self.budget = ErrorBudget(rig.bus.bus_error_burst, rig.bus.bus_error_credit)
         n = len(self.ids)
         self.present_deg: list[float | None] = [None] * n
         self.voltage_v: list[float | None] = [None] * n
@@ -93,6 +94,7 @@ class Readback:
             raise_hardware_error(bus, sid, self.status_spec)
         if failure is None:
             counters["reads"] += 1
+            self.budget.ok()
             if fast:
                 self._fast_failures = 0
                 if self._probing:
@@ -103,10 +105,10 @@ class Readback:
         self.retrying = True  # read again next tick, not in read_divider ticks
         if fast:
             self._fast_failed(now, counters)
-        if self.budget.fail(now):
+        if self.budget.fail():
             raise BusErrors(
-                f"{self.budget.failures} failed reads: more than {self.budget.burst:g} at once "
-                f"or {self.budget.drain_per_s:g}/s for long (last: {failure})"
+                f"failed reads outnumber good ones by {self.budget.burst:g} "
+                f"({self.budget.failures} failed, {self.budget.successes} good; last: {failure})"
             )
         budget = self.rig.bus.reply_budget_s
         stale = {

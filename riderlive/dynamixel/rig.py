@@ -80,9 +80,9 @@ class BusConfig(StrictModel):
     reply_budget_s: float = Field(0.1, gt=0.0, le=10.0)
     """How long a servo may stay silent, retried every tick, before the rig faults."""
     bus_error_burst: float = Field(20.0, ge=1.0, le=10_000.0)
-    """Failed reads the bus may have at once (the error budget's size)."""
-    bus_error_drain_per_s: float = Field(5.0, ge=0.0, le=10_000.0)
-    """Failed reads per second the bus may have for ever; faster for long spends the budget."""
+    """The error budget: failed reads may outnumber good ones by this much, no more."""
+    bus_error_credit: float = Field(1.0, gt=0.0, le=100.0)
+    """Failed reads repaid by each good read (1: the bus faults when most reads fail)."""
     setup_retry_s: float = Field(1.0, gt=0.0, le=60.0)
     """How long the start-up steps retry a silent servo before refusing to start."""
     bus_watchdog_ms: int = Field(100, ge=0, le=2540)

@@ -8,9 +8,11 @@ exceptions (:class:`PortLost`, :class:`PortBusy`, :class:`NoReply`, :class:`Reje
 
 Reply timeouts: the expected time (the bytes still queued for the wire, the reply's
 wire time, twice the adapter's latency timer) plus an allowance measured from the
-replies themselves (:class:`~riderlive.devices.budget.ReplyTimer`: the host's real
-scheduling delays, never below ``timeout_margin_ms``, backing off after a miss), on a
-monotonic clock (the SDK's own uses wall time, which jumps).
+replies themselves (:class:`~riderlive.devices.budget.ReplyTimer`, one per kind of
+transaction: the host's real scheduling delays, never below ``timeout_margin_ms``,
+backing off after a miss), on a monotonic clock (the SDK's own uses wall time, which
+jumps). After a reply that failed, the line is drained of its late remainder before
+the next request, so a late reply never corrupts the next one.
 
 The port is opened exclusively (``flock``): the tick and the guardian never write
 the bus at the same time, and a process that dies releases it with its file.
@@ -19,6 +21,7 @@ While a reply is awaited, a pending e-stop request gives the wait up at once.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import termios
 import time
@@ -116,6 +119,21 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         """A reply arrived: teach the timer how late it was."""
         self.timer.observe(self.getCurrentTime() - self.packet_start_time - self.expected_ms)
 
+    def drain(self, quiet_ms: float, max_ms: float) -> int:
+        """Read and drop bytes until the line has been quiet for ``quiet_ms`` (at most
+        ``max_ms``): the late remainder of a reply given up on, which would otherwise
+        corrupt the next one. Returns the bytes dropped."""
+        start = last = self.getCurrentTime()
+        dropped = 0
+        while (now := self.getCurrentTime()) - last < quiet_ms and now - start < max_ms:
+            waiting = self.ser.in_waiting
+            if waiting:
+                dropped += len(self.ser.read(waiting))
+                last = self.getCurrentTime()
+            else:
+                time.sleep(0.0001)
+        return dropped
+
 
 def usb_latency_timer_ms(port: str) -> int | None:
     """The FTDI latency timer of a ``/dev/ttyUSBn`` port in ms (None if not an FTDI)."""
@@ -134,21 +152,31 @@ class SdkBus:
         self.port_name = port
         self.baud = baud
         self.port = RigPort(port, latency_ms, timer)
+        self.timers = {kind: dataclasses.replace(timer) for kind in ("unicast", "sync read", "fast sync read")}
+        """One reply timer per kind of transaction: a 24-servo read is not a ping."""
         self.packets = sdk.PacketHandler(2.0)
         self._writers: dict[tuple[int, int], Any] = {}
         self._readers: dict[tuple[int, int, tuple[int, ...]], Any] = {}
         self.transactions = 0
         self.stale_replies = 0
+        self.stale_bytes = 0
         self.timeouts = 0
+        self._unsettled = False
 
     @property
     def is_open(self) -> bool:
         return bool(self.port.is_open)
 
-    def _guard(self, what: str, call: Callable[[], T]) -> T:
-        """Run one SDK call; a pyserial failure becomes PortLost; the port is freed."""
+    def _guard(self, what: str, call: Callable[[], T], kind: str = "unicast") -> T:
+        """Run one SDK call; a pyserial failure becomes PortLost; the port is freed. After
+        a reply that failed, the line is first drained of its late remainder."""
         self.transactions += 1
+        self.port.timer = self.timers[kind]
         try:
+            if self._unsettled:
+                self._unsettled = False
+                quiet = 2.0 * self.port.latency_ms + 1.0
+                self.stale_bytes += self.port.drain(quiet, quiet + self.port.timer.allowance_ms())
             return call()
         except _PORT_ERRORS as exc:
             raise PortLost(f"{self.port_name}: {what} failed: {exc}") from exc
@@ -193,6 +221,7 @@ class SdkBus:
         if result == sdk.COMM_RX_TIMEOUT:
             self.timeouts += 1
             self.port.timer.missed()
+        self._unsettled = True
         raise NoReply(servo_id, f"{what}: {self.packets.getTxRxResult(result)}")
 
     def _transact(self, what: str, servo_id: int, packet: list[int], reply_params: int) -> bytes:
@@ -286,8 +315,8 @@ class SdkBus:
             for servo_id in ids:
                 reader.addParam(servo_id)
         if fast:
-            return self._guard("fast sync read", lambda: self._fast_read(reader, length, ids))
-        return self._guard("sync read", lambda: self._plain_read(reader, length, ids))
+            return self._guard("fast sync read", lambda: self._fast_read(reader, length, ids), "fast sync read")
+        return self._guard("sync read", lambda: self._plain_read(reader, length, ids), "sync read")
 
     def _plain_read(self, reader: Any, length: int, ids: Sequence[int]) -> dict[int, tuple[int, bytes]]:
         result = reader.txPacket()
