@@ -6,11 +6,11 @@ process that owns the bus writes torque off). Between the two lives this latch: 
 slots in shared memory and a file lock on that segment.
 
 "No goal write after the request" is structural: every goal write happens inside
-:meth:`StopLatch.gate`, which holds the lock, refuses (:class:`StopRequested`) when a
-request is pending, and blocks SIGINT/SIGTERM so an in-process signal handler cannot
-slip a request between the check and the write. :meth:`request` takes the same lock
-to record the request, so a request is ordered either after a whole goal write or
-before its check. The lock is held for one write system call (~20 us); a requester
+:meth:`StopView.gate`, which holds the lock and refuses (:class:`StopRequested`) when a
+request is pending. :meth:`StopLatch.request` takes the same lock to record the
+request, so a request is ordered either after a whole goal write or before its check;
+a signal handler that interrupts this process's own write (SIGINT of the CLI) has its
+request recorded the moment the write is done. The lock is held for one write system call (~20 us); a requester
 that cannot get it within ``LOCK_WAIT_S`` (the writer is frozen, say) records the
 request anyway and counts it. A killed holder releases the lock with its file.
 
@@ -24,7 +24,6 @@ import contextlib
 import enum
 import fcntl
 import os
-import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -34,7 +33,6 @@ from riderlive.devices.shared import Slots, lock_path
 
 LOCK_WAIT_S = 0.002
 """How long a request waits for a goal write in progress before recording anyway."""
-STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
 _SLOTS = ("requested", "handled", "latched", "requested_at", "source", "lock_timeouts")
 
 
@@ -61,6 +59,9 @@ class StopLatch:
         self._gate_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
         self._request_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
         self._thread_lock = threading.Lock()  # requests from threads of one process: one at a time
+        self._gate_owner: int | None = None
+        """The thread inside a gate of this process (a signal handler may interrupt it)."""
+        self._deferred: list[StopSource] = []
 
     @property
     def name(self) -> str:
@@ -69,7 +70,13 @@ class StopLatch:
     # -- the requester's side ----------------------------------------------------------
 
     def request(self, source: StopSource = StopSource.API) -> float:
-        """Record an e-stop request; return its time (perf_counter s, after the lock)."""
+        """Record an e-stop request; return its time (perf_counter s, after the lock).
+
+        Called by a signal handler that interrupted this process's own goal write (the
+        thread inside the gate), the request is recorded the moment the write is done."""
+        if self._gate_owner == threading.get_ident():
+            self._deferred.append(source)
+            return time.perf_counter()
         acquired = self._thread_lock.acquire(timeout=LOCK_WAIT_S)
         try:
             locked = self._flock(self._request_fd, LOCK_WAIT_S)
@@ -168,17 +175,15 @@ class StopView:
         """Around a goal write: raises StopRequested instead of entering if a request is
         pending (or is being recorded right now); no request can be recorded inside."""
         latch = self.latch
-        masked = threading.current_thread() is threading.main_thread()
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if masked else None
+        if not latch._flock(latch._gate_fd, LOCK_WAIT_S):
+            raise StopRequested("e-stop being requested")
+        latch._gate_owner = threading.get_ident()
         try:
-            if not latch._flock(latch._gate_fd, LOCK_WAIT_S):
-                raise StopRequested("e-stop being requested")
-            try:
-                if self.pending:
-                    raise StopRequested("e-stop requested")
-                yield
-            finally:
-                fcntl.flock(latch._gate_fd, fcntl.LOCK_UN)
+            if self.pending:
+                raise StopRequested("e-stop requested")
+            yield
         finally:
-            if old is not None:
-                signal.pthread_sigmask(signal.SIG_SETMASK, old)
+            latch._gate_owner = None
+            fcntl.flock(latch._gate_fd, fcntl.LOCK_UN)
+            while latch._deferred:  # a signal handler asked while this thread wrote
+                latch.request(latch._deferred.pop(0))
