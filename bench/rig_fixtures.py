@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import re
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from multiprocessing.connection import Connection
 from typing import Any
 
-from riderlive.dynamixel.rig import RigConfig
+from riderlive.configfile import CONFIG_DIR
+from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import Instruction, Item
 from riderlive.realtime.pacing import try_realtime_priority
 from tests.dynamixel.rig_harness import TimedBus, is_torque_off_write, servo_setups
@@ -105,3 +108,22 @@ def other_core_busy(seconds: float, enabled: bool = True) -> Iterator[None]:
     finally:
         burner.terminate()
         burner.join()
+
+
+def bench_rig(path: Path, tick_hz: float, baud: int = 1_000_000, **bus: Any) -> RigConfig:
+    """bench3 at ``tick_hz`` written to ``path`` (a rig map the service and the guardian read)."""
+    text = (CONFIG_DIR / "rigs" / "bench3.toml").read_text()
+    values = {"tick_hz": tick_hz, "baud": baud, "read_divider": 4, "latency_timer_ms": 0.5} | bus
+    for key, value in values.items():
+        line = f"{key} = {value!r}".replace("'", '"')
+        text, n = re.subn(rf"^{key} = .*$", line, text, flags=re.M)
+        if not n:
+            text = text.replace("[bus]\n", f"[bus]\n{line}\n", 1)
+    path.write_text(text)
+    return load_rig(path)
+
+
+def decode_goals(raw: bytes) -> dict[int, int]:
+    """Servo id -> Goal Position pulses of a goal SYNC_WRITE (4-byte items)."""
+    body = raw[12:-2]
+    return {body[i]: int.from_bytes(body[i + 1 : i + 5], "little", signed=True) for i in range(0, len(body) - 4, 5)}

@@ -400,7 +400,7 @@ class Device:
                 self._off_confirmed = True
                 if self.last_stop is not None and self.state is S.ESTOP and self.last_stop.confirmed_at is None:
                     self.last_stop.confirmed_at = now
-                log.info("%s: outputs off, read back", self.name)
+                log.debug("%s: outputs off, read back", self.name)
             return
         self.counters["off_repeats"] += 1
         if self.last_stop is not None and self.state is S.ESTOP:

@@ -59,6 +59,9 @@ class TickSection(StrictModel):
     hang_floor: float = pydantic.Field(default=0.25, ge=0.0, le=60.0)
     """Without real-time priority the hang threshold is at least this (seconds): a loaded
     machine stalls a normal-priority process for tens of milliseconds."""
+    hang_floor_realtime: float = pydantic.Field(default=0.03, ge=0.0, le=60.0)
+    """With real-time priority the hang threshold is at least this (seconds): even a
+    SCHED_FIFO tick is late by ~10 ms now and then on a busy 2-core machine."""
     restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
     """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
 

@@ -6,10 +6,11 @@ The web process supervises the tick process it spawned:
   exception, the OOM killer): noticed at once, on the event loop.
 - **hung**: its heartbeat on the safety board (written every tick) is older than
   ``tick.hang_ticks - 1`` periods, checked every half period: noticed within
-  ``hang_ticks`` periods (SIGSTOP, a loop stuck in a call). That holds when the tick
-  runs at real-time priority; without it the threshold is at least ``tick.hang_floor``
-  (a loaded machine stalls a normal process for tens of ms: no false restarts). A
-  hung tick is killed (SIGKILL) before anything else touches its bus.
+  ``hang_ticks`` periods (SIGSTOP, a loop stuck in a call), but never sooner than
+  ``tick.hang_floor_realtime`` (30 ms: up to 150 ticks/s that is within 5 ticks) when
+  the tick runs at real-time priority, ``tick.hang_floor`` (0.25 s) when it does not (a
+  loaded machine stalls a normal process for tens of ms: no false restarts). A hung
+  tick is killed (SIGKILL) before anything else touches its bus.
 
 Then the guardian (when devices are configured) parks the devices and releases their
 buses; the supervisor waits for that, then starts the next tick generation after a
@@ -175,9 +176,9 @@ class TickSupervisor:
 
     def hang_threshold(self) -> float:
         """Seconds without a heartbeat that make a tick hung (see the module docstring)."""
-        threshold = self.hang_s
-        if self.link.counters.values[self.link.counters.index["realtime"]] != 1.0:
-            threshold = max(threshold, self.config.tick.hang_floor)
+        tick = self.config.tick
+        realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
+        threshold = max(self.hang_s, tick.hang_floor_realtime if realtime else tick.hang_floor)
         first = self._first_beat
         if first is None or time.perf_counter() - first < WARMUP_S:
             threshold = max(threshold, WARMUP_HANG_S)
