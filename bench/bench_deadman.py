@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import os
 import signal
 import statistics
@@ -124,7 +125,7 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
         raise SystemExit(f"{case}: no park ({len(goals)} goals) or no torque off ({len(offs)})")
     speed = {s.id: s.max_speed_dps for s in rig.config.servos.values()}
     ratio = 0.0
-    for (t0, g0), (t1, g1) in zip(goals, goals[1:], strict=False):
+    for (t0, g0), (t1, g1) in itertools.pairwise(goals):
         for sid, pulses in g1.items():
             if sid in g0 and t1 > t0:
                 step = abs(pulses - g0[sid]) * DEG_PER_PULSE

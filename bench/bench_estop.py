@@ -111,7 +111,8 @@ def main() -> int:
             worst = max(r["handler"]) * 1000
             after = sum(r["after_off"])
             ok &= worst <= limit and after == 0
-            print(f"\n{rate:g} ticks/s, {args.trials} e-stops, other core busy: {not args.idle} (target: max <= {limit:.2f} ms)")
+            busy = not args.idle
+            print(f"\n{rate:g} ticks/s, {args.trials} e-stops, other core busy: {busy} (target: max <= {limit:.2f} ms)")
             print(f"  handler -> torque off on the wire  {summary(r['handler'])}")
             print(f"  latched -> torque off on the wire  {summary(r['latch'])}")
             print(f"  client  -> torque off on the wire  {summary(r['client'])}   (HTTP included)")

@@ -16,8 +16,8 @@ import multiprocessing as mp
 import re
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 from riderlive.configfile import CONFIG_DIR

@@ -103,25 +103,21 @@ class Guardian:
         return 0
 
     def _web_failed(self, now: float) -> str | None:
-        pid = int(self.board["web_pid"])
-        if not pid:
-            return None
-        if not pid_alive(pid):
-            return f"the web process {pid} is gone"
-        beat = self.board["web_beat"]
-        if beat and now - beat > self.web_timeout_s:
-            return f"the web process {pid} has not beaten for {(now - beat) * 1000:.0f} ms"
-        return None
+        return self._failed("web", self.web_timeout_s, now)
 
     def _tick_failed(self, now: float) -> str | None:
-        pid = int(self.board["tick_pid"])
+        return self._failed("tick", self.tick_timeout_s, now)
+
+    def _failed(self, process: str, timeout_s: float, now: float) -> str | None:
+        """Why the ``web`` or ``tick`` process counts as failed (None: it does not)."""
+        pid = int(self.board[f"{process}_pid"])
         if not pid:
             return None
         if not pid_alive(pid):
-            return f"the tick process {pid} is gone"
-        beat = self.board["tick_beat"]
-        if beat and now - beat > self.tick_timeout_s:
-            return f"the tick process {pid} has not ticked for {(now - beat) * 1000:.0f} ms"
+            return f"the {process} process {pid} is gone"
+        beat = self.board[f"{process}_beat"]
+        if beat and now - beat > timeout_s:
+            return f"the {process} process {pid} has not beaten for {(now - beat) * 1000:.0f} ms"
         return None
 
     def _wait(self) -> None:

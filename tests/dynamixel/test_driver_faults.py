@@ -172,7 +172,7 @@ def test_estop_during_setup(timed_buses: Callable[..., TimedBus]) -> None:
     assert all(torque(emu, i) == 0 for i in range(1, 25))
     assert drive(device, 0.1).statuses[-1].state is S.ESTOP  # the setup does not resume
     assert device.reset("test") is S.CONNECTING  # configured only halfway: connect again
-    tick_until(device, lambda s: s is S.DISARMED)
+    tick_until(device, lambda s: s is S.DISARMED, seconds=15.0)
     device.close()
 
 
