@@ -108,3 +108,14 @@ class MemoryPlug:
 
     def status(self) -> dict[str, Any]:
         return {"goals": list(self.goals), "outputs": list(self.outputs)}
+
+
+def describe(file: str, port: str | None) -> Any:
+    """The registry's hook (kind ``memory``): ``file`` is the device's name; 100 ticks/s."""
+    from riderlive.devices.registry import DeviceInfo
+
+    return DeviceInfo(file, 100.0, f"{file}: in memory")
+
+
+def make_plug(spec: Any) -> MemoryPlug:
+    return MemoryPlug(name=spec.name)
