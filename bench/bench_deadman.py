@@ -47,6 +47,7 @@ class Rig:
         self.config: RigConfig = bench_rig(workdir / "bench3.toml", 100.0, park_s=PARK_S, soft_start_s=0.2)
         self.emu = Emulator(self.config, priority=60)
         self.live: LiveServer | None = None
+        self.retries = 0
 
     def service(self) -> LiveServer:
         if self.live is None or self.live.proc.poll() is not None:
@@ -77,18 +78,26 @@ class Rig:
             time.sleep(0.02)
 
     def running(self) -> None:
-        """Armed and running (a tick restarted by a false hang on a loaded machine is retried)."""
+        """Armed and running. On a loaded machine a start can fault (a stalled tick) or the
+        tick be restarted; that is reset and retried, and counted in ``self.retries``."""
         for _ in range(5):
-            self.wait("disarmed")
-            for _ in range(50):
-                if self.supervision()["guardian"]["alive"] and self.supervision()["up"]:
-                    break
-                time.sleep(0.1)
-            answer = httpx.post(self.service().base + "/api/arm", json={"device": self.config.name}, timeout=10)
-            if answer.status_code == 200:
-                self.wait("running")
-                return
-            print(f"  (arm refused, retrying: {answer.text})", flush=True)
+            try:
+                if self.state() in ("fault", "estop"):
+                    httpx.post(self.service().base + "/api/reset", timeout=10)
+                self.wait("disarmed")
+                for _ in range(50):
+                    sup = self.supervision()
+                    if sup["guardian"]["alive"] and sup["up"]:
+                        break
+                    time.sleep(0.1)
+                answer = httpx.post(self.service().base + "/api/arm", json={"device": self.config.name}, timeout=10)
+                if answer.status_code == 200:
+                    self.wait("running", timeout=10.0)
+                    return
+                print(f"  (arm refused, retrying: {answer.text})", flush=True)
+            except SystemExit as exc:
+                print(f"  (no start, retrying: {str(exc)[:200]})", flush=True)
+            self.retries += 1
             time.sleep(1.0)
         raise SystemExit("the rig could not be armed")
 
@@ -159,6 +168,7 @@ def main() -> int:
                     flush=True,
                 )
         finally:
+            print(f"starts retried after a fault or a refused arm (a loaded machine): {rig.retries}")
             rig.close()
     return 0 if ok else 1
 

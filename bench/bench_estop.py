@@ -47,6 +47,15 @@ def wait_state(live: LiveServer, wanted: str, timeout: float = 10.0) -> None:
         time.sleep(0.01)
 
 
+def arm(client: httpx.Client, name: str, timeout: float = 20.0) -> None:
+    """Arm, retrying while the service is not ready (the guardian starting, a tick restart)."""
+    deadline = time.perf_counter() + timeout
+    while (answer := client.post("/api/arm", json={"device": name})).status_code != 200:
+        if time.perf_counter() > deadline:
+            raise SystemExit(f"arm refused: {answer.text}")
+        time.sleep(0.1)
+
+
 def run(rate: float, trials: int, workdir: Path) -> dict[str, list[float]]:
     baud = 1_000_000 if rate <= 200 else 4_000_000
     changes = {"soft_start_s": 0.1, "park_s": 0.2, "bus_watchdog_ms": 200, "reply_budget_s": 0.5}  # e-stops, not faults
@@ -63,7 +72,7 @@ def run(rate: float, trials: int, workdir: Path) -> dict[str, list[float]]:
         wait_state(live, "disarmed", 30.0)
         emu.ask("arrivals")
         for n in range(trials):
-            assert client.post("/api/arm", json={"device": rig.name}).status_code == 200
+            arm(client, rig.name)
             wait_state(live, "running")
             time.sleep(random.uniform(0.05, 0.15))
             sent = time.perf_counter()
