@@ -1,21 +1,23 @@
-"""Bringing a rig up: connect, check every servo, configure, torque on, arm the watchdog.
+"""Bringing a rig up and arming it: connect, check, configure (torque off), torque on.
 
 :func:`bring_up` is a generator that yields after every bus transaction, so the
-driver can spread it over ticks (a few transactions per tick) and an e-stop can cut
-in between any two of them. A transaction that meets a silent servo is retried on
-later ticks for ``setup_retry_s``; every other failure raises one of the lifecycle's
-errors. The generator's value is the present position of every servo (degrees).
+device runner can spread it over ticks and an e-stop can cut in between any two of
+them. A transaction that meets a silent servo is retried on later steps for
+``setup_retry_s``; every other failure raises one of the lifecycle's errors. It ends
+with every servo configured and its torque **off**: arming (:func:`torque_on_here`)
+is a separate, operator-issued step.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Generator
+from collections.abc import Callable
 from functools import partial
 from typing import TypeVar
 
-from riderlive.dynamixel.lifecycle import ModelMismatch, RigState, ServoHardwareError, ServoSilent
+from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply
+from riderlive.devices.plug import Steps
 from riderlive.dynamixel.rig import (
     RigConfig,
     ServoConfig,
@@ -27,12 +29,10 @@ from riderlive.dynamixel.rig import (
     watchdog_units,
 )
 from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
-from riderlive.dynamixel.tables import Item, ItemSpec, OperatingMode, decode_hardware_error
+from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, ModelSpec, OperatingMode, decode_hardware_error
 
 log = logging.getLogger("riderlive.dynamixel")
 T = TypeVar("T")
-Steps = Generator[None, None, T]
-GoFn = Callable[[RigState, str], None]
 
 EEPROM_FIRST, EEPROM_END = 9, 64
 """The EEPROM span configured here (Return Delay Time .. Shutdown), read in one go."""
@@ -43,37 +43,65 @@ def hardware_bits(raw: int) -> tuple[str, ...]:
     return tuple(str(bit.name).lower() for bit in decode_hardware_error(raw))
 
 
-def bring_up(bus: SdkBus, rig: RigConfig, connect: bool, go: GoFn) -> Steps[list[float]]:
-    """CONNECTING -> CHECKING -> CONFIGURING, one transaction per step; ``go`` records
-    each transition. Returns the servos' present positions (degrees, rig order)."""
+def servo_hardware_error(servo_id: int, raw: int) -> HardwareFault:
+    return HardwareFault(servo_id, hardware_bits(raw), raw, what="servo")
+
+
+def first_spec(rig: RigConfig) -> ModelSpec:
+    """Every X-series model shares the addresses used for group transactions."""
+    return next(iter(rig.servos.values())).spec
+
+
+def bring_up(bus: SdkBus, rig: RigConfig, detail: Callable[[str], None]) -> Steps[None]:
+    """Open the port, check every servo, configure it, torque off; one transaction per step."""
     budget = rig.bus.setup_retry_s
-    if connect:
-        bus.open()
-        check_latency(bus, rig)
-        yield
-        go(RigState.CHECKING, f"{rig.bus.port} open at {rig.bus.baud} baud")
+    detail(f"opening {rig.bus.port} at {rig.bus.baud} baud")
+    bus.open()
+    check_latency(bus, rig)
+    spec = first_spec(rig)
+    bus.broadcast_write(spec.spec(Item.TORQUE_ENABLE), 0)  # whatever the last owner left on
+    yield
+    detail("checking: ping, model number, hardware errors")
     for servo in rig.servos.values():
         found = yield from _retry(budget, partial(bus.ping, servo.id))
         if found != servo.spec.model_number:
-            raise ModelMismatch(servo.id, servo.spec.model_number, found)
+            message = f"servo {servo.id}: model number {found}, the rig map expects {servo.spec.model_number}"
+            raise Mismatch(servo.id, message)
         status = servo.spec.spec(Item.HARDWARE_ERROR_STATUS)
         yield from _check_hardware(bus, rig, servo.id, status)
-    go(RigState.CONFIGURING, f"{len(rig.servos)} servos answered, no hardware errors")
-    present = []
+    detail("configuring")
     for servo in rig.servos.values():
-        present.append((yield from _configure(bus, rig, servo)))
-    spec = next(iter(rig.servos.values())).spec
-    bus.sync_write(spec.spec(Item.TORQUE_ENABLE), dict.fromkeys(rig.ids, 1))
-    yield
+        yield from _configure(bus, rig, servo)
+    if rig.bus.bus_watchdog_ms:
+        arm_watchdog(bus, rig)  # it runs only while torque is on
+        yield
+
+
+def read_present(bus: SdkBus, rig: RigConfig, ids: tuple[int, ...]) -> tuple[list[float], list[int]]:
+    """Present Position of ``ids`` (degrees), one plain Sync Read; and the ids whose
+    status carried the Alert bit (a hardware error to read)."""
+    position = first_spec(rig).spec(Item.PRESENT_POSITION)
+    block = bus.read_block(position.address, position.size, ids, fast=False)
+    present = [pulses_to_deg(int.from_bytes(block[sid][1], "little", signed=True)) for sid in ids]
+    return present, [sid for sid in ids if block[sid][0] & ALERT_BIT]
+
+
+def torque_on_here(bus: SdkBus, rig: RigConfig, ids: tuple[int, ...], present: list[float]) -> list[float]:
+    """Arm: the goal is where the servos are (``present``, within the limits), torque on,
+    the Bus Watchdog armed. Returns the goals (degrees, rig order): the soft start's start."""
+    spec = first_spec(rig)
+    servos = list(rig.servos.values())
+    goals = [min(max(p, s.min_deg), s.max_deg) for p, s in zip(present, servos, strict=True)]
+    bus.sync_write(spec.spec(Item.GOAL_POSITION), {s: deg_to_pulses(g) for s, g in zip(ids, goals, strict=True)})
     if rig.bus.bus_watchdog_ms:
         arm_watchdog(bus, rig)
-        yield
-    return present
+    bus.sync_write(spec.spec(Item.TORQUE_ENABLE), dict.fromkeys(ids, 1))
+    return goals
 
 
 def arm_watchdog(bus: SdkBus, rig: RigConfig) -> None:
     """Clear a tripped Bus Watchdog (write 0), then arm it: two SYNC_WRITEs."""
-    spec = next(iter(rig.servos.values())).spec.spec(Item.BUS_WATCHDOG)
+    spec = first_spec(rig).spec(Item.BUS_WATCHDOG)
     bus.sync_write(spec, dict.fromkeys(rig.ids, 0))
     bus.sync_write(spec, dict.fromkeys(rig.ids, watchdog_units(rig.bus.bus_watchdog_ms)))
 
@@ -101,7 +129,7 @@ def _retry(budget_s: float, call: Callable[[], T]) -> Steps[T]:
         try:
             value = call()
             break
-        except ServoSilent:
+        except NoReply:
             now = time.perf_counter()
             first_failure = now if first_failure is None else first_failure
             if now - first_failure >= budget_s:
@@ -121,12 +149,12 @@ def _check_hardware(bus: SdkBus, rig: RigConfig, servo_id: int, status: ItemSpec
         yield from _retry(budget, partial(bus.ping, servo_id))
         raw = yield from _retry(budget, partial(bus.read, servo_id, status))
     if raw:
-        raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
+        raise servo_hardware_error(servo_id, raw)
 
 
-def _configure(bus: SdkBus, rig: RigConfig, servo: ServoConfig) -> Steps[float]:
+def _configure(bus: SdkBus, rig: RigConfig, servo: ServoConfig) -> Steps[None]:
     """Torque off, settings, profiles; the goal set to the present position (within the
-    limits) so torque-on does not jump. Returns the present position (degrees)."""
+    limits), so a later torque-on does not jump."""
     budget = rig.bus.setup_retry_s
     sid, spec = servo.id, servo.spec
     write, read = partial(bus.write, sid), partial(bus.read, sid)
@@ -153,4 +181,3 @@ def _configure(bus: SdkBus, rig: RigConfig, servo: ServoConfig) -> Steps[float]:
     present = pulses_to_deg((yield from _retry(budget, partial(read, spec.spec(Item.PRESENT_POSITION)))))
     start = min(max(present, servo.min_deg), servo.max_deg)
     yield from _retry(budget, partial(write, spec.spec(Item.GOAL_POSITION), deg_to_pulses(start)))
-    return present

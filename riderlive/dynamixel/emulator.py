@@ -216,7 +216,8 @@ class EmulatedBus:
                 elif fault.kind is FaultKind.OVERLOAD:
                     servo.raise_hardware_error(HardwareError.OVERLOAD)
                 elif fault.kind is FaultKind.VOLTAGE:
-                    servo.raise_hardware_error(HardwareError.INPUT_VOLTAGE)
+                    low = servo.get(Item.MIN_VOLTAGE_LIMIT) / 10.0
+                    servo.set_supply(low - 1.0 if fault.volts is None else fault.volts)
                 elif fault.kind is FaultKind.CLEAR:
                     faults.drop = faults.corrupt = None
 
@@ -325,11 +326,16 @@ class EmulatedBus:
             if faults.corrupt is not None and faults.corrupt.fires():
                 self.stats.corrupted_replies += 1
                 data = corrupt(data)
+            delay = chunk.servo.return_delay_s if chunk.waits_return_delay else 0.0
             if self.wire_timing:
-                t += (chunk.servo.return_delay_s if chunk.waits_return_delay else 0.0) + len(data) * 10 / self.baud
+                t += delay + len(data) * 10 / self.baud
                 if not chunk.chained:  # a fast-read chain is useless to the host until complete
                     self._flush(batch)
                     self._sleep_until(t)
+            elif delay:  # Return Delay Time is honoured without wire timing too
+                self._flush(batch)
+                t += delay
+                self._sleep_until(t)
             batch += data
             self.stats.replies += 1
         if self.wire_timing:

@@ -11,7 +11,8 @@ Text form (the CLI's ``--fault``, also usable from tests)::
     reappear:3        servo 3 is back
     overheat:3        servo 3's temperature jumps above its limit (Overheating error)
     overload:3        servo 3 reports an Overload hardware error
-    voltage:3         servo 3 reports an Input Voltage hardware error
+    voltage:3         servo 3's supply drops below its Min Voltage Limit (Input Voltage error)
+    voltage:3:13.5    servo 3's supply is 13.5 V (an error when outside its voltage limits)
     close@10          the pseudo-terminal disappears 10 s after start
     clear[:3]         remove reply faults (of one servo, or all)
 
@@ -51,6 +52,8 @@ class FaultSpec:
     probability: float | None = None
     seed: int = 0
     at_s: float = 0.0
+    volts: float | None = None
+    """``voltage``: the supply voltage to set (None: below the servo's Min Voltage Limit)."""
 
 
 def parse_fault(text: str) -> FaultSpec:
@@ -62,8 +65,10 @@ def parse_fault(text: str) -> FaultSpec:
         kind = FaultKind(parts[0].lower())
         at_s = float(when) if when else 0.0
         servo_id = int(parts[1]) if len(parts) > 1 else None
-        count = probability = None
-        if len(parts) > 2:
+        count = probability = volts = None
+        if len(parts) > 2 and kind is FaultKind.VOLTAGE:
+            volts = float(parts[2])
+        elif len(parts) > 2:
             if "." in parts[2]:
                 probability = float(parts[2])
             else:
@@ -79,7 +84,7 @@ def parse_fault(text: str) -> FaultSpec:
         raise ValueError(f"bad fault {text!r}: probability must be within 0..1")
     if kind in REPLY_FAULTS and count is None and probability is None:
         count = 1
-    return FaultSpec(kind, servo_id, count, probability, seed, at_s)
+    return FaultSpec(kind, servo_id, count, probability, seed, at_s, volts)
 
 
 @dataclass

@@ -11,7 +11,7 @@ import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from riderlive.dynamixel.emulator_servo import EmulatedServo
+from riderlive.dynamixel.emulator_servo import CLEAR_FIRMWARE, EmulatedServo
 from riderlive.dynamixel.protocol import InstructionPacket, encode_status, fast_status_chunks, le_int
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item, StatusError
 
@@ -85,6 +85,8 @@ def dispatch(
             i += 5 + length
     else:
         for servo in active.values():
+            if inst == Instruction.FACTORY_RESET and servo.get(Item.FIRMWARE_VERSION) >= CLEAR_FIRMWARE:
+                continue  # firmware >= 42 ignores a broadcast factory reset (a whole rig wiped at once)
             _, _, after = unicast(servo, inst, params, now, reboot_time_s)
             if after is not None:
                 after()
@@ -115,6 +117,8 @@ def unicast(
         error = servo.action(now)
     elif inst == Instruction.REBOOT:
         after = functools.partial(servo.reboot, now, reboot_time_s)
+    elif inst == Instruction.CLEAR:
+        error = servo.clear(params, now)
     elif inst == Instruction.FACTORY_RESET:
         if len(params) != 1:
             error = StatusError.DATA_LENGTH

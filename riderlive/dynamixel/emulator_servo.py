@@ -28,6 +28,7 @@ from riderlive.dynamixel.tables import (
     EXTENDED_POSITION_RANGE,
     MODELS,
     POSITION_MODES,
+    PULSES_PER_TURN,
     RETURN_DELAY_UNIT_S,
     VELOCITY_UNIT_RPM,
     Access,
@@ -50,6 +51,10 @@ _OVERHEATING = int(HardwareError.OVERHEATING)
 _WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
+CLEAR_FIRMWARE = 42
+"""Firmware from which X-series servos accept CLEAR and ignore a broadcast FACTORY_RESET."""
+CLEAR_SIGNATURE = bytes((0x44, 0x58, 0x4C, 0x22))
+"""The fixed bytes after CLEAR's option ("DXL\"")."""
 """Items that become read-only while the Bus Watchdog has tripped."""
 
 
@@ -178,6 +183,7 @@ class EmulatedServo:
                 self.set(Item.GOAL_POSITION, round(self.state.position) + self.get(Item.HOMING_OFFSET))
                 self.set(Item.GOAL_VELOCITY, 0)
         self._integrate(now)
+        self._check_voltage()
         if outputs and self._outputs_stale:
             self._sync_outputs(self._last_advance)
 
@@ -286,6 +292,20 @@ class EmulatedServo:
         self.set(Item.HARDWARE_ERROR_STATUS, self.hardware_error | bits)
         if self.hardware_error & self.get(Item.SHUTDOWN):
             self.set(Item.TORQUE_ENABLE, 0)
+
+    def set_supply(self, volts: float) -> None:
+        """The supply voltage (V): outside Min/Max Voltage Limit (34/32, 0.1 V) the servo
+        latches an Input Voltage error (and shuts down if Shutdown says so)."""
+        self.voltage = volts
+        self._synced = ()
+        self._check_voltage()
+        self._sync_outputs(self._last_advance)
+
+    def _check_voltage(self) -> None:
+        tenths = round(self.voltage * 10)
+        inside = self.get(Item.MIN_VOLTAGE_LIMIT) <= tenths <= self.get(Item.MAX_VOLTAGE_LIMIT)
+        if not inside and not self.hardware_error & HardwareError.INPUT_VOLTAGE:
+            self.raise_hardware_error(HardwareError.INPUT_VOLTAGE)
 
     @property
     def shut_down(self) -> bool:
@@ -417,6 +437,24 @@ class EmulatedServo:
         if option == FactoryResetOption.KEEP_ID_AND_BAUD:
             self.set(Item.BAUD_RATE, keep_baud)
         self._sync_outputs(now)
+        return StatusError.NONE
+
+    def clear(self, params: bytes, now: float) -> StatusError:
+        """CLEAR (0x10), firmware >= 42: option 0x01 with the fixed ``44 58 4C 22`` resets the
+        multi-turn count (Present Position back within one turn); only while not moving."""
+        if self.get(Item.FIRMWARE_VERSION) < CLEAR_FIRMWARE:
+            return StatusError.INSTRUCTION
+        if len(params) != 5:
+            return StatusError.DATA_LENGTH
+        if params[0] != 0x01 or params[1:] != CLEAR_SIGNATURE:
+            return StatusError.DATA_RANGE
+        self.advance(now)
+        if self.state.velocity != 0.0 or self.get(Item.MOVING):
+            return StatusError.RESULT_FAIL
+        turns = math.floor(self.state.position / PULSES_PER_TURN) * PULSES_PER_TURN
+        self.state = replace(self.state, position=self.state.position - turns)
+        self.set(Item.GOAL_POSITION, self.get(Item.GOAL_POSITION) - turns)
+        self._synced = ()
         return StatusError.NONE
 
     def ping_params(self) -> bytes:

@@ -1,30 +1,40 @@
 """The divided read: what the servos report back, and which of them went silent.
 
-Every ``read_divider`` ticks the driver reads 15 bytes from each servo, Present Position
-(132) .. Present Temperature (146), with one Fast Sync Read (a single reply packet
-for the whole bus) or, after failures, a plain Sync Read (one reply per servo, so a
-silent servo is named). Each servo's status ERR byte comes along; its Alert bit means
-"read my Hardware Error Status".
+Every ``read_divider`` ticks the plug reads 15 bytes from each servo, Present Position
+(132) .. Present Temperature (146), with one Fast Sync Read (a single reply packet for
+the whole bus) or a plain Sync Read (one reply per servo, so a silent servo is
+named). Each servo's status ERR byte comes along; its Alert bit means "read my
+Hardware Error Status".
 
-A failed read is repeated on the next tick. A servo is declared silent when it has
-missed every read for ``reply_budget_s``; a Fast Sync Read that fails is retried as a
-plain one (which names the culprit), and after ``fast_read_fallback_after`` failures
-the plain read is used until the next start.
+Telling a miss from a failure (as ROS 2's Dynamixel hardware interface does):
+
+- A failed read is retried on the next tick and counted; a servo is declared silent
+  only when it has missed every read for ``reply_budget_s``.
+- The bus has an error budget (:class:`~riderlive.devices.budget.ErrorBudget`): every
+  failed read adds one, every good one takes ``bus_error_credit`` out; failures that
+  outnumber good reads by ``bus_error_burst`` (persistent corruption) are a
+  ``bus_errors`` fault, scattered misses never are.
+- A failed Fast Sync Read is followed by a plain one (which names a culprit). Only
+  ``fast_read_fallback_after`` fast failures in a row, with no fast success between,
+  switch to the plain read; it tries the fast read again after ``fast_read_retry_s``
+  (doubling each time it fails again at once).
 """
 
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from collections.abc import Sequence
 
-from riderlive.dynamixel.bringup import hardware_bits
-from riderlive.dynamixel.lifecycle import ServoHardwareError, ServoSilent
+from riderlive.devices.budget import ErrorBudget
+from riderlive.devices.lifecycle import BusErrors, HardwareFault, NoReply
+from riderlive.dynamixel.bringup import servo_hardware_error
 from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
 from riderlive.dynamixel.sdkbus import SdkBus
-from riderlive.dynamixel.status import BusCounters
 from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec
 
 log = logging.getLogger("riderlive.dynamixel")
+MAX_FAST_RETRY_S = 600.0
 
 
 class Readback:
@@ -39,51 +49,67 @@ class Readback:
         self._volt_at = spec.spec(Item.PRESENT_INPUT_VOLTAGE).address - self.address
         self._temp_at = spec.spec(Item.PRESENT_TEMPERATURE).address - self.address
         self.status_spec: ItemSpec = spec.spec(Item.HARDWARE_ERROR_STATUS)
-        self.fast_capable = all(s.spec.fast_sync_read for s in rig.servos.values())
+        self.fast_capable = rig.bus.fast_sync_read and all(s.spec.fast_sync_read for s in rig.servos.values())
+        self.budget = ErrorBudget(rig.bus.bus_error_burst, rig.bus.bus_error_credit)
         n = len(self.ids)
         self.present_deg: list[float | None] = [None] * n
         self.voltage_v: list[float | None] = [None] * n
         self.temperature_c: list[int | None] = [None] * n
+        self.fresh: set[int] = set()
+        """The servos the last read heard from."""
         self.restart()
 
     def restart(self) -> None:
-        """Back to Fast Sync Read, nobody missing (a new start)."""
-        self.use_fast = self.rig.bus.fast_sync_read and self.fast_capable
+        """Back to Fast Sync Read, nobody missing, a full error budget (a new start)."""
+        self.use_fast = self.fast_capable
         self.retrying = False
         self._plain_next = False
         self._fast_failures = 0
+        self._probing = False
+        self._fast_retry_at: float | None = None
+        self._retry_interval = self.rig.bus.fast_read_retry_s
         self._missing_since: list[float | None] = [None] * len(self.ids)
+        self.budget.reset()
 
-    def read(self, bus: SdkBus, skip: set[int], now: float, counters: BusCounters) -> None:
-        """One read of every servo not in ``skip``. Raises ServoSilent (a servo missing for
-        the reply budget) or ServoHardwareError (a servo raised its Alert bit)."""
+    def read(self, bus: SdkBus, skip: set[int], now: float, counters: Counter[str]) -> None:
+        """One read of every servo not in ``skip``. Raises NoReply (a servo silent for its
+        budget), BusErrors (the bus's budget is spent) or HardwareFault (an Alert bit)."""
+        if not self.use_fast and self._fast_retry_at is not None and now >= self._fast_retry_at:
+            self.use_fast, self._probing, self._fast_retry_at = True, True, None
+            counters["fast_read_retries"] += 1
         fast = self.use_fast and not self._plain_next
         ids = [sid for sid in self.ids if sid not in skip]
-        failure: ServoSilent | None = None
+        failure: NoReply | None = None
         try:
             block = bus.read_block(self.address, self.length, ids, fast)
-        except ServoSilent as exc:
+        except NoReply as exc:
             block, failure = exc.partial, exc
         for i, sid in enumerate(self.ids):
             if sid in block:
                 self._missing_since[i] = None
             elif sid in ids and self._missing_since[i] is None:
                 self._missing_since[i] = now
+        self.fresh = set(block)
         for sid in self._decode(block):
             raise_hardware_error(bus, sid, self.status_spec)
         if failure is None:
-            counters.reads += 1
+            counters["reads"] += 1
+            self.budget.ok()
+            if fast:
+                self._fast_failures = 0
+                if self._probing:
+                    self._probing, self._retry_interval = False, self.rig.bus.fast_read_retry_s
             self.retrying = self._plain_next = False
             return
-        counters.read_failures += 1
+        counters["read_failures"] += 1
         self.retrying = True  # read again next tick, not in read_divider ticks
         if fast:
-            counters.fast_read_failures += 1
-            self._fast_failures += 1
-            self._plain_next = True  # a plain Sync Read names the silent servo
-            if self._fast_failures >= self.rig.bus.fast_read_fallback_after:
-                self.use_fast = False
-                log.warning("fast sync read failed %d times: using plain sync read", self._fast_failures)
+            self._fast_failed(now, counters)
+        if self.budget.fail():
+            raise BusErrors(
+                f"failed reads outnumber good ones by {self.budget.burst:g} "
+                f"({self.budget.failures} failed, {self.budget.successes} good; last: {failure})"
+            )
         budget = self.rig.bus.reply_budget_s
         stale = {
             sid: since
@@ -91,13 +117,33 @@ class Readback:
             if since is not None and now - since >= budget
         }
         if stale:
-            sid = failure.servo_id if failure.servo_id in stale else min(stale, key=stale.__getitem__)
+            sid = failure.unit if failure.unit in stale else min(stale, key=stale.__getitem__)
             silent_ms = (now - stale[sid]) * 1000
-            raise ServoSilent(sid, f"no reply for {silent_ms:.0f} ms of retries ({failure})") from failure
+            raise NoReply(sid, f"no reply for {silent_ms:.0f} ms of retries ({failure})") from failure
+
+    def _fast_failed(self, now: float, counters: Counter[str]) -> None:
+        counters["fast_read_failures"] += 1
+        self._fast_failures += 1
+        self._plain_next = True  # a plain Sync Read names the silent servo
+        if self._probing or self._fast_failures >= self.rig.bus.fast_read_fallback_after:
+            if self._probing:
+                self._retry_interval = min(2.0 * self._retry_interval, MAX_FAST_RETRY_S)
+            self.use_fast, self._probing = False, False
+            self._fast_retry_at = now + self._retry_interval
+            counters["fast_read_fallbacks"] += 1
+            log.warning(
+                "fast sync read failed %d times in a row: plain sync read, fast again in %.0f s",
+                self._fast_failures,
+                self._retry_interval,
+            )
+            self._fast_failures = 0
 
     def tracking_error(self, goals: Sequence[float]) -> list[float | None]:
-        """Goal sent minus present position, degrees (None until read)."""
-        return [None if p is None else g - p for g, p in zip(goals, self.present_deg, strict=True)]
+        """Goal sent minus present position, degrees; None for a servo the last read missed."""
+        return [
+            None if p is None or sid not in self.fresh else g - p
+            for sid, g, p in zip(self.ids, goals, self.present_deg, strict=True)
+        ]
 
     def _decode(self, block: dict[int, tuple[int, bytes]]) -> list[int]:
         """Store what a read brought; return the ids whose ERR byte has the Alert bit."""
@@ -122,10 +168,10 @@ def raise_hardware_error(bus: SdkBus, servo_id: int, status: ItemSpec) -> None:
     for attempt in range(2):
         try:
             raw = bus.read(servo_id, status)
-        except ServoSilent:
+        except NoReply:
             if attempt:
-                raise ServoHardwareError(servo_id, ("alert",), 0) from None
+                raise HardwareFault(servo_id, ("alert",), 0, what="servo") from None
             continue
         if raw:
-            raise ServoHardwareError(servo_id, hardware_bits(raw), raw)
+            raise servo_hardware_error(servo_id, raw)
         return

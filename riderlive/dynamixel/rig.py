@@ -66,13 +66,23 @@ class BusConfig(StrictModel):
     """Read present position, temperature and errors every N ticks."""
     fast_sync_read: bool = True
     fast_read_fallback_after: int = Field(10, ge=1)
-    """Failed Fast Sync Reads after which the driver uses plain Sync Read until reset."""
+    """Fast Sync Reads failing in a row (no fast success between) before the plain Sync Read
+    takes over; it tries fast again after ``fast_read_retry_s``."""
+    fast_read_retry_s: float = Field(30.0, gt=0.0, le=3600.0)
+    """After a fallback, try the Fast Sync Read again after this (doubling while it fails)."""
     latency_timer_ms: float = Field(1.0, ge=0.0, le=32.0)
     """The USB adapter's latency timer (FTDI: set it to 1 ms); enters the reply timeout."""
     timeout_margin_ms: float = Field(2.0, gt=0.0, le=200.0)
-    """Added to wire time + 2 x latency for a reply timeout (the SDK uses 2 ms)."""
+    """The least a reply may be late beyond wire time + 2 x latency (the SDK uses 2 ms);
+    the real allowance is measured from the replies (srtt + 4 rttvar, docs/hardware.md)."""
+    max_reply_wait_ms: float = Field(25.0, gt=0.0, le=500.0)
+    """The most a reply may be late beyond its wire time, however slow the replies were."""
     reply_budget_s: float = Field(0.1, gt=0.0, le=10.0)
     """How long a servo may stay silent, retried every tick, before the rig faults."""
+    bus_error_burst: float = Field(20.0, ge=1.0, le=10_000.0)
+    """The error budget: failed reads may outnumber good ones by this much, no more."""
+    bus_error_credit: float = Field(1.0, gt=0.0, le=100.0)
+    """Failed reads repaid by each good read (1: the bus faults when most reads fail)."""
     setup_retry_s: float = Field(1.0, gt=0.0, le=60.0)
     """How long the start-up steps retry a silent servo before refusing to start."""
     bus_watchdog_ms: int = Field(100, ge=0, le=2540)
@@ -385,7 +395,17 @@ class ServoMap:
         return [min(max(p, lo), hi) for p, lo, hi in zip(positions, self.low, self.high, strict=True)]
 
 
-def smoothstep(x: float) -> float:
-    """0 -> 0, 1 -> 1 with zero slope at both ends (the soft-start and park ramps)."""
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
+def wire_budget(rig: RigConfig) -> str:
+    """Three lines on what the rig asks of its bus per tick (printed at start)."""
+    bus = rig.bus
+    wire = wire_seconds_per_tick(rig)
+    return "\n".join(
+        [
+            f"{rig.name}: {len(rig.servos)} servos on {bus.port} at {bus.baud} baud, {bus.tick_hz:g} ticks/s, "
+            f"read every {bus.read_divider} ticks",
+            f"wire per tick {wire * 1000:.2f} ms = {wire * bus.tick_hz:.0%} of a tick "
+            f"(at most {MAX_WIRE_SHARE:.0%}; the wire allows {1 / wire:.0f} ticks/s)",
+            f"a tick with a read takes {read_tick_seconds(rig) * 1000:.2f} ms (at most one tick, "
+            f"{bus.tick_s * 1000:.2f} ms)",
+        ]
+    )

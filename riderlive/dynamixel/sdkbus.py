@@ -3,27 +3,38 @@
 The SDK reports result codes and never raises; a vanished port surfaces as an
 ``OSError`` or ``serial.SerialException`` from pyserial and leaves the SDK's
 ``is_using`` flag set. :class:`SdkBus` turns all of that into the lifecycle's
-exceptions (:class:`PortLost`, :class:`ServoSilent`, :class:`ServoRejected`) and
-frees the port after any failure, so the next transaction can run.
+exceptions (:class:`PortLost`, :class:`PortBusy`, :class:`NoReply`, :class:`Rejected`,
+:class:`StopRequested`) and frees the port after any failure.
 
-Reply timeouts follow the SDK's formula (wire time + 2 x USB latency + margin) but
-with the configured latency timer instead of the SDK's fixed 16 ms, so a silent
-servo costs a few milliseconds of a tick, not 34.
+Reply timeouts: the expected time (the bytes still queued for the wire, the reply's
+wire time, twice the adapter's latency timer) plus an allowance measured from the
+replies themselves (:class:`~riderlive.devices.budget.ReplyTimer`, one per kind of
+transaction: the host's real scheduling delays, never below ``timeout_margin_ms``,
+backing off after a miss), on a monotonic clock (the SDK's own uses wall time, which
+jumps). After a reply that failed, the line is drained of its late remainder before
+the next request, so a late reply never corrupts the next one.
+
+The port is opened exclusively (``flock``): the tick and the guardian never write
+the bus at the same time, and a process that dies releases it with its file.
+While a reply is awaited, a pending e-stop request gives the wait up at once.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import termios
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import dynamixel_sdk as sdk
 import serial
 
-from riderlive.dynamixel.lifecycle import PortLost, RigError, ServoRejected, ServoSilent
+from riderlive.devices.budget import ReplyTimer
+from riderlive.devices.latch import StopView
+from riderlive.devices.lifecycle import DeviceError, NoReply, PortBusy, PortLost, Rejected, StopRequested
 from riderlive.dynamixel.tables import ALERT_BIT, BROADCAST_ID, ItemSpec, StatusError
 
 T = TypeVar("T")
@@ -31,7 +42,6 @@ T = TypeVar("T")
 _PORT_ERRORS = (OSError, termios.error, serial.SerialException, AttributeError, TypeError)
 """What pyserial raises when the device vanishes (termios.error from a flush on a dead
 tty; AttributeError/TypeError: no handle left)."""
-
 
 _ID, _ERR, _PARAMS = 4, 8, 9
 """Offsets in a status packet: ID, ERR, first parameter."""
@@ -50,28 +60,46 @@ def _instruction(servo_id: int, instruction: int, params: list[int]) -> list[int
 
 
 class RigPort(sdk.PortHandler):  # type: ignore[misc]
-    """A PortHandler whose reply timeout uses the configured adapter latency and counts
-    the bytes still queued for the wire.
+    """A PortHandler with measured reply timeouts, a monotonic clock, an exclusive open,
+    and a wait that an e-stop request cuts short.
 
     A SYNC_WRITE returns as soon as the adapter has the bytes; if the next instruction
     follows at once, its reply can only start after the queued bytes have gone out at
-    the baud rate. The SDK's timeout starts at the write call and ignores that queue.
+    the baud rate, so the timeout counts them too.
     """
 
-    def __init__(self, port_name: str, latency_ms: float, margin_ms: float) -> None:
+    is_open: bool
+    packet_timeout: float
+
+    def __init__(self, port_name: str, latency_ms: float, timer: ReplyTimer) -> None:
         super().__init__(port_name)
         self.latency_ms = latency_ms
-        self.margin_ms = margin_ms
+        self.timer = timer
         self.wire_free_at = 0.0
-        """When the bytes written so far will have left the adapter (SDK clock, ms)."""
+        """When the bytes written so far will have left the adapter (ms, this port's clock)."""
+        self.expected_ms = 0.0
         self.last_write: float | None = None
         """perf_counter of the last instruction packet written (what feeds the Bus Watchdog)."""
-        self.abort_wait = False
-        """Set from another thread (e-stop): a reply being waited for is given up at once."""
+        self.stops: StopView | None = None
+        self.aborted = False
+        """The last wait was given up for an e-stop request."""
+
+    def getCurrentTime(self) -> float:
+        return time.perf_counter() * 1000.0
+
+    def setupPort(self, cflag_baud: int) -> bool:
+        if self.is_open:
+            self.closePort()
+        self.ser = serial.Serial(port=self.port_name, baudrate=self.baudrate, timeout=0, exclusive=True)
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = 10_000.0 / self.baudrate
+        return True
 
     def isPacketTimeout(self) -> bool:
-        if self.abort_wait:
-            self.packet_timeout = 0
+        if self.stops is not None and self.stops.pending:
+            self.aborted = True
+            self.packet_timeout = 0.0
             return True
         return bool(super().isPacketTimeout())
 
@@ -84,8 +112,27 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
     def setPacketTimeout(self, packet_length: int) -> None:
         self.packet_start_time = self.getCurrentTime()
         queued = max(0.0, self.wire_free_at - self.packet_start_time)
-        wire = self.tx_time_per_byte * packet_length
-        self.packet_timeout = queued + wire + 2.0 * self.latency_ms + self.margin_ms
+        self.expected_ms = queued + self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms
+        self.packet_timeout = self.timer.timeout_ms(self.expected_ms)
+
+    def replied(self) -> None:
+        """A reply arrived: teach the timer how late it was."""
+        self.timer.observe(self.getCurrentTime() - self.packet_start_time - self.expected_ms)
+
+    def drain(self, quiet_ms: float, max_ms: float) -> int:
+        """Read and drop bytes until the line has been quiet for ``quiet_ms`` (at most
+        ``max_ms``): the late remainder of a reply given up on, which would otherwise
+        corrupt the next one. Returns the bytes dropped."""
+        start = last = self.getCurrentTime()
+        dropped = 0
+        while (now := self.getCurrentTime()) - last < quiet_ms and now - start < max_ms:
+            waiting = self.ser.in_waiting
+            if waiting:
+                dropped += len(self.ser.read(waiting))
+                last = self.getCurrentTime()
+            else:
+                time.sleep(0.0001)
+        return dropped
 
 
 def usb_latency_timer_ms(port: str) -> int | None:
@@ -101,47 +148,64 @@ def usb_latency_timer_ms(port: str) -> int | None:
 class SdkBus:
     """One serial port, Protocol 2.0; every method is one bus transaction."""
 
-    def __init__(self, port: str, baud: int, latency_ms: float, margin_ms: float) -> None:
+    def __init__(self, port: str, baud: int, latency_ms: float, timer: ReplyTimer) -> None:
         self.port_name = port
         self.baud = baud
-        self.port = RigPort(port, latency_ms, margin_ms)
+        self.port = RigPort(port, latency_ms, timer)
+        self.timers = {kind: dataclasses.replace(timer) for kind in ("unicast", "sync read", "fast sync read")}
+        """One reply timer per kind of transaction: a 24-servo read is not a ping."""
         self.packets = sdk.PacketHandler(2.0)
         self._writers: dict[tuple[int, int], Any] = {}
-        self._reader: Any = None
-        self._reader_key: tuple[int, int, tuple[int, ...]] | None = None
+        self._readers: dict[tuple[int, int, tuple[int, ...]], Any] = {}
         self.transactions = 0
         self.stale_replies = 0
+        self.stale_bytes = 0
+        self.timeouts = 0
+        self._unsettled = False
 
     @property
     def is_open(self) -> bool:
         return bool(self.port.is_open)
 
-    def _guard(self, what: str, call: Callable[[], T]) -> T:
-        """Run one SDK call; a pyserial failure becomes PortLost; the port is freed."""
+    def _guard(self, what: str, call: Callable[[], T], kind: str = "unicast") -> T:
+        """Run one SDK call; a pyserial failure becomes PortLost; the port is freed. After
+        a reply that failed, the line is first drained of its late remainder."""
         self.transactions += 1
+        self.port.timer = self.timers[kind]
         try:
+            if self._unsettled:
+                self._unsettled = False
+                quiet = 2.0 * self.port.latency_ms + 1.0
+                self.stale_bytes += self.port.drain(quiet, quiet + self.port.timer.allowance_ms())
             return call()
         except _PORT_ERRORS as exc:
             raise PortLost(f"{self.port_name}: {what} failed: {exc}") from exc
         finally:
             self.port.is_using = False
+            if self.port.aborted:
+                self.port.aborted = False
+                raise StopRequested(f"{what}: given up for an e-stop")
 
     def open(self) -> None:
         if self.is_open:
             return
         try:
             ok = self.port.openPort() and self.port.setBaudRate(self.baud)
+        except serial.SerialException as exc:
+            self.port.is_open = False
+            if "exclusively lock" in str(exc):
+                raise PortBusy(f"{self.port_name} is held by another process") from exc
+            raise PortLost(f"cannot open {self.port_name}: {exc}") from exc
         except _PORT_ERRORS as exc:
             self.port.is_open = False
             raise PortLost(f"cannot open {self.port_name}: {exc}") from exc
         if not ok:
             raise PortLost(f"cannot open {self.port_name} at {self.baud} baud")
         self._writers.clear()
-        self._reader = None
-        self._reader_key = None
+        self._readers.clear()
 
     def close(self) -> None:
-        """Close the port, ignoring a handle that is already gone."""
+        """Close the port (releasing its lock), ignoring a handle that is already gone."""
         try:
             if self.port.ser is not None:
                 self.port.ser.close()
@@ -150,13 +214,15 @@ class SdkBus:
         self.port.is_open = False
         self.port.is_using = False
 
-    def _check(self, servo_id: int, what: str, result: int, error: int) -> None:
+    def _result(self, servo_id: int | None, what: str, result: int) -> NoReturn:
+        """A failed SDK result as the lifecycle's error (timeouts teach the timer)."""
         if result == sdk.COMM_TX_FAIL:
-            raise PortLost(f"{self.port_name}: could not send {what} to servo {servo_id}")
-        if result != sdk.COMM_SUCCESS:
-            raise ServoSilent(servo_id, f"{what}: {self.packets.getTxRxResult(result)}")
-        if error & ~ALERT_BIT:
-            raise ServoRejected(servo_id, what, StatusError(error & ~ALERT_BIT).name.lower())
+            raise PortLost(f"{self.port_name}: could not send {what}")
+        if result == sdk.COMM_RX_TIMEOUT:
+            self.timeouts += 1
+            self.port.timer.missed()
+        self._unsettled = True
+        raise NoReply(servo_id, f"{what}: {self.packets.getTxRxResult(result)}")
 
     def _transact(self, what: str, servo_id: int, packet: list[int], reply_params: int) -> bytes:
         """Send one instruction packet; return the params of the servo's status reply.
@@ -175,11 +241,15 @@ class SdkBus:
                 if result != sdk.COMM_SUCCESS:
                     return [], result, 0
                 if reply[_ID] == servo_id and len(reply) == _STATUS_BYTES + reply_params:
+                    self.port.replied()
                     return reply[_PARAMS : _PARAMS + reply_params], result, reply[_ERR]
                 self.stale_replies += 1
 
         params, result, error = self._guard(what, run)
-        self._check(servo_id, what, result, error)
+        if result != sdk.COMM_SUCCESS:
+            self._result(servo_id, what, result)
+        if error & ~ALERT_BIT:
+            raise Rejected(servo_id, what, StatusError(error & ~ALERT_BIT).name.lower())
         return bytes(params)
 
     def ping(self, servo_id: int) -> int:
@@ -214,7 +284,7 @@ class SdkBus:
             raise PortLost(f"{self.port_name}: could not send broadcast write {spec.item}")
 
     def sync_write(self, spec: ItemSpec, values: Mapping[int, int]) -> None:
-        """One SYNC_WRITE of ``spec`` to every id in ``values`` (no replies: feeds no check)."""
+        """One SYNC_WRITE of ``spec`` to every id in ``values`` (no replies)."""
         key = (spec.address, spec.size)
         writer = self._writers.get(key)
         if writer is None:
@@ -229,51 +299,55 @@ class SdkBus:
         if result == sdk.COMM_TX_FAIL:
             raise PortLost(f"{self.port_name}: could not send sync write {spec.item}")
         if result != sdk.COMM_SUCCESS:
-            raise RigError(f"sync write {spec.item}: {self.packets.getTxRxResult(result)}")
+            raise DeviceError(f"sync write {spec.item}: {self.packets.getTxRxResult(result)}")
 
     def read_block(self, address: int, length: int, ids: Sequence[int], fast: bool) -> dict[int, tuple[int, bytes]]:
         """SYNC_READ (or FAST_SYNC_READ) of ``length`` bytes at ``address`` from ``ids``.
 
         Returns id -> (status ERR byte, data). Plain Sync Read names the first servo
-        that did not answer (ServoSilent with its id and the answers before it in
-        ``partial``); Fast Sync Read cannot, and raises ServoSilent without an id.
+        that did not answer (NoReply with its id and the answers before it in
+        ``partial``); Fast Sync Read cannot, and raises NoReply without an id.
         """
         key = (address, length, tuple(ids))
-        if self._reader_key != key:
-            self._reader = sdk.GroupSyncRead(self.port, self.packets, address, length)
+        reader = self._readers.get(key)
+        if reader is None:
+            reader = self._readers[key] = sdk.GroupSyncRead(self.port, self.packets, address, length)
             for servo_id in ids:
-                self._reader.addParam(servo_id)
-            self._reader_key = key
-        reader = self._reader
+                reader.addParam(servo_id)
         if fast:
-            return self._guard("fast sync read", lambda: self._fast_read(reader, length, ids))
-        return self._guard("sync read", lambda: self._plain_read(reader, length, ids))
+            return self._guard("fast sync read", lambda: self._fast_read(reader, length, ids), "fast sync read")
+        return self._guard("sync read", lambda: self._plain_read(reader, length, ids), "sync read")
 
     def _plain_read(self, reader: Any, length: int, ids: Sequence[int]) -> dict[int, tuple[int, bytes]]:
         result = reader.txPacket()
         if result != sdk.COMM_SUCCESS:
-            self._check(ids[0], "sync read", result, 0)
+            self._result(ids[0], "sync read", result)
         out: dict[int, tuple[int, bytes]] = {}
         for servo_id in ids:
             data, result, error = self.packets.readRx(self.port, servo_id, length)
             if result != sdk.COMM_SUCCESS:
-                raise ServoSilent(servo_id, f"sync read: {self.packets.getTxRxResult(result)}", out)
+                try:
+                    self._result(servo_id, "sync read", result)
+                except NoReply:
+                    raise NoReply(servo_id, f"sync read: {self.packets.getTxRxResult(result)}", out) from None
             out[servo_id] = (int(error), bytes(data))
+        self.port.replied()
         return out
 
     def _fast_read(self, reader: Any, length: int, ids: Sequence[int]) -> dict[int, tuple[int, bytes]]:
         result = reader.fastSyncReadTxPacket()
         if result != sdk.COMM_SUCCESS:
-            self._check(ids[0], "fast sync read", result, 0)
+            self._result(ids[0], "fast sync read", result)
         chunk = length + 4  # ERR, ID, data, CRC
         raw, result, _ = self.packets.fastSyncReadRx(self.port, BROADCAST_ID, chunk * len(ids))
         if result != sdk.COMM_SUCCESS:
-            raise ServoSilent(None, f"fast sync read: {self.packets.getTxRxResult(result)}")
+            self._result(None, "fast sync read", result)
+        self.port.replied()
         raw = bytes(raw)
         out: dict[int, tuple[int, bytes]] = {}
         for start in range(0, len(raw) - chunk + 1, chunk):
             out[raw[start + 1]] = (raw[start], raw[start + 2 : start + 2 + length])
         missing = [i for i in ids if i not in out]
         if missing:
-            raise ServoSilent(missing[0], "fast sync read: no data", out)
+            raise NoReply(missing[0], "fast sync read: no data", out)
         return out

@@ -48,17 +48,64 @@ class ProducerGone:
 
 @dataclass(frozen=True)
 class EStop:
-    """Emergency stop: the rig goes to torque off within one tick."""
+    """Wake the tick: an e-stop was just recorded in the latch (the latch is what counts;
+    this only ends the tick's sleep early)."""
+
+
+@dataclass(frozen=True)
+class Arm:
+    """An operator arms ``device`` (its name is the confirmation). Replied to."""
+
+    device: str
+    by: str
+    request: int = 0
+
+
+@dataclass(frozen=True)
+class Disarm:
+    """Ease ``device`` (every device when None) to park, then outputs off. Replied to."""
+
+    device: str | None = None
+    by: str = "operator"
+    request: int = 0
 
 
 @dataclass(frozen=True)
 class Reset:
-    """Clear an e-stop or a rig fault and start again."""
+    """Clear the e-stop latch and e-stops/faults of ``device`` (all when None): to
+    ``disarmed``; never arms. Replied to when ``request`` is set."""
+
+    device: str | None = None
+    by: str = "operator"
+    request: int = 0
+
+
+@dataclass(frozen=True)
+class Reload:
+    """Re-read ``device``'s configuration file and connect it again (refused while it moves)."""
+
+    device: str
+    by: str = "operator"
+    request: int = 0
 
 
 @dataclass(frozen=True)
 class Stop:
-    """Park the rig, then end the tick process."""
+    """Park the devices, then end the tick process."""
 
 
-Command = SetMode | SetGait | Perform | SetModel | ProducerGone | EStop | Reset | Stop
+@dataclass(frozen=True)
+class Reply:
+    """The tick's answer to a request (tick -> web, same pipe)."""
+
+    request: int
+    ok: bool
+    states: dict[str, str]
+    """Device name -> its state after the request."""
+    refusal: str | None = None
+    """A ``devices.lifecycle.Refusal`` value when refused."""
+    message: str = ""
+
+
+Command = SetMode | SetGait | Perform | SetModel | ProducerGone | EStop | Arm | Disarm | Reset | Reload | Stop
+Request = Arm | Disarm | Reset | Reload

@@ -1,4 +1,12 @@
-"""The web process's handle on the tick process: spawn, rings, commands, shutdown."""
+"""The web process's handle on the tick process: spawn, rings, commands, shutdown.
+
+The shared memory (rings, counters, status, the e-stop latch and the safety board)
+outlives any one tick process: after a crash or a hang the supervisor
+(``riderlive.service.supervisor``) calls :meth:`TickLink.respawn`, which starts the
+next *generation* on the same memory with fresh pipes. Requests that want an answer
+(arm, disarm, reset, reload) travel on the duplex command pipe; the tick's replies
+come back on it.
+"""
 
 from __future__ import annotations
 
@@ -6,13 +14,17 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import signal
 import threading
 import time
+from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
 import orjson
 
+from riderlive.devices.board import SafetyBoard
+from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
@@ -27,42 +39,88 @@ class TickLink:
         self.outputs = SharedRing(L.OUTPUT_CAPACITY, L.OUTPUT_WIDTH + len(setup.extra_channels))
         self.counters = SharedCounters(L.COUNTERS)
         self.status_blob = SharedBlob()
+        self.latch = StopLatch()
+        self.board = SafetyBoard()
+        self.board["web_pid"] = float(os.getpid())
         names = {
             "input": self.inputs.name,
             "output": self.outputs.name,
             "counters": self.counters.name,
             "status": self.status_blob.name,
         }
-        self.setup = dataclasses.replace(setup, shm_names=names)
+        self.base_setup = dataclasses.replace(
+            setup, shm_names=names, latch_name=self.latch.name, board_name=self.board.name
+        )
+        self.setup = self.base_setup
+        self.generation = 0
+        self.process: multiprocessing.process.BaseProcess | threading.Thread
+        self._commands: Connection
+        self._notify: Connection
+        self.notify_fd = -1
+        self.outputs.read_next = 0
+        self._status_version = -1
+        self._status: dict[str, Any] = {}
+        self.respawn()
+
+    def respawn(self) -> None:
+        """Start the next generation of the tick (the first one from ``__init__``)."""
+        if self.generation:
+            self._commands.close()
+            self._notify.close()
+        self.generation += 1
+        self.setup = dataclasses.replace(self.base_setup, generation=self.generation)
+        self.board.forget_devices()
+        self.board["tick_beat"] = 0.0
         context = multiprocessing.get_context("spawn")
         self._commands, child_commands = context.Pipe(duplex=True)
         notify_read, notify_write = context.Pipe(duplex=False)
         self._notify = notify_read
         self.notify_fd = notify_read.fileno()
         args = (self.setup, child_commands, notify_write)
-        self.process: multiprocessing.process.BaseProcess | threading.Thread
-        if setup.isolation == "thread":
+        if self.setup.isolation == "thread":
             self.process = threading.Thread(target=tick_main, args=args, name="riderlive-tick", daemon=True)
             self.process.start()
+            self.board["tick_pid"] = float(os.getpid())
         else:
             self.process = context.Process(target=tick_main, args=args, name="riderlive-tick", daemon=True)
             self.process.start()
             child_commands.close()
             notify_write.close()
+            self.board["tick_pid"] = float(self.process.pid or 0)
+        self.board["tick_generation"] = float(self.generation)
         os.set_blocking(self.notify_fd, False)
-        self.outputs.read_next = 0
-        self._status_version = -1
-        self._status: dict[str, Any] = {}
 
     @property
     def start(self) -> float:
         return self.setup.start
+
+    @property
+    def commands_fd(self) -> int:
+        """Readable when the tick has replied to a request."""
+        return self._commands.fileno()
+
+    @property
+    def sentinel(self) -> int | None:
+        """Readable once the tick process has exited (None for a tick thread)."""
+        if isinstance(self.process, threading.Thread):
+            return None
+        return int(self.process.sentinel)
 
     def engine_time(self) -> float:
         return time.perf_counter() - self.setup.start
 
     def send(self, command: cmd.Command) -> None:
         self._commands.send(command)
+
+    def replies(self) -> list[cmd.Reply]:
+        """The tick's replies that have arrived (call when ``commands_fd`` is readable)."""
+        out = []
+        with contextlib.suppress(EOFError, OSError):
+            while self._commands.poll():
+                message = self._commands.recv()
+                if isinstance(message, cmd.Reply):
+                    out.append(message)
+        return out
 
     def push_input(self, producer: int, t: float, received: float, values: list[float] | np.ndarray) -> None:
         """Hand one validated horse frame (service length units) to the tick."""
@@ -77,7 +135,7 @@ class TickLink:
         try:
             while os.read(self.notify_fd, 65536):
                 pass
-        except BlockingIOError:
+        except (BlockingIOError, OSError):
             pass
 
     def read_outputs(self, limit: int | None = None) -> list[np.ndarray]:
@@ -85,7 +143,7 @@ class TickLink:
         return self.outputs.read_new(limit)
 
     def status(self) -> dict[str, Any]:
-        """The tick's latest status (driver, mode, e-stop, rig...)."""
+        """The tick's latest status (driver, mode, e-stop, devices...)."""
         version = self.status_blob.version
         if version != self._status_version:
             data = self.status_blob.read()
@@ -96,6 +154,32 @@ class TickLink:
 
     def alive(self) -> bool:
         return self.process.is_alive()
+
+    def beat_age(self) -> float | None:
+        """Seconds since the tick's last heartbeat (None before its first)."""
+        beat = self.board["tick_beat"]
+        return None if not beat else time.perf_counter() - beat
+
+    def exit_reason(self) -> str:
+        """How the tick process ended: ``exit 1``, ``SIGKILL``..., or ``running``."""
+        if isinstance(self.process, threading.Thread):
+            return "running" if self.process.is_alive() else "thread ended"
+        code = self.process.exitcode
+        if code is None:
+            return "running"
+        if code < 0:
+            with contextlib.suppress(ValueError):
+                return signal.Signals(-code).name
+            return f"signal {-code}"
+        return f"exit {code}"
+
+    def kill(self) -> None:
+        """SIGKILL the tick process (a hung one) and reap it."""
+        if isinstance(self.process, threading.Thread) or self.process.pid is None:
+            return
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.process.pid, signal.SIGKILL)
+        self.process.join(2.0)
 
     def stop(self, timeout: float) -> None:
         """Ask the tick to park and stop; wait up to ``timeout`` seconds, then kill it."""
@@ -117,3 +201,5 @@ class TickLink:
         self._notify.close()
         for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
             shared.close()
+        self.latch.close()
+        self.board.close()

@@ -1,78 +1,205 @@
-"""What the tick drives besides the rings: the ``TickOutput`` protocol and the rig hookup.
+"""The devices the tick drives: built from their specs, ticked, commanded, reported.
 
-A ``TickOutput`` is called once per tick with the rider frame (channels.RIDER order)
-and the tick's deadline in ``perf_counter`` seconds; it returns a JSON-ready status
-dict to publish (or None when it has nothing new). It must not block longer than its
-share of the tick. The Dynamixel rig (``riderlive.dynamixel.driver.RigDriver``) is
-adapted by :class:`RigOutput`.
+:class:`TickDevices` holds one :class:`~riderlive.devices.device.Device` per
+configured device (the Dynamixel rig today, the motion platform next). Each is ticked
+every ``spec.divider``-th tick (a device validated for a lower rate than the service's),
+publishes its state and last goal pose to the safety board for the guardian, and
+answers the operators' requests (arm, disarm, reset, reload) with a
+:class:`~riderlive.realtime.commands.Reply`. E-stops come through the shared latch:
+:meth:`act_on_stop` applies a new request to every device at once, whatever their
+dividers.
 """
 
 from __future__ import annotations
 
-import importlib
+import logging
+import time
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Any
+
+from riderlive.devices.board import SafetyBoard
+from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.latch import StopLatch
+from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
+from riderlive.devices.registry import DeviceSpec, make_plug
+from riderlive.devices.shared import pid_alive
+from riderlive.realtime import commands as cmd
+
+log = logging.getLogger(__name__)
+REST_STATES = frozenset({DeviceState.DISCONNECTED, DeviceState.DISARMED, DeviceState.PARKED})
+REST_STATES |= {DeviceState.ESTOP, DeviceState.FAULT}
+"""States in which a device holds no pose: shutdown may stop ticking."""
 
 
-class TickOutput(Protocol):
-    """A device driven by the tick (the rig, a motion platform...)."""
+class TickDevices:
+    """The tick's devices; every method runs in the tick's thread."""
 
-    def open(self) -> None: ...
-
-    def tick(self, rider: Sequence[float], now: float) -> dict[str, Any] | None: ...
-
-    def estop(self) -> None: ...
-
-    def request_park(self) -> None: ...
-
-    def is_parked(self) -> bool: ...
-
-    def reset(self) -> None: ...
-
-    def close(self) -> None: ...
-
-
-PARKED_STATES = frozenset({"parked", "torque_off", "off", "disconnected", "closed", "fault", "estop"})
-"""Rig states in which shutdown may stop ticking (the rig holds no pose any more)."""
-
-
-class RigOutput:
-    """Adapter for ``riderlive.dynamixel.driver.RigDriver(config, port)``.
-
-    ``rig_file`` is a rig map (``config/rigs/*.toml``); ``port`` overrides its serial
-    port (e.g. the emulator's pty). The driver module is imported here, inside the
-    tick process, only when a rig is configured.
-    """
-
-    def __init__(self, rig_file: str, port: str | None) -> None:
-        rig_module = importlib.import_module("riderlive.dynamixel.rig")
-        driver_module = importlib.import_module("riderlive.dynamixel.driver")
-        self._driver: Any = driver_module.RigDriver(rig_module.load_rig(rig_file), port)
-        self._state = "closed"
+    def __init__(
+        self,
+        specs: Sequence[DeviceSpec],
+        latch: StopLatch,
+        board: SafetyBoard | None = None,
+        guardian_required: bool = False,
+        arm_on_start: str | None = None,
+    ) -> None:
+        self.specs = list(specs)
+        self.latch = latch
+        self.board = board
+        self.guardian_required = guardian_required
+        self.arm_on_start = arm_on_start
+        """Who asked (``serve --arm``): arm each device once, when it first gets to disarmed."""
+        self.devices = [Device(make_plug(spec), spec.period_s, latch) for spec in self.specs]
+        self.stops = latch.view()
+        self.statuses: list[DeviceStatus | None] = [None] * len(self.devices)
+        self._auto_armed: set[str] = set()
 
     def open(self) -> None:
-        self._driver.open()
+        for device in self.devices:
+            device.connect("tick")
 
-    def tick(self, rider: Sequence[float], now: float) -> dict[str, Any] | None:
-        status = self._driver.tick(rider, now)
-        if status is None:
-            return None
-        data: dict[str, Any] = status.to_dict() if hasattr(status, "to_dict") else dict(status)
-        state = data.get("state")
-        self._state = str(getattr(state, "value", state)).lower()
-        return data
+    # -- e-stop --------------------------------------------------------------------------
 
-    def estop(self) -> None:
-        self._driver.estop()
+    def stop_pending(self) -> bool:
+        """A new e-stop request (cheap: checked while the tick spins before a deadline)."""
+        return self.stops.pending
 
-    def request_park(self) -> None:
-        self._driver.request_park()
+    def act_on_stop(self, now: float) -> bool:
+        """A new e-stop request: every device acts on it now. True if there was one."""
+        if not self.stops.take():
+            return False
+        for device in self.devices:
+            device.poll_stop(now)
+        return True
 
-    def is_parked(self) -> bool:
-        return self._state in PARKED_STATES
+    # -- the tick ------------------------------------------------------------------------
 
-    def reset(self) -> None:
-        self._driver.reset()
+    def tick(self, frame: Sequence[float], now: float, tick_index: int) -> bool:
+        """Tick each device that is due; True when a state changed (publish now)."""
+        changed = False
+        for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
+            if tick_index % spec.divider:
+                continue
+            before = device.state
+            status = device.tick(frame, now)
+            self.statuses[i] = status
+            changed |= status.state is not before or bool(status.transitions)
+            if self.board is not None:
+                self.board.publish(i, device.state, device.plug.pose)
+            if self.arm_on_start and device.state is DeviceState.DISARMED and device.name not in self._auto_armed:
+                self._auto_armed.add(device.name)
+                try:
+                    self._arm(device, self.arm_on_start)
+                except Refused as exc:
+                    log.error("%s: not armed at start: %s", device.name, exc)
+        return changed
+
+    # -- requests ------------------------------------------------------------------------
+
+    def request(self, command: cmd.Request) -> cmd.Reply:
+        """Apply an operator's request; refusals come back in the reply, never raised."""
+        try:
+            message = self._apply(command)
+            return cmd.Reply(command.request, True, self.states(), None, message)
+        except Refused as exc:
+            log.warning("refused %s: %s", type(command).__name__.lower(), exc)
+            return cmd.Reply(command.request, False, self.states(), exc.reason.value, str(exc))
+
+    def _apply(self, command: cmd.Request) -> str:
+        if isinstance(command, cmd.Arm):
+            device = self._named(command.device)
+            self._arm(device, command.by)
+            return f"{device.name} armed by {command.by}: {device.state.value}"
+        targets = self.devices if command.device is None else [self._named(command.device)]
+        if isinstance(command, cmd.Disarm):
+            for device in targets:
+                device.disarm(command.by)
+            return "disarmed"
+        if isinstance(command, cmd.Reset):
+            return self._reset(targets, command)
+        return self._reload(targets[0], command.by)
+
+    def _named(self, name: str) -> Device:
+        for device in self.devices:
+            if device.name == name:
+                return device
+        known = ", ".join(repr(d.name) for d in self.devices) or "none configured"
+        raise Refused(Refusal.UNKNOWN_DEVICE, f"no device {name!r} (devices: {known})")
+
+    def _arm(self, device: Device, by: str) -> None:
+        if self.guardian_required and not self.guardian_alive():
+            raise Refused(Refusal.NOT_READY, "the guardian (dead-man process) is not running: nothing may move")
+        device.arm(device.name, by)
+
+    def guardian_alive(self) -> bool:
+        board = self.board
+        return board is not None and board["guardian_ready"] == 1.0 and pid_alive(int(board["guardian_pid"]))
+
+    def _reset(self, targets: list[Device], command: cmd.Reset) -> str:
+        done = []
+        for device in targets:
+            try:
+                device.reset(command.by)
+                done.append(device.name)
+            except Refused as exc:
+                if exc.reason is not Refusal.NOTHING_TO_RESET or command.device is not None:
+                    raise
+        self.latch.clear()
+        return f"reset: {', '.join(done) or 'nothing latched'}"
+
+    def _reload(self, device: Device, by: str) -> str:
+        if device.state.moving:
+            raise Refused(Refusal.MOVING, f"{device.name} is {device.state.value}: disarm it before a reload")
+        index = self.devices.index(device)
+        try:
+            plug = make_plug(self.specs[index])
+        except ValueError as exc:  # ConfigError and pydantic's: the file is wrong; keep the old one
+            raise Refused(Refusal.BAD_CONFIG, str(exc)) from None
+        device.close(by)
+        fresh = Device(plug, self.specs[index].period_s, self.latch)
+        fresh.counters = device.counters  # counters stay monotonic across a reload
+        fresh.counters["reloads"] += 1
+        self.devices[index] = fresh
+        fresh.connect(by)
+        return f"{fresh.name} reloaded: connecting, then disarmed"
+
+    # -- shutdown and status -------------------------------------------------------------
+
+    def park(self) -> None:
+        for device in self.devices:
+            device.disarm("shutdown")
+
+    def at_rest(self) -> bool:
+        return all(d.state in REST_STATES for d in self.devices)
 
     def close(self) -> None:
-        self._driver.close()
+        for device in self.devices:
+            try:
+                device.close("shutdown", timeout_s=0.0)
+            except Exception as exc:
+                log.warning("%s: close failed: %s", device.name, exc)
+
+    def states(self) -> dict[str, str]:
+        return {d.name: d.state.value for d in self.devices}
+
+    def status(self) -> dict[str, Any]:
+        """``devices``: one summary each; ``rig``: the first Dynamixel device in full."""
+        full = []
+        for device, status in zip(self.devices, self.statuses, strict=True):
+            full.append((status or device.status(time.perf_counter())).to_dict())
+        summary_keys = (
+            "name",
+            "kind",
+            "state",
+            "detail",
+            "fault",
+            "armed_by",
+            "outputs_off_confirmed",
+            "estop",
+            "counters",
+        )
+        rig = next((s for s in full if s["kind"] == "dynamixel"), None)
+        return {
+            "devices": [{k: s[k] for k in summary_keys} for s in full],
+            "rig": rig,
+            "guardian": None if self.board is None else {"alive": self.guardian_alive()},
+        }

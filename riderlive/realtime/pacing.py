@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import logging
 import os
+import select
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 log = logging.getLogger(__name__)
@@ -57,20 +59,35 @@ class DeadlineClock:
 
     def wait(self) -> tuple[float, float]:
         """Wait for the next deadline; return ``(deadline, lateness)`` in seconds."""
-        self.tick += 1
-        target = self.deadline(self.tick)
+        woke = self.wait_or_wake()
+        assert woke is not None
+        return woke
+
+    def wait_or_wake(
+        self, fds: Sequence[int] = (), interrupted: Callable[[], bool] | None = None
+    ) -> tuple[float, float] | None:
+        """Like :meth:`wait`, but return None as soon as one of ``fds`` is readable
+        (while sleeping) or ``interrupted()`` is true (while spinning): the deadline is
+        then still ahead, and the next call waits for it again. The caller must consume
+        what made an fd readable."""
+        target = self.deadline(self.tick + 1)
         now = time.perf_counter()
         if now - target > self.period:
             self.overruns += 1
             missed = int((now - target) / self.period)
             self.skipped += missed
             self.tick += missed
-            target = self.deadline(self.tick)
+            target = self.deadline(self.tick + 1)
         remaining = target - now - self.spin
         if remaining > 0.0:
-            time.sleep(remaining)
+            if not fds:
+                time.sleep(remaining)
+            elif select.select(fds, [], [], remaining)[0]:
+                return None
         while (now := time.perf_counter()) < target:
-            pass
+            if interrupted is not None and interrupted():
+                return None
+        self.tick += 1
         return target, now - target
 
 

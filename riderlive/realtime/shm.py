@@ -20,27 +20,15 @@ reader re-checks the sequence word after copying.
 from __future__ import annotations
 
 import time
-from multiprocessing import resource_tracker, shared_memory
+from multiprocessing import shared_memory
 
 import numpy as np
 import numpy.typing as npt
 
+from riderlive.devices.shared import attach as _attach
+
 FloatArray = npt.NDArray[np.float64]
 _HEADER = 8
-
-
-def _attach(name: str) -> shared_memory.SharedMemory:
-    """Open an existing segment without registering it with this process's tracker.
-
-    The creating process owns (and unlinks) the segment; a second registration from
-    the attaching process would unlink it early or warn at exit (Python < 3.13).
-    """
-    register = resource_tracker.register
-    resource_tracker.register = lambda *args, **kwargs: None  # type: ignore[assignment]
-    try:
-        return shared_memory.SharedMemory(name=name, create=False)
-    finally:
-        resource_tracker.register = register
 
 
 class SharedRing:

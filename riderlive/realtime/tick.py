@@ -1,12 +1,18 @@
-"""The tick process: a fixed-rate loop that owns the rules and the rig.
+"""The tick process: a fixed-rate loop that owns the rules and the devices.
 
 It runs in its own process (``multiprocessing`` spawn) so no web traffic shares its
 GIL. Each tick: wait for the deadline, apply pending commands, take new input frames
-from the input ring, step :class:`~riderlive.realtime.core.TickCore`, drive the
-``TickOutput`` (the rig) when one is configured, write one record to the output
-ring and wake the web process with one byte on the notify pipe (non-blocking: a
-stalled web process cannot stall the tick). Status (driver, mode, e-stop, rig) goes
-to a shared blob as JSON when it changes and at about 30 Hz while a rig runs.
+from the input ring, step :class:`~riderlive.realtime.core.TickCore`, tick the devices
+(:class:`~riderlive.realtime.output.TickDevices`: the rig), write one record to the
+output ring and wake the web process with one byte on the notify pipe (non-blocking: a
+stalled web process cannot stall the tick). Status (driver, mode, e-stop, devices) goes
+to a shared blob as JSON when it changes and at about 30 Hz while a device is there.
+
+Between deadlines the tick sleeps on its command pipe (and a signal pipe): a command
+wakes it at once, and an e-stop recorded in the latch is acted on at that moment (or
+during the last millisecond's spin, or inside a bus wait), not at the next deadline.
+Every tick it writes its heartbeat to the safety board, where the web process and the
+guardian look for a dead or hung tick.
 """
 
 from __future__ import annotations
@@ -26,11 +32,14 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
+from riderlive.devices.board import SafetyBoard
+from riderlive.devices.latch import StopLatch, StopSource
+from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import ProceduralHorse
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, Mode, TickCore, TickResult, Timing
-from riderlive.realtime.output import RigOutput, TickOutput
+from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.rules.animator import AnimatorLayer
@@ -63,9 +72,19 @@ class TickSetup:
     """Seconds spun before each deadline; None: 0.25 ms at SCHED_FIFO, 1 ms otherwise."""
     isolation: str = "process"
     """``process`` (the design) or ``thread`` (in the web process; a baseline for benchmarks)."""
-    rig_file: str | None = None
-    rig_port: str | None = None
+    devices: tuple[DeviceSpec, ...] = ()
+    """Devices to drive (planned by the web process: validated, rates fitted)."""
     park_timeout: float = 5.0
+    """At shutdown, how long the devices may take to park before the tick stops anyway."""
+    generation: int = 1
+    """1 for the first tick of a service, +1 per restart after a crash or a hang."""
+    arm_on_start: str | None = None
+    """``serve --arm``: arm each device once when it first gets to disarmed (first
+    generation only; a restarted tick never re-arms)."""
+    guardian: bool = False
+    """A guardian process watches this tick: arming is refused while it is not running."""
+    latch_name: str | None = None
+    board_name: str | None = None
     tail: bool = False
     """Run the tail and braid physics (``riderlive.realtime.tail``) and publish their channels."""
     physics_file: str | None = None
@@ -80,11 +99,24 @@ class TickSetup:
 class TickLoop:
     """The loop's state; :meth:`run` returns when stopped."""
 
-    def __init__(self, setup: TickSetup, commands: Connection, notify_fd: int, output: TickOutput | None) -> None:
+    def __init__(
+        self,
+        setup: TickSetup,
+        commands: Connection,
+        notify_fd: int,
+        devices: TickDevices | None,
+        *,
+        latch: StopLatch | None = None,
+        board: SafetyBoard | None = None,
+    ) -> None:
         self.setup = setup
         self.commands = commands
         self.notify_fd = notify_fd
-        self.output = output
+        self.devices = devices
+        self._own_latch = latch is None
+        self.latch = StopLatch() if latch is None else latch
+        self.board = board
+        self.wake_fds: list[int] = [commands.fileno()]
         names = setup.shm_names
         self.inputs = SharedRing(0, 0, name=names["input"])
         self.outputs = SharedRing(0, 0, name=names["output"])
@@ -95,10 +127,9 @@ class TickLoop:
         self.core = TickCore(model, setup.timing, self.horse, setup.mode, setup.rider_bounds)
         self.running = True
         self.stopping_since: float | None = None
-        self.estopped = False
         self.realtime = "off"
         self.events: deque[str] = deque(maxlen=10)
-        self.rig: dict[str, Any] | None = None
+        self.device_status: dict[str, Any] = {}
         self._status_dirty = True
         self._last_good: TickResult | None = None
         self.physics: TickPhysics | None = None
@@ -132,22 +163,32 @@ class TickLoop:
         elif isinstance(command, cmd.ProducerGone):
             self.core.producer_gone(command.producer)
         elif isinstance(command, cmd.EStop):
-            self.estopped = True
-            if self.output is not None:
-                self.output.estop()
-        elif isinstance(command, cmd.Reset):
-            self.estopped = False
-            if self.output is not None:
-                self.output.reset()
+            if self.devices is not None:
+                self.devices.act_on_stop(time.perf_counter())
+        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload):
+            self._request(command)
         elif isinstance(command, cmd.Stop):
             self._begin_stop(now)
         self._status_dirty = True
 
+    def _request(self, command: cmd.Request) -> None:
+        """An operator's request: applied by the devices, answered on the command pipe."""
+        if self.devices is not None:
+            reply = self.devices.request(command)
+        elif isinstance(command, cmd.Reset):
+            self.latch.clear()
+            reply = cmd.Reply(command.request, True, {}, None, "reset: no devices")
+        else:
+            reply = cmd.Reply(command.request, False, {}, "unknown_device", "no devices are configured")
+        if command.request:
+            with contextlib.suppress(OSError, ValueError):
+                self.commands.send(reply)
+
     def _begin_stop(self, now: float) -> None:
         if self.stopping_since is None:
             self.stopping_since = now
-            if self.output is not None:
-                self.output.request_park()
+            if self.devices is not None:
+                self.devices.park()
 
     def _poll_commands(self, now: float) -> None:
         try:
@@ -169,12 +210,14 @@ class TickLoop:
             "gait": self.horse.gait,
             "move": getattr(self.horse, "move", None),
             "speed": self.horse.speed,
-            "estop": self.estopped,
+            "estop": self.latch.latched,
             "realtime": self.realtime,
             "rate": self.setup.rate,
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
-            "rig": self.rig,
+            "rig": None,
+            "devices": [],
+            **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
             "events": list(self.events),
         }
@@ -191,14 +234,26 @@ class TickLoop:
         bucket0 = index["lateness_bucket_0"]
         spin = setup.spin if setup.spin is not None else (0.00025 if self.realtime == "fifo" else 0.001)
         clock = DeadlineClock(period=1.0 / setup.rate, start=time.perf_counter(), spin=spin)
-        rig_every = max(1, round(setup.rate / 30.0))
+        status_every = max(1, round(setup.rate / 30.0))
         values[index["realtime"]] = 1.0 if self.realtime == "fifo" else 0.0
         values[index["alive"]] = 1.0
         last_driver = self.core.driver
+        devices = self.devices
         self._publish_status()
         while self.running:
-            deadline, lateness = clock.wait()
+            woke = clock.wait_or_wake(self.wake_fds, None if devices is None else devices.stop_pending)
+            if self.board is not None:
+                self.board["tick_beat"] = time.perf_counter()
+            if woke is None:  # a command or a signal between deadlines: e-stops first
+                if devices is not None:
+                    devices.act_on_stop(time.perf_counter())
+                self._drain_wake_fds()
+                self._poll_commands(time.perf_counter() - setup.start)
+                continue
+            deadline, lateness = woke
             now = deadline - setup.start
+            if devices is not None:
+                devices.act_on_stop(deadline)
             self._poll_commands(now)
             newest_rx = -1.0
             for record in self.inputs.read_new():
@@ -217,17 +272,10 @@ class TickLoop:
                 self._status_dirty = True
             values[index["state_resets"]] = self.core.resets
             values[index["outputs_clamped"]] = self.core.clamped
-            if self.output is not None:
-                try:
-                    status = self.output.tick(result.rider, deadline)
-                except Exception as exc:  # the driver owns its faults; the tick goes on
-                    status = None
-                    self.events.append(f"rig tick failed: {exc}")
-                    self._status_dirty = True
-                if status is not None and (
-                    clock.tick % rig_every == 0 or self.rig is None or status.get("state") != self.rig.get("state")
-                ):
-                    self.rig = status
+            if devices is not None:
+                changed = devices.tick(result.rider, deadline, clock.tick)
+                if changed or clock.tick % status_every == 0:
+                    self.device_status = devices.status()
                     self._status_dirty = True
             extra: list[float] = []  # after the rig's transaction: the bus never waits on the tail
             if self.physics is not None:
@@ -268,11 +316,18 @@ class TickLoop:
             values[index["step_max"]] = max(values[index["step_max"]], done + setup.start - deadline)
             values[bucket0 + bucket_of(lateness)] += 1
             if self.stopping_since is not None and (
-                self.output is None or self.output.is_parked() or now - self.stopping_since > setup.park_timeout
+                devices is None or devices.at_rest() or now - self.stopping_since > setup.park_timeout
             ):
                 self.running = False
         values[index["alive"]] = 0.0
+        if devices is not None:
+            self.device_status = devices.status()
         self._publish_status()
+
+    def _drain_wake_fds(self) -> None:
+        for fd in self.wake_fds[1:]:  # the signal pipe (the command pipe is read by _poll_commands)
+            with contextlib.suppress(BlockingIOError, OSError):
+                os.read(fd, 4096)
 
     def _step(self, now: float, values: Any, index: dict[str, int]) -> TickResult:
         """``core.step``, never raising and never returning a non-finite rider value.
@@ -299,13 +354,17 @@ class TickLoop:
         return self._last_good
 
     def close(self) -> None:
-        if self.output is not None:
+        if self.devices is not None:
             try:
-                self.output.close()
+                self.devices.close()
             except Exception as exc:
-                log.warning("closing the rig failed: %s", exc)
+                log.warning("closing the devices failed: %s", exc)
+        if self.board is not None and not self.running:
+            self.board["tick_clean_exit"] = float(self.setup.generation)
         for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
             shared.close()
+        if self._own_latch:
+            self.latch.close()
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:
@@ -316,12 +375,25 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
     notify_fd = notify.fileno()
     os.set_blocking(notify_fd, False)
-    output: TickOutput | None = None
-    if setup.rig_file:
-        output = RigOutput(setup.rig_file, setup.rig_port)
-    loop = TickLoop(setup, commands, notify_fd, output)
+    latch = StopLatch(setup.latch_name) if setup.latch_name else StopLatch()
+    board = SafetyBoard(setup.board_name) if setup.board_name else None
+    devices: TickDevices | None = None
+    if setup.devices:
+        arm = setup.arm_on_start if setup.generation == 1 else None
+        devices = TickDevices(setup.devices, latch, board, setup.guardian, arm)
+    loop = TickLoop(setup, commands, notify_fd, devices, latch=latch, board=board)
     if in_process:
-        signal.signal(signal.SIGTERM, lambda *_: loop._begin_stop(time.perf_counter() - setup.start))
+        wake_read, wake_write = os.pipe()
+        os.set_blocking(wake_read, False)
+        os.set_blocking(wake_write, False)
+        signal.set_wakeup_fd(wake_write, warn_on_full_buffer=False)
+        loop.wake_fds.append(wake_read)
+
+        def on_term(signum: int, frame: object) -> None:  # SIGTERM of the driving process: e-stop
+            latch.request(StopSource.SIGNAL)
+            loop._begin_stop(time.perf_counter() - setup.start)
+
+        signal.signal(signal.SIGTERM, on_term)
     try:
         # The physics kernels compile (cold cache) or load here: before real-time priority
         # (a 10-20 s compile at FIFO would starve the web process), before the collector is
@@ -334,8 +406,11 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
             gc.collect()
             gc.freeze()
             gc.disable()
-        if output is not None:
-            output.open()
+        if devices is not None:
+            devices.open()
         loop.run()
     finally:
         loop.close()
+        latch.close()
+        if board is not None:
+            board.close()

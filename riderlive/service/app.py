@@ -29,6 +29,7 @@ from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
+from riderlive.service.devices_api import add_device_routes, render_device_metrics
 from riderlive.service.metrics import render
 from riderlive.service.rest import (
     AnimatorBody,
@@ -178,21 +179,14 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def takes() -> dict[str, Any]:
         return {"takes": list_takes(config.takes.directory)}
 
-    @app.post("/api/estop", dependencies=ctl, summary="Emergency stop: the rig goes to torque off")
-    async def estop() -> dict[str, Any]:
-        service.link.send(cmd.EStop())
-        return {"estop": True}
-
-    @app.post("/api/reset", dependencies=ctl, summary="Clear an e-stop or a rig fault")
-    async def reset() -> dict[str, Any]:
-        service.link.send(cmd.Reset())
-        return {"estop": False}
+    add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
 
     @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
     async def metrics() -> PlainTextResponse:
         text = render(
             service.metrics, service.link.counters.snapshot(), service.hub.snapshot(), len(service.arbiter.producers)
         )
+        text += render_device_metrics(service)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 
     if STATIC_DIR.is_dir():

@@ -59,6 +59,18 @@ class TickSection(StrictModel):
     and the shipped ``config/presets`` (by name, never by path)."""
     param_blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=10.0)
     """Seconds over which a change of preset, parameters or animator layer blends in."""
+    hang_ticks: float = pydantic.Field(default=5.0, ge=2.0, le=1000.0)
+    """A tick whose heartbeat is older than this many periods is hung: killed and
+    restarted (its devices stay safe and are not re-armed). Raise it on a machine
+    without real-time priority at high rates (docs/architecture.md, "Supervision")."""
+    hang_floor: float = pydantic.Field(default=0.25, ge=0.0, le=60.0)
+    """Without real-time priority the hang threshold is at least this (seconds): a loaded
+    machine stalls a normal-priority process for tens of milliseconds."""
+    hang_floor_realtime: float = pydantic.Field(default=0.03, ge=0.0, le=60.0)
+    """With real-time priority the hang threshold is at least this (seconds): even a
+    SCHED_FIFO tick is late by ~10 ms now and then on a busy 2-core machine."""
+    restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
+    """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
 
 
 class InputSection(StrictModel):
@@ -143,6 +155,24 @@ class RigSection(StrictModel):
     file: str | None = None
     port: str | None = None
     park_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
+    arm: bool = False
+    """Arm the rig once it is connected, at start only (``serve --arm``). Unattended use
+    only: the rig moves with nobody confirming it (docs/hardware.md)."""
+    rate_policy: Literal["divide", "refuse"] = "divide"
+    """A rig validated (``bus.tick_hz``) below ``tick.rate``: drive it every n-th tick,
+    or refuse to start."""
+
+
+class GuardianSection(StrictModel):
+    """The dead-man process that parks the devices when the tick or the web process dies."""
+
+    enabled: bool = True
+    tick_timeout: float = pydantic.Field(default=0.5, ge=0.02, le=10.0)
+    """Seconds without a tick heartbeat before the guardian acts on its own, for when the
+    web process is frozen too (a live web process kills a hung tick sooner, after
+    ``tick.hang_ticks``, and the guardian sees that death at once)."""
+    web_timeout: float = pydantic.Field(default=2.0, ge=0.1, le=60.0)
+    """Seconds without a web-process heartbeat before the guardian stops everything."""
 
 
 class PhysicsSection(StrictModel):
@@ -188,6 +218,7 @@ class ServiceConfig(StrictModel):
     physics: PhysicsSection = PhysicsSection()
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
+    guardian: GuardianSection = GuardianSection()
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:
@@ -197,6 +228,11 @@ class ServiceConfig(StrictModel):
                 "(or security.require_token = false to run open, at your own risk)"
             )
         return self
+
+    @property
+    def arming_token(self) -> str | None:
+        """Arming needs the token whenever one is configured, loopback or not."""
+        return self.security.token
 
     @property
     def token_required(self) -> bool:

@@ -31,6 +31,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
 from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, lookup
+from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
 from riderlive.service import auth
@@ -83,6 +84,8 @@ class Subscriber:
     transport: Any = None
     """The raw transport (fast path), or None: frames then go through the slot."""
     behind_since: float | None = None
+    controls: bool = False
+    """May send control messages (``estop``): no control token is required, or it gave it."""
 
     def offer_frame(self, data: str | bytes, input_rx: float) -> None:
         if self.frame is not None:
@@ -333,6 +336,9 @@ class Hub:
                 return
         client = Subscriber(websocket, f"rider-{next(_ids)}", self.default)
         client.transport = websocket.scope.get("extensions", {}).get(TRANSPORT)
+        client.controls = not config.token_required or auth.token_matches(
+            config.security.token, auth.token_from_subprotocols(offered)
+        )
         await websocket.send_text(orjson.dumps(self.hello()).decode())
         status = service.link.status()
         if status:
@@ -368,7 +374,12 @@ class Hub:
                 pong = {"type": "pong", "id": decode_ping_id(obj), "engine_time": service.link.engine_time()}
                 client.offer_control(pong)
             elif kind == "auth":
-                pass
+                client.controls = client.controls or auth.token_matches(service.config.security.token, obj.get("token"))
+            elif kind == "estop":  # the websocket control channel: latched e-stop of every device
+                if not client.controls:
+                    raise BadFrame("unauthorized", "estop needs the control token (subprotocol or auth message)")
+                latched = service.supervisor.estop(StopSource.WEBSOCKET)
+                client.offer_control({"type": "estop", "id": obj.get("id"), "latched_at": latched})
             else:
                 raise BadFrame("unknown_type", f"unknown message type {str(kind)[:64]!r}")
         except Exception as exc:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
@@ -21,17 +22,24 @@ from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
+from riderlive.service.devices_api import DeviceMetrics, plan_devices
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
+from riderlive.service.supervisor import TickSupervisor
 from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, take_path
 from riderlive.takes.replay import Replay, load_replay
 
 log = logging.getLogger(__name__)
 
 
-def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[str, ...] = ()) -> TickSetup:
+def make_setup(
+    config: ServiceConfig,
+    params: RuleParams,
+    extra_channels: tuple[str, ...] = (),
+    devices: tuple[DeviceSpec, ...] = (),
+) -> TickSetup:
     source = config.source
     timing = Timing(
         delay=config.input.delay,
@@ -57,9 +65,10 @@ def make_setup(config: ServiceConfig, params: RuleParams, extra_channels: tuple[
         realtime_priority=config.tick.realtime_priority,
         isolation=config.tick.isolation,
         spin=config.tick.spin,
-        rig_file=config.rig.file,
-        rig_port=config.rig.port,
+        devices=devices,
         park_timeout=config.rig.park_timeout,
+        arm_on_start="serve --arm" if config.rig.arm else None,
+        guardian=bool(devices) and config.guardian.enabled,
         tail=config.physics.tail,
         physics_file=config.physics.file,
         extra_channels=extra_channels,
@@ -79,6 +88,8 @@ class Service:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
             self.extra_channels = physics_channels(config.physics.file)
+        self.devices = plan_devices(config)
+        """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params = load_preset(config.tick.preset)
         self.animator = AnimatorLayer()
         self.metrics = ServiceMetrics()
@@ -106,30 +117,24 @@ class Service:
         self._replay_task: asyncio.Task[None] | None = None
         self._status_version = -1
         self.link: TickLink
+        self.supervisor: TickSupervisor
+        self.device_metrics: DeviceMetrics
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
         self.recover_takes()
-        self.link = TickLink(make_setup(self.config, self.params, self.extra_channels))
-        loop = asyncio.get_running_loop()
-        loop.add_reader(self.link.notify_fd, self.on_tick)
-        self._watchdog = loop.create_task(self._watch_tick())
-
-    async def _watch_tick(self) -> None:
-        """Say so loudly if the tick process dies: no frames, no rig (its servos' watchdog stops them)."""
-        while self.link.alive():
-            await asyncio.sleep(0.5)
-        log.critical("the tick process has died: no rider frames until the service restarts")
-        self.hub.publish_status({**self.link.status(), "driver": "dead", "tick_alive": False})
+        self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
+        self.supervisor = TickSupervisor(self.link, self.config, self.on_tick, self.hub.publish_status)
+        await self.supervisor.start()
 
     async def stop(self) -> None:
-        """Goodbye to clients, park the rig and stop the tick, close the take."""
+        """Goodbye to clients, park the devices and stop the tick, the guardian, the take."""
         await self.hub.goodbye("shutdown")
-        self._watchdog.cancel()
+        await self.supervisor.stop()
         if self._replay_task is not None:
             self._replay_task.cancel()
-        asyncio.get_running_loop().remove_reader(self.link.notify_fd)
         await asyncio.to_thread(self.link.stop, self.config.rig.park_timeout + 2.0)
+        await asyncio.to_thread(self.supervisor.stop_guardian)
         self.on_tick()
         self.stop_recording()
         self.link.close()
@@ -294,6 +299,7 @@ class Service:
             "session": self.session,
             "engine_time": link.engine_time(),
             "tick_alive": link.alive(),
+            "supervision": self.supervisor.snapshot(),
             "tick": link.status(),
             "counters": link.counters.snapshot(),
             "source": self.source,

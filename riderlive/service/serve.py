@@ -1,4 +1,9 @@
-"""``riderlive serve``: run the live service until SIGINT or SIGTERM."""
+"""``riderlive serve``: run the live service until SIGINT or SIGTERM.
+
+SIGINT and SIGTERM are an e-stop of every device (torque off at once, latched), then a
+clean shutdown. ``--arm`` arms the rig once it is connected, at start only: for
+unattended installations, at the risk that it moves with nobody watching.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +12,12 @@ import math
 import os
 import socket
 import sys
+from types import FrameType
 
 import uvicorn
 
 from riderlive.configfile import ConfigError, validate
+from riderlive.devices.latch import StopSource
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
@@ -43,6 +50,13 @@ class RiderServer(uvicorn.Server):
         await self.service.hub.goodbye("shutdown")
         await super().shutdown(sockets)
 
+    def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+        """SIGINT/SIGTERM of the process that drives the devices: e-stop first."""
+        supervisor = getattr(self.service, "supervisor", None)
+        if supervisor is not None:
+            supervisor.estop(StopSource.SIGNAL)
+        super().handle_exit(sig, frame)
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="service TOML (see config/service.example.toml)")
@@ -54,6 +68,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vmc", metavar="HOST:PORT", help="send the rider as a VMC performer (docs/vmc.md)")
     parser.add_argument("--vmc-horse", metavar="HOST:PORT", help="send the horse too, to another port")
     parser.add_argument("--vmc-rate", type=float, metavar="HZ", help="VMC bundles per second (default 60)")
+    parser.add_argument(
+        "--arm",
+        action="store_true",
+        help="arm the rig once connected, at start only (rig.arm = true): unattended use, it moves unwatched",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,12 +90,14 @@ def run(args: argparse.Namespace) -> int:
             )
             if v is not None
         }
-        if overrides or vmc or getattr(args, "tail", False):
+        if overrides or vmc or getattr(args, "tail", False) or getattr(args, "arm", False):
             data = config.model_dump()
             data["server"].update(overrides)
             data["vmc"].update(vmc)
             if getattr(args, "tail", False):
                 data["physics"]["tail"] = True
+            if getattr(args, "arm", False):
+                data["rig"]["arm"] = True
             config = validate(ServiceConfig, data, "command line")
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)

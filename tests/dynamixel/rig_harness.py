@@ -1,4 +1,4 @@
-"""Helpers for driving a RigDriver against the emulated bus (tests and bench share them)."""
+"""Helpers for driving the rig device against the emulated bus (tests and bench share them)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from riderlive.channels import RIDER
-from riderlive.dynamixel.driver import RigDriver
+from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.lifecycle import DeviceState
+from riderlive.dynamixel.driver import RigPlug
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
-from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import RigConfig, load_rig
-from riderlive.dynamixel.status import RigStatus
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item
 
 TORQUE_ENABLE_ADDRESS = 64
@@ -64,29 +64,38 @@ class TimedBus(EmulatedBus):
 class Run:
     """Statuses of a paced run and the rider frames that went in."""
 
-    statuses: list[RigStatus] = field(default_factory=list)
+    statuses: list[DeviceStatus] = field(default_factory=list)
     riders: list[list[float]] = field(default_factory=list)
     overruns: int = 0
 
 
+def plug_of(device: Device) -> RigPlug:
+    assert isinstance(device.plug, RigPlug)
+    return device.plug
+
+
+def rig_of(device: Device) -> RigConfig:
+    return plug_of(device).config
+
+
 def drive(
-    driver: RigDriver,
+    device: Device,
     seconds: float,
     rider: Callable[[float], Sequence[float]] | None = None,
     *,
-    until: Callable[[RigStatus], bool] | None = None,
+    until: Callable[[DeviceStatus], bool] | None = None,
     hz: float | None = None,
     run: Run | None = None,
 ) -> Run:
     """Call ``tick`` at ``hz`` (the rig's tick_hz) on perf_counter deadlines."""
     run = run or Run()
-    period = 1.0 / (hz or driver.config.bus.tick_hz)
+    period = 1.0 / (hz or rig_of(device).bus.tick_hz)
     neutral = [0.0] * len(RIDER)
     start = next_tick = time.perf_counter()
     while time.perf_counter() - start < seconds:
         now = time.perf_counter()
         frame = list(rider(now - start)) if rider else neutral
-        status = driver.tick(frame, now)
+        status = device.tick(frame, now)
         run.statuses.append(status)
         run.riders.append(frame)
         if until is not None and until(status):
@@ -101,16 +110,31 @@ def drive(
     return run
 
 
-def start_running(
-    driver: RigDriver, rider: Callable[[float], Sequence[float]] | None = None, timeout: float = 5.0
-) -> Run:
-    """open() and tick until RUNNING (assert it gets there)."""
-    assert driver.open()
-    stop = (RigState.RUNNING, RigState.FAULT, RigState.ESTOP)
-    run = drive(driver, timeout, rider, until=lambda s: s.state in stop)
-    assert driver.state is RigState.RUNNING, run.statuses[-1].fault
+def connect(device: Device, timeout: float = 5.0) -> Run:
+    """connect() and tick until disarmed (assert it gets there)."""
+    device.connect("test")
+    run = drive(device, timeout, until=lambda s: s.state is not DeviceState.CONNECTING)
+    assert device.state is DeviceState.DISARMED, device.fault
+    return run
+
+
+def start_running(device: Device, rider: Callable[[float], Sequence[float]] | None = None, timeout: float = 5.0) -> Run:
+    """Connect, arm, and tick until RUNNING (assert it gets there)."""
+    run = connect(device, timeout)
+    device.arm(device.name, "test")
+    stop = (DeviceState.RUNNING, DeviceState.FAULT, DeviceState.ESTOP)
+    run = drive(device, timeout, rider, until=lambda s: s.state in stop, run=run)
+    assert device.state is DeviceState.RUNNING, run.statuses[-1].fault
     return run
 
 
 def torque(bus: EmulatedBus, servo_id: int) -> int:
     return bus.read_item(servo_id, Item.TORQUE_ENABLE)
+
+
+def goal_deg(status: DeviceStatus) -> list[float]:
+    return [s["goal_deg"] for s in status.extra["servos"]]
+
+
+def present_deg(status: DeviceStatus) -> list[float | None]:
+    return [s["present_deg"] for s in status.extra["servos"]]

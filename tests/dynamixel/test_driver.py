@@ -1,12 +1,14 @@
-"""The rig driver through the real dynamixel-sdk against the emulated bus: the normal path.
+"""The rig device through the real dynamixel-sdk against the emulated bus: the normal path.
 
-A horse trots through the rules into the 24-servo rig: the goals are the mapped rule
-outputs, the servos follow them within a stated tolerance, every tick is one goal
-write (+ the divided read), and park / close end with torque off.
+A horse trots through the rules into the 24-servo rig: connecting ends disarmed with
+torque off, the arm soft-starts from where the servos are, the goals are the mapped
+rule outputs, the servos follow them within a stated tolerance, every tick is one goal
+write (+ the divided read), and disarm / close end with torque off.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -17,14 +19,26 @@ from typing import Any
 import pytest
 
 from riderlive.channels import RIDER
-from riderlive.dynamixel.driver import RigDriver
+from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
+from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.lifecycle import RigState
 from riderlive.dynamixel.rig import ServoMap, deg_to_pulses, profile_velocity, pulses_to_deg
 from riderlive.dynamixel.tables import Item
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
-from tests.dynamixel.rig_harness import drive, servo_setups, short_rig, start_running, torque
+from tests.dynamixel.rig_harness import (
+    connect,
+    drive,
+    goal_deg,
+    rig_of,
+    servo_setups,
+    short_rig,
+    start_running,
+    torque,
+)
+
+S = DeviceState
 
 TRACKING_LAG_DEG = 4.0
 """At every read while trotting, |goal sent - present position| may exceed the goal's
@@ -50,152 +64,181 @@ def trot() -> Callable[[float], list[float]]:
     return lambda _t: model.evaluate(horse.sample(time.perf_counter() - origin))
 
 
+def extra(status: DeviceStatus, key: str) -> list[Any]:
+    return [servo[key] for servo in status.extra["servos"]]
+
+
 def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
     rig = short_rig(tick_hz=50.0, baud=4_000_000)
     bus = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    driver = RigDriver(rig, port=bus.port)
+    device = rig_device(rig, port=bus.port)
     horse = trot()
-    setup = start_running(driver, horse)
-    states = [t.target for s in setup.statuses for t in s.transitions]
-    assert states == [
-        RigState.CONNECTING,
-        RigState.CHECKING,
-        RigState.CONFIGURING,
-        RigState.SOFT_START,
-        RigState.RUNNING,
-    ]
-
-    # configured as the map says
+    setup = connect(device)
+    # connected, checked, configured as the map says, and torque OFF: nothing moves yet
+    assert [t.target for s in setup.statuses for t in s.transitions] == [S.CONNECTING, S.DISARMED]
+    bus.settle()
     for servo in rig.servos.values():
         assert bus.read_item(servo.id, Item.RETURN_DELAY_TIME) == 0
         assert bus.read_item(servo.id, Item.MIN_POSITION_LIMIT) == deg_to_pulses(servo.min_deg)
         assert bus.read_item(servo.id, Item.MAX_POSITION_LIMIT) == deg_to_pulses(servo.max_deg)
         assert bus.read_item(servo.id, Item.PROFILE_VELOCITY) == profile_velocity(servo.max_speed_dps)
         assert bus.read_item(servo.id, Item.BUS_WATCHDOG) == rig.bus.bus_watchdog_ms // 20
-        assert torque(bus, servo.id) == 1
+        assert torque(bus, servo.id) == 0
+    quiet = drive(device, 0.3, horse)
+    assert all(s.state is S.DISARMED and not s.wrote for s in quiet.statuses)
+    assert all(s.outputs_off_confirmed for s in quiet.statuses[-3:])  # read back
+
+    assert device.arm(rig.name, "test") is S.SOFT_START
+    armed = drive(device, 3.0, horse, until=lambda s: s.state is not S.SOFT_START)
+    assert device.state is S.RUNNING
+    assert all(torque(bus, servo.id) == 1 for servo in rig.servos.values())
+    assert armed.statuses[0].armed_by == "test"
 
     smap = ServoMap(rig)
-    run = drive(driver, 1.5, horse)  # the same trot, continued
-    running = [(s, r) for s, r in zip(run.statuses, run.riders, strict=True) if s.state is RigState.RUNNING]
+    run = drive(device, 1.5, horse)  # the same trot, continued
+    running = [(s, r) for s, r in zip(run.statuses, run.riders, strict=True) if s.state is S.RUNNING]
     assert len(running) > 40, [s.fault for s in run.statuses if s.fault][:1]
-    reads = lagging = 0
+    reads = lagging = missed = 0
     errors: list[float] = []
-    previous = running[0][0].goal_deg
-    for status, rider in running:
+    previous = goal_deg(running[0][0])
+    transactions = running[0][0].extra["transactions"]
+    for status, rider in running[1:]:
+        goals = goal_deg(status)
         expected = smap.targets(rider, smap.park)
-        assert status.goal_deg == pytest.approx(expected, abs=1e-9)  # the rules, mapped, unclamped
-        assert not any(status.clamped)
-        assert status.transactions == (2 if status.read else 1)
-        if status.read:
+        assert goals == pytest.approx(expected, abs=1e-9)  # the rules, mapped, unclamped
+        assert not any(extra(status, "clamped"))
+        read = status.extra["read"]
+        assert status.extra["transactions"] - transactions == (2 if read else 1)
+        transactions = status.extra["transactions"]
+        if read:
             reads += 1
-            for err, goal, before in zip(status.tracking_error_deg, status.goal_deg, previous, strict=True):
-                assert err is not None and abs(err) < abs(goal - before) + TRACKING_MAX_DEG
+            for err, goal, before in zip(extra(status, "tracking_error_deg"), goals, previous, strict=True):
+                if err is None:  # that read missed this servo (retried next tick, counted)
+                    missed += 1
+                    continue
+                assert abs(err) < abs(goal - before) + TRACKING_MAX_DEG
                 errors.append(abs(err))
                 lagging += abs(err) > abs(goal - before) + TRACKING_LAG_DEG
-        previous = status.goal_deg
+        previous = goals
     assert reads >= len(running) // rig.bus.read_divider - 1
+    assert missed <= 0.5 * (len(errors) + missed)  # a loaded 2-core box misses reads (retried, counted)
     assert sum(errors) / len(errors) < TRACKING_MEAN_DEG
     assert lagging <= (1.0 - TRACKING_WITHIN_LAG) * len(errors)
     last = running[-1][0]
     assert last.fault is None  # read failures (a loaded CI box) are retried within the budget
-    assert last.counters["reads"] > last.counters["read_failures"]
-    assert all(t is not None and 20 <= t < 80 for t in last.temperature_c)
-    assert all(v is not None and v > 4.0 for v in last.voltage_v)
+    assert last.counters["reads"] > last.counters.get("read_failures", 0)
+    assert all(t is not None and 20 <= t < 80 for t in extra(last, "temperature_c"))
+    assert all(v is not None and v > 4.0 for v in extra(last, "voltage_v"))
     published = json.loads(json.dumps(last.to_dict()))  # JSON-ready as it is
     assert published["state"] == "running" and published["servos"][0]["name"] == "lower_back_pitch"
-    assert published["servos"][6]["goal_deg"] == pytest.approx(last.goal_deg[6])
+    assert published["name"] == rig.name and published["kind"] == "dynamixel"
+    assert published["servos"][6]["goal_deg"] == pytest.approx(goal_deg(last)[6])
 
     # the servos hold the last goal once the horse stops
     hold = run.riders[-1]
-    drive(driver, 0.4, lambda t: hold)
-    for servo_id, goal in zip(smap.ids, driver.tick(hold, time.perf_counter()).goal_deg, strict=True):
+    drive(device, 0.4, lambda t: hold)
+    for servo_id, goal in zip(smap.ids, goal_deg(device.tick(hold, time.perf_counter())), strict=True):
         assert abs(pulses_to_deg(bus.read_item(servo_id, Item.PRESENT_POSITION)) - goal) < FINAL_TOLERANCE_DEG
 
-    # park: ramp to the park pose, torque off, TORQUE_OFF
-    driver.request_park()
-    parked = drive(driver, 2.0, trot(), until=lambda s: s.state is not RigState.PARKING)
-    assert driver.state is RigState.TORQUE_OFF
+    # disarm: ramp to the park pose, torque off, PARKED
+    assert device.disarm("test") is S.PARKING
+    parked = drive(device, 2.0, trot(), until=lambda s: s.state is not S.PARKING)
+    assert device.state is S.PARKED
     bus.settle()
-    assert parked.statuses[-1].goal_deg == pytest.approx(smap.park)
+    assert goal_deg(parked.statuses[-1]) == pytest.approx(smap.park)
     for servo_id, park in zip(smap.ids, smap.park, strict=True):
         assert torque(bus, servo_id) == 0
         assert abs(pulses_to_deg(bus.read_item(servo_id, Item.PRESENT_POSITION)) - park) < 1.5
-    driver.close()
-    assert driver.state is RigState.CLOSED
+    device.close()
+    assert device.state is S.DISCONNECTED
 
 
-def bench_driver(bus_factory: Callable[..., EmulatedBus], **bus: Any) -> tuple[RigDriver, EmulatedBus]:
+def bench_device(bus_factory: Callable[..., EmulatedBus], **bus: Any) -> tuple[Device, EmulatedBus]:
     rig = short_rig("bench3", **bus)
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    return RigDriver(rig, port=emu.port), emu
+    return rig_device(rig, port=emu.port), emu
 
 
 def test_soft_start_ramps_from_present_pose(bus_factory: Callable[..., EmulatedBus]) -> None:
     rig = short_rig("bench3", soft_start_s=0.5)
     emu = bus_factory([s.__class__(s.id, s.model, position=1700) for s in servo_setups(rig)], baud=rig.bus.baud)
-    driver = RigDriver(rig, port=emu.port)
+    device = rig_device(rig, port=emu.port)
     rider = [0.0] * len(RIDER)
-    driver.open()
-    run = drive(driver, 3.0, lambda t: rider, until=lambda s: s.state is RigState.RUNNING)
-    soft = [s for s in run.statuses if s.state is RigState.SOFT_START]
+    connect(device)
+    device.arm(rig.name, "test")
+    run = drive(device, 3.0, lambda t: rider, until=lambda s: s.state is S.RUNNING)
+    soft = [s for s in run.statuses if s.state is S.SOFT_START]
     took = run.statuses[-1].at - soft[0].at
     assert 0.5 - 0.01 <= took <= 0.5 + 0.3  # soft_start_s (+ a late tick on a loaded box)
     start = pulses_to_deg(1700)
-    first, last = soft[0].goal_deg, run.statuses[-1].goal_deg
+    first, last = goal_deg(soft[0]), goal_deg(run.statuses[-1])
     assert first[0] == pytest.approx(start, abs=2.0)  # starts where the servo was
     assert last[0] == pytest.approx(180.0)  # ends on the rider's pose (channel 0 -> zero_deg)
     head = 2
     speed = rig.servos["head"].max_speed_dps
     for a, b in itertools.pairwise([*soft, run.statuses[-1]]):
         dt = min(b.at - a.at, 4.0 / rig.bus.tick_hz)
-        assert abs(b.goal_deg[head] - a.goal_deg[head]) <= speed * dt + 1e-9  # no jump
+        assert abs(goal_deg(b)[head] - goal_deg(a)[head]) <= speed * dt + 1e-9  # no jump
+
+
+def test_arming_soft_starts_from_where_a_hand_left_the_servo(bus_factory: Callable[..., EmulatedBus]) -> None:
+    """Disarmed, a servo is moved by hand (torque off): the arm reads it there and eases from it."""
+    device, emu = bench_device(bus_factory, soft_start_s=0.4)
+    connect(device)
+    with emu.lock:
+        emu.servo(1).state = dataclasses.replace(emu.servo(1).state, position=2400.0)  # pushed to ~211 deg
+    device.arm(device.name, "test")
+    first = drive(device, 0.05).statuses[0]
+    assert goal_deg(first)[0] == pytest.approx(pulses_to_deg(2400), abs=1.5)
 
 
 def test_bad_rider_frames_are_held_not_raised(bus_factory: Callable[..., EmulatedBus]) -> None:
-    driver, _ = bench_driver(bus_factory)
-    start_running(driver)
+    device, _ = bench_device(bus_factory)
+    start_running(device)
     rider = [1.0] * len(RIDER)
-    before = driver.tick(rider, time.perf_counter()).goal_deg
+    before = goal_deg(device.tick(rider, time.perf_counter()))
     time.sleep(0.01)
     bad = list(rider)
     bad[0] = math.nan
-    status = driver.tick(bad, time.perf_counter())
-    assert status.goal_deg[0] == before[0]  # lower_back.rz held
-    held = status.goal_deg
+    status = device.tick(bad, time.perf_counter())
+    assert goal_deg(status)[0] == before[0]  # lower_back.rz held
+    held = goal_deg(status)
     time.sleep(0.01)
-    status = driver.tick([1.0, 2.0], time.perf_counter())  # wrong length: everything held
-    assert status.goal_deg == pytest.approx(held, abs=1e-9)
-    assert status.state is RigState.RUNNING
+    status = device.tick([1.0, 2.0], time.perf_counter())  # wrong length: everything held
+    assert goal_deg(status) == pytest.approx(held, abs=1e-9)
+    assert status.state is S.RUNNING
     assert status.counters["bad_inputs"] == 2
 
 
 def test_limits_and_slew_are_applied(bus_factory: Callable[..., EmulatedBus]) -> None:
-    driver, emu = bench_driver(bus_factory)
-    start_running(driver)
+    device, emu = bench_device(bus_factory)
+    start_running(device)
     rider = [0.0] * len(RIDER)
     rider[0] = 1000.0  # lower_back.rz far beyond max_deg
-    run = drive(driver, 3.0, lambda t: rider, until=lambda s: s.goal_deg[0] >= 230.0 - 1e-9)
-    goals = [s.goal_deg[0] for s in run.statuses]
-    assert run.statuses[0].clamped[0]
+    run = drive(device, 3.0, lambda t: rider, until=lambda s: goal_deg(s)[0] >= 230.0 - 1e-9)
+    goals = [goal_deg(s)[0] for s in run.statuses]
+    assert run.statuses[0].extra["servos"][0]["clamped"]
     assert max(goals) == pytest.approx(230.0)  # max_deg of bench3's lower_back
-    speed = driver.config.servos["lower_back"].max_speed_dps
+    rig = rig_of(device)
+    speed = rig.servos["lower_back"].max_speed_dps
     times = [s.at for s in run.statuses]
     for (t0, g0), (t1, g1) in itertools.pairwise(zip(times, goals, strict=True)):
-        assert g1 - g0 <= speed * min(t1 - t0, 4.0 / driver.config.bus.tick_hz) + 1e-6
+        assert g1 - g0 <= speed * min(t1 - t0, 4.0 / rig.bus.tick_hz) + 1e-6
     emu.settle()
     assert emu.read_item(1, Item.GOAL_POSITION) <= deg_to_pulses(230.0)
 
 
 def test_close_parks_then_torques_off_within_bound(bus_factory: Callable[..., EmulatedBus]) -> None:
-    driver, emu = bench_driver(bus_factory)
-    start_running(driver)
+    device, emu = bench_device(bus_factory)
+    start_running(device)
     t0 = time.perf_counter()
-    driver.close()
+    device.close()
     took = time.perf_counter() - t0
-    assert driver.state is RigState.CLOSED
+    assert device.state is S.DISCONNECTED
     emu.settle()
-    assert took < driver.config.bus.park_s + driver.config.bus.close_timeout_s
-    assert took >= driver.config.bus.park_s * 0.9  # it did ease to the park pose
+    bus = rig_of(device).bus
+    assert took < device.plug.park_timeout_s + 0.2
+    assert took >= bus.park_s * 0.9  # it did ease to the park pose
     for servo_id in (1, 2, 3):
         assert torque(emu, servo_id) == 0
     assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - 190.0) < 0.1  # head's park_deg
@@ -204,19 +247,34 @@ def test_close_parks_then_torques_off_within_bound(bus_factory: Callable[..., Em
 def test_requests_out_of_turn_are_refused_or_safe(bus_factory: Callable[..., EmulatedBus]) -> None:
     rig = short_rig(baud=4_000_000)  # 24 servos: configuring spans many ticks
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    driver = RigDriver(rig, port=emu.port)
-    assert driver.open()
-    assert not driver.open()  # already starting
-    drive(driver, 2.0, until=lambda s: s.state is RigState.CONFIGURING)
-    driver.request_park()  # during configuring: stop the start-up, torque off
-    assert driver.state is RigState.TORQUE_OFF
+    device = rig_device(rig, port=emu.port)
+    device.connect("test")
+    with pytest.raises(Refused) as refused:
+        device.connect("test")  # already connecting
+    assert refused.value.reason is Refusal.NOT_READY
+    with pytest.raises(Refused) as refused:
+        device.arm(rig.name, "test")  # not connected yet
+    assert refused.value.reason is Refusal.NOT_READY
+    drive(device, 2.0, until=lambda s: "configuring" in s.detail)
+    assert device.disarm("test") is S.DISCONNECTED  # during setup: stop it, torque off
     emu.settle()
     assert all(torque(emu, i) == 0 for i in rig.ids)
-    assert driver.reset()
-    drive(driver, 5.0, until=lambda s: s.state is RigState.RUNNING)
-    assert driver.state is RigState.RUNNING
-    assert not driver.reset() and not driver.reconnect()  # only from TORQUE_OFF / ESTOP / FAULT
-    assert driver.state is RigState.RUNNING
-    assert [t.target for t in driver.history][-1] is RigState.RUNNING
-    driver.close()
-    assert driver.state is RigState.CLOSED
+    connect(device)
+    with pytest.raises(Refused) as refused:
+        device.arm("bench3", "test")  # the name is the confirmation: not this rig
+    assert refused.value.reason is Refusal.UNKNOWN_DEVICE
+    device.arm(rig.name, "test")
+    with pytest.raises(Refused) as refused:
+        device.arm(rig.name, "test")  # double arm
+    assert refused.value.reason is Refusal.ALREADY_ARMED
+    drive(device, 5.0, until=lambda s: s.state is S.RUNNING)
+    with pytest.raises(Refused) as refused:
+        device.reset("test")  # nothing latched
+    assert refused.value.reason is Refusal.NOTHING_TO_RESET
+    with pytest.raises(Refused) as refused:
+        device.reconnect("test")  # moving
+    assert refused.value.reason is Refusal.MOVING
+    assert device.state is S.RUNNING
+    assert device.counters["arms"] == 1
+    device.close()
+    assert device.state is S.DISCONNECTED

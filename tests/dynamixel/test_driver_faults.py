@@ -2,10 +2,14 @@
 
 What each fault must do (docs/hardware.md, "Faults"):
 
-- e-stop: torque-off SYNC_WRITE on the wire within one tick; ESTOP latched until reset().
+- e-stop: torque off on the wire within one tick of the request, no goal write after
+  it, read back and repeated until confirmed; ESTOP latched until reset, which never arms.
 - hardware error: that servo torqued off, the rest park, then FAULT with id and bits.
 - silent servo: retried up to ``reply_budget_s``, then fault with its id, park, FAULT.
-- port vanishes: FAULT at once; tick() keeps answering; reconnect() brings it back.
+- persistent corruption: the same, within the reply budget (or the bus's error budget).
+- transient misses: retried and counted; Fast Sync Read falls back only after failing
+  ``fast_read_fallback_after`` times in a row, and tries again later.
+- port vanishes: FAULT at once; tick() keeps answering; reset reconnects to DISARMED.
 - ticks stop: the servos' Bus Watchdog stops them; the next tick re-arms it and parks.
 - a hardware error or a wrong model at start: refuse to start (or reboot, if configured).
 """
@@ -22,16 +26,30 @@ from typing import Any
 import pytest
 
 from riderlive.channels import RIDER
-from riderlive.dynamixel.driver import RigDriver
+from riderlive.devices.device import Device
+from riderlive.devices.latch import StopSource
+from riderlive.devices.lifecycle import DeviceState, FaultKind, Refusal, Refused
+from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import ServoSetup
 from riderlive.dynamixel.emulator_faults import FaultKind as EmuFault
 from riderlive.dynamixel.emulator_faults import FaultSpec
-from riderlive.dynamixel.lifecycle import FaultKind, RigState
 from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
-from riderlive.dynamixel.tables import HardwareError, Item
-from tests.dynamixel.rig_harness import TimedBus, drive, servo_setups, short_rig, start_running, torque
+from riderlive.dynamixel.tables import HardwareError, Instruction, Item
+from tests.dynamixel.rig_harness import (
+    TimedBus,
+    connect,
+    drive,
+    goal_deg,
+    rig_of,
+    servo_setups,
+    short_rig,
+    start_running,
+    torque,
+)
 
 NEUTRAL = [0.0] * len(RIDER)
+S = DeviceState
+GOAL_POSITION = 116
 
 
 @pytest.fixture
@@ -49,76 +67,160 @@ def timed_buses(fast_switching: None) -> Iterator[Callable[..., TimedBus]]:
         bus.stop()
 
 
-def rig_on(timed_buses: Callable[..., TimedBus], name: str = "bench3", **bus: Any) -> tuple[RigDriver, TimedBus]:
+def rig_on(timed_buses: Callable[..., TimedBus], name: str = "bench3", **bus: Any) -> tuple[Device, TimedBus]:
     rig = short_rig(name, **bus)
     emu = timed_buses(servo_setups(rig), baud=rig.bus.baud)
-    return RigDriver(rig, port=emu.port), emu
+    return rig_device(rig, port=emu.port), emu
 
 
-def tick_until(driver: RigDriver, done: Callable[[RigState], bool], seconds: float = 3.0) -> float:
+def tick_until(device: Device, done: Callable[[DeviceState], bool], seconds: float = 3.0) -> float:
     """Tick (neutral rider) until ``done(state)``; return when it happened (perf_counter)."""
-    run = drive(driver, seconds, until=lambda s: done(s.state))
-    assert done(driver.state), f"still {driver.state}, fault {driver.fault}"
+    run = drive(device, seconds, until=lambda s: done(s.state))
+    assert done(device.state), f"still {device.state}, fault {device.fault}"
     return run.statuses[-1].at
+
+
+def goal_writes_after(emu: TimedBus, t: float) -> int:
+    """Goal SYNC_WRITEs that fully arrived after ``t`` (perf_counter)."""
+    return sum(
+        1
+        for at, raw in list(emu.arrivals)
+        if at > t and raw[7] == Instruction.SYNC_WRITE and raw[8] | raw[9] << 8 == GOAL_POSITION
+    )
 
 
 # --- e-stop -----------------------------------------------------------------------------
 
 
-def test_estop_torques_off_within_one_tick(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses)
-    start_running(driver)
-    drive(driver, 0.2)
+def test_estop_torques_off_at_once_latches_and_reset_never_arms(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses)
+    start_running(device)
+    drive(device, 0.2)
     pressed = time.perf_counter()
-    driver.estop()
+    device.estop(StopSource.API)
     emu.settle()
     assert emu.torque_off_at is not None
     latency = emu.torque_off_at - pressed
-    assert latency < driver.config.bus.tick_s, f"e-stop to torque-off write took {latency * 1000:.1f} ms"
-    assert driver.state is RigState.ESTOP
+    assert latency < rig_of(device).bus.tick_s, f"e-stop to torque-off write took {latency * 1000:.1f} ms"
+    assert device.state is S.ESTOP
     assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    assert goal_writes_after(emu, pressed) == 0
 
-    # latched: the next tick repeats the torque-off broadcast, then nothing is sent;
-    # open() cannot restart it, reset() does
-    packets = emu.stats.packets
-    statuses = drive(driver, 0.1).statuses
+    # latched: no goal goes out; torque read back; arm refused; reset -> disarmed, still
+    statuses = drive(device, 1.0, until=lambda s: s.outputs_off_confirmed).statuses
+    statuses += drive(device, 0.1).statuses
     emu.settle()
-    assert all(s.state is RigState.ESTOP and not s.wrote for s in statuses)
-    assert emu.stats.packets == packets + 1
-    assert not driver.open()
-    assert driver.reset()
-    tick_until(driver, lambda s: s is RigState.RUNNING)
+    assert all(s.state is S.ESTOP and not s.wrote for s in statuses)
+    assert statuses[-1].outputs_off_confirmed and statuses[-1].estop is not None
+    assert statuses[-1].estop.confirmed_at is not None and statuses[-1].estop.source == "api"
+    assert goal_writes_after(emu, pressed) == 0
+    with pytest.raises(Refused) as refused:
+        device.arm(device.name, "test")
+    assert refused.value.reason is Refusal.ESTOPPED
+    assert device.reset("test") is S.DISARMED
+    after_reset = drive(device, 0.2).statuses
+    emu.settle()
+    assert all(s.state is S.DISARMED and not s.wrote for s in after_reset)
+    assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    device.arm(device.name, "test")
+    tick_until(device, lambda s: s is S.RUNNING)
+    device.close()
 
 
-def test_estop_from_another_thread_during_ticks(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses, tick_hz=100.0)
-    start_running(driver)
+def test_estop_from_another_thread_wakes_and_no_goal_follows(timed_buses: Callable[..., TimedBus]) -> None:
+    """The tick loop sleeps on a wake pipe (as the service's does on its command pipe)."""
+    device, emu = rig_on(timed_buses, tick_hz=100.0)
+    start_running(device)
+    wake_read, wake_write = os.pipe()
     pressed: list[float] = []
 
     def press() -> None:
         time.sleep(0.137)
-        pressed.append(time.perf_counter())
-        driver.estop()
+        pressed.append(device.latch.request(StopSource.WEBSOCKET))
+        os.write(wake_write, b"!")
+
+    from riderlive.realtime.pacing import DeadlineClock
 
     presser = threading.Thread(target=press)
     presser.start()
-    drive(driver, 0.4)
+    clock = DeadlineClock(rig_of(device).bus.tick_s, start=time.perf_counter())
+    end = time.perf_counter() + 0.4
+    while time.perf_counter() < end:
+        if clock.wait_or_wake([wake_read], lambda: device.stops.pending) is None:
+            os.read(wake_read, 16)
+            device.poll_stop(time.perf_counter())
+        device.tick(NEUTRAL, time.perf_counter())
     presser.join()
+    os.close(wake_read)
+    os.close(wake_write)
     emu.settle()
-    assert driver.state is RigState.ESTOP
+    assert device.state is S.ESTOP and device.last_stop is not None
+    assert device.last_stop.source == "websocket"
     assert emu.torque_off_at is not None
-    assert emu.torque_off_at - pressed[0] < driver.config.bus.tick_s + 0.001
+    assert emu.torque_off_at - pressed[0] < 0.002 + 0.001  # woken at once, not at the next tick
+    assert goal_writes_after(emu, pressed[0]) == 0
+    device.close()
 
 
 def test_estop_during_setup(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses, "full_rider", baud=4_000_000)
-    driver.open()
-    drive(driver, 2.0, until=lambda s: s.state is RigState.CONFIGURING)
-    driver.estop()
-    assert driver.state is RigState.ESTOP
+    device, emu = rig_on(timed_buses, "full_rider", baud=4_000_000)
+    device.connect("test")
+    drive(device, 2.0, until=lambda s: "configuring" in s.detail)
+    device.estop()
+    assert device.state is S.ESTOP
     emu.settle()
     assert all(torque(emu, i) == 0 for i in range(1, 25))
-    assert drive(driver, 0.1).statuses[-1].state is RigState.ESTOP  # the setup does not resume
+    assert drive(device, 0.1).statuses[-1].state is S.ESTOP  # the setup does not resume
+    assert device.reset("test") is S.CONNECTING  # configured only halfway: connect again
+    tick_until(device, lambda s: s is S.DISARMED, seconds=15.0)
+    device.close()
+
+
+def test_estop_unconfirmed_is_repeated_until_the_servo_answers(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses)
+    start_running(device)
+    emu.apply(FaultSpec(EmuFault.VANISH, 2))  # deaf: misses the broadcast, cannot confirm
+    device.estop()
+    drive(device, 0.15)
+    emu.settle()
+    assert torque(emu, 2) == 1 and torque(emu, 1) == 0
+    assert device.last_stop is not None and device.last_stop.confirmed_at is None
+    assert device.last_stop.repeats >= 3  # every tick while unconfirmed
+    emu.apply(FaultSpec(EmuFault.REAPPEAR, 2))
+    status = drive(device, 0.2, until=lambda s: s.outputs_off_confirmed).statuses[-1]
+    emu.settle()
+    assert status.outputs_off_confirmed and torque(emu, 2) == 0
+    assert device.last_stop.confirmed_at is not None
+    device.close()
+
+
+# --- bad requests -------------------------------------------------------------------------
+
+
+def test_park_during_soft_start_and_reset_during_parking(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses, soft_start_s=1.0)
+    connect(device)
+    device.arm(device.name, "test")
+    rider = list(NEUTRAL)
+    rider[0] = 20.0  # lower_back.rz: the soft start heads for 220 deg
+    soft = drive(device, 0.3, lambda t: rider).statuses
+    midway = goal_deg(soft[-1])[0]
+    assert device.state is S.SOFT_START and 180.5 < midway < 219.0
+    assert device.disarm("test") is S.PARKING  # park from where the ramp is, not from its end
+    parking = drive(device, 0.1).statuses
+    assert max(goal_deg(s)[0] for s in parking) <= midway + 1e-9
+    with pytest.raises(Refused) as refused:
+        device.reset("test")
+    assert refused.value.reason is Refusal.PARKING
+    with pytest.raises(Refused) as refused:
+        device.arm(device.name, "test")
+    assert refused.value.reason is Refusal.PARKING
+    tick_until(device, lambda s: s is S.PARKED)
+    emu.settle()
+    assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    device.arm(device.name, "test")  # parked: an arm may start again
+    assert device.state is S.SOFT_START
+    device.close()
 
 
 # --- servo hardware errors --------------------------------------------------------------
@@ -129,105 +231,137 @@ def test_estop_during_setup(timed_buses: Callable[..., TimedBus]) -> None:
     [(EmuFault.OVERLOAD, "overload"), (EmuFault.OVERHEAT, "overheating"), (EmuFault.VOLTAGE, "input_voltage")],
 )
 def test_hardware_error_parks_and_reports(timed_buses: Callable[..., TimedBus], kind: EmuFault, bit: str) -> None:
-    driver, emu = rig_on(timed_buses)
-    start_running(driver)
-    drive(driver, 0.1)
+    device, emu = rig_on(timed_buses)
+    start_running(device)
+    drive(device, 0.1)
     injected = time.perf_counter()
     emu.apply(FaultSpec(kind, 2))
-    detected = tick_until(driver, lambda s: s is not RigState.RUNNING)
-    bus = driver.config.bus
+    detected = tick_until(device, lambda s: s is not S.RUNNING)
+    bus = rig_of(device).bus
     # found on the next divided read: within read_divider ticks (+ one tick of slack)
     assert detected - injected <= (bus.read_divider + 1) * bus.tick_s + 0.05
-    assert driver.state is RigState.PARKING
-    fault = driver.fault
+    assert device.state is S.PARKING
+    fault = device.fault
     assert fault is not None and fault.kind is FaultKind.HARDWARE_ERROR
-    assert fault.servo_id == 2 and bit in fault.bits
+    assert fault.unit == 2 and bit in fault.bits
+    emu.settle()
     assert torque(emu, 2) == 0
-    status = driver.tick(NEUTRAL, time.perf_counter())
-    assert status.hardware_errors == {2: fault.bits}
+    status = device.tick(NEUTRAL, time.perf_counter())
+    assert status.extra["servos"][1]["hardware_error"] == list(fault.bits)
     assert status.to_dict()["fault"]["bits"] == list(fault.bits)
 
-    off = tick_until(driver, lambda s: s is RigState.FAULT)
+    off = tick_until(device, lambda s: s is S.FAULT)
     emu.settle()
     # eased to park, waited for the servos to arrive, then torque off
     assert bus.park_s - bus.tick_s <= off - detected <= bus.park_s + bus.park_settle_s + 0.3
     assert all(torque(emu, i) == 0 for i in (1, 2, 3))
-    head_park = driver.config.servos["head"].park
+    head_park = rig_of(device).servos["head"].park
     assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head_park) < 0.1
+    with pytest.raises(Refused) as refused:
+        device.arm(device.name, "test")
+    assert refused.value.reason is Refusal.FAULTED
+    device.close()
 
 
 def test_hardware_error_at_start_refuses_or_reboots(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses)
+    device, emu = rig_on(timed_buses)
     emu.write_item(3, Item.HARDWARE_ERROR_STATUS, int(HardwareError.OVERLOAD))
-    driver.open()
-    tick_until(driver, lambda s: s is RigState.FAULT)
-    fault = driver.fault
-    assert fault is not None and fault.kind is FaultKind.HARDWARE_ERROR and fault.servo_id == 3
+    device.connect("test")
+    tick_until(device, lambda s: s is S.FAULT)
+    fault = device.fault
+    assert fault is not None and fault.kind is FaultKind.HARDWARE_ERROR and fault.unit == 3
     assert fault.bits == ("overload",)
     emu.settle()
     assert all(torque(emu, i) == 0 for i in (1, 2, 3))
+    device.close()
 
     rebooting, emu2 = rig_on(timed_buses, reboot_on_error=True)
     emu2.write_item(3, Item.HARDWARE_ERROR_STATUS, int(HardwareError.OVERLOAD))
     start_running(rebooting)
     assert emu2.stats.instructions["REBOOT"] == 1
     assert emu2.read_item(3, Item.HARDWARE_ERROR_STATUS) == 0
+    rebooting.close()
 
 
 def test_wrong_model_refuses_to_start(timed_buses: Callable[..., TimedBus]) -> None:
     rig = short_rig("bench3")
     emu = timed_buses([ServoSetup(1, "XL330-M288"), ServoSetup(2, "XL430-W250"), ServoSetup(3, "XL330-M288")])
-    driver = RigDriver(rig, port=emu.port)
-    driver.open()
-    tick_until(driver, lambda s: s is RigState.FAULT)
-    fault = driver.fault
-    assert fault is not None and fault.kind is FaultKind.MODEL_MISMATCH and fault.servo_id == 2
+    device = rig_device(rig, port=emu.port)
+    device.connect("test")
+    tick_until(device, lambda s: s is S.FAULT)
+    fault = device.fault
+    assert fault is not None and fault.kind is FaultKind.MISMATCH and fault.unit == 2
     assert "1060" in fault.message and "1200" in fault.message
+    device.close()
 
 
-# --- silent servos ---------------------------------------------------------------------
+# --- silent servos, corruption, transient misses -------------------------------------------
 
 
 def test_silent_servo_faults_after_budget_then_parks(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses, "full_rider", baud=4_000_000, reply_budget_s=0.25, tick_hz=50.0)
-    start_running(driver)
-    drive(driver, 0.2)
+    device, emu = rig_on(timed_buses, "full_rider", baud=4_000_000, reply_budget_s=0.25, tick_hz=50.0)
+    start_running(device)
+    drive(device, 0.2)
     vanished = time.perf_counter()
     emu.apply(FaultSpec(EmuFault.VANISH, 7))
-    detected = tick_until(driver, lambda s: s is not RigState.RUNNING)
-    bus = driver.config.bus
-    fault = driver.fault
-    assert fault is not None and fault.kind is FaultKind.NO_REPLY and fault.servo_id == 7
+    detected = tick_until(device, lambda s: s is not S.RUNNING)
+    bus = rig_of(device).bus
+    fault = device.fault
+    assert fault is not None and fault.kind is FaultKind.NO_REPLY and fault.unit == 7
     took = detected - vanished
     # silent for reply_budget_s since its last answer (at most one read period before it
     # vanished), retried every tick meanwhile; then the fault
     read_period = bus.read_divider * bus.tick_s
     assert bus.reply_budget_s - read_period <= took <= bus.reply_budget_s + read_period + 0.2
-    assert driver.state is RigState.PARKING
-    tick_until(driver, lambda s: s is RigState.FAULT)
+    assert device.state is S.PARKING
+    tick_until(device, lambda s: s is S.FAULT)
     emu.settle()
     assert all(torque(emu, i) == 0 for i in range(1, 25) if i != 7)
     # servo 7 heard nothing since it vanished: its own Bus Watchdog has stopped it
     time.sleep(bus.bus_watchdog_ms / 1000)
     emu.apply(FaultSpec(EmuFault.REAPPEAR, 7))
     assert emu.read_item(7, Item.BUS_WATCHDOG) == -1
+    device.close()
 
 
-def test_transient_drops_are_retried_without_fault(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses, fast_read_fallback_after=2)
-    start_running(driver)
-    emu.apply(FaultSpec(EmuFault.DROP, 2, count=1))
-    run = drive(driver, 0.3)
-    emu.apply(FaultSpec(EmuFault.DROP, 2, count=1))
-    run = drive(driver, 0.3, run=run)
+def test_persistent_corruption_faults_within_the_reply_budget(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses, reply_budget_s=0.2)
+    start_running(device)
+    emu.apply(FaultSpec(EmuFault.CORRUPT, 3, probability=1.0))  # every reply of servo 3 fails its CRC
+    started = time.perf_counter()
+    detected = tick_until(device, lambda s: s is not S.RUNNING)
+    bus = rig_of(device).bus
+    fault = device.fault
+    assert fault is not None and fault.kind in (FaultKind.NO_REPLY, FaultKind.BUS_ERRORS)
+    assert detected - started <= bus.reply_budget_s + bus.read_divider * bus.tick_s + 0.2
+    if fault.kind is FaultKind.NO_REPLY:
+        assert fault.unit == 3
+    tick_until(device, lambda s: s is S.FAULT)
+    device.close()
+
+
+def test_transient_misses_are_retried_and_fast_read_comes_back(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses, fast_read_fallback_after=3, fast_read_retry_s=0.3)
+    start_running(device)
+    for _ in range(3):  # one lost reply now and then: retried, counted, no fallback
+        emu.apply(FaultSpec(EmuFault.DROP, 2, count=1))
+        run = drive(device, 0.15)
     last = run.statuses[-1]
-    assert last.state is RigState.RUNNING and last.fault is None
-    # each drop failed one Fast Sync Read (a loaded box may time out one more)
-    assert last.counters["fast_read_failures"] >= 2
-    assert not last.fast_sync_read  # fell back to plain Sync Read after 2 fast failures
-    more = drive(driver, 0.3).statuses[-1]
-    assert more.counters["fast_read_failures"] == last.counters["fast_read_failures"]  # no fast read since
-    assert more.counters["reads"] > last.counters["reads"]
+    assert last.state is S.RUNNING and last.fault is None
+    assert last.counters["fast_read_failures"] >= 3 and last.counters.get("fast_read_fallbacks", 0) == 0
+    assert last.extra["fast_sync_read"]
+    # a real failure: the fast read fails every time while the plain one works -> fall back
+    with emu.lock:
+        emu.servo(2).fast_read = False  # as a firmware that ignores FAST_SYNC_READ
+    last = drive(device, 1.0, until=lambda s: not s.extra["fast_sync_read"]).statuses[-1]
+    assert not last.extra["fast_sync_read"] and last.counters["fast_read_fallbacks"] == 1
+    assert last.state is S.RUNNING
+    # ... and it tries the fast read again later (fast_read_retry_s), which now works
+    with emu.lock:
+        emu.servo(2).fast_read = True
+    back = drive(device, 1.5, until=lambda s: s.extra["fast_sync_read"] and s.extra["read"]).statuses[-1]
+    assert back.counters["fast_read_retries"] == 1 and back.state is S.RUNNING and back.fault is None
+    device.close()
 
 
 def test_old_firmware_without_fast_read_falls_back(timed_buses: Callable[..., TimedBus]) -> None:
@@ -235,77 +369,96 @@ def test_old_firmware_without_fast_read_falls_back(timed_buses: Callable[..., Ti
     setups = servo_setups(rig)
     setups[1] = ServoSetup(setups[1].id, setups[1].model, fast_read=False)  # ignores FAST_SYNC_READ
     emu = timed_buses(setups, baud=rig.bus.baud)
-    driver = RigDriver(rig, port=emu.port)
-    start_running(driver)
-    last = drive(driver, 3.0, until=lambda s: not s.fast_sync_read).statuses[-1]
-    assert not last.fast_sync_read
-    assert last.state is RigState.RUNNING and last.fault is None
+    device = rig_device(rig, port=emu.port)
+    start_running(device)
+    last = drive(device, 3.0, until=lambda s: not s.extra["fast_sync_read"]).statuses[-1]
+    assert not last.extra["fast_sync_read"]
+    assert last.state is S.RUNNING and last.fault is None
     assert last.counters["fast_read_failures"] == 3
     reads = last.counters["reads"]
-    last = drive(driver, 0.3).statuses[-1]
+    last = drive(device, 0.3).statuses[-1]
     assert last.counters["reads"] > reads and last.counters["fast_read_failures"] == 3
-    assert all(p is not None for p in last.present_deg)
+    assert all(s["present_deg"] is not None for s in last.extra["servos"])
+    device.close()
 
 
 # --- the port and the ticks -------------------------------------------------------------
 
 
-def test_port_vanishes_then_reconnects(timed_buses: Callable[..., TimedBus], tmp_path: Path) -> None:
+def test_port_vanishes_then_reset_reconnects(timed_buses: Callable[..., TimedBus], tmp_path: Path) -> None:
     rig = short_rig("bench3")
     link = tmp_path / "ttyRIG"  # a stable name, like /dev/serial/by-id/...
     emu = timed_buses(servo_setups(rig), baud=rig.bus.baud)
     os.symlink(emu.port, link)
-    driver = RigDriver(rig, port=str(link))
-    start_running(driver)
-    drive(driver, 0.1)
+    device = rig_device(rig, port=str(link))
+    start_running(device)
+    drive(device, 0.1)
     pulled = time.perf_counter()
     emu.close_port()
-    failed = tick_until(driver, lambda s: s is RigState.FAULT, seconds=1.0)
-    assert failed - pulled < 2 * driver.config.bus.tick_s + 0.05
-    fault = driver.fault
+    failed = tick_until(device, lambda s: s is S.FAULT, seconds=1.0)
+    assert failed - pulled < 2 * rig.bus.tick_s + 0.05
+    fault = device.fault
     assert fault is not None and fault.kind is FaultKind.PORT_LOST
-    statuses = drive(driver, 0.1).statuses  # tick() goes on answering
-    assert all(s.state is RigState.FAULT and s.transactions == 0 for s in statuses)
+    statuses = drive(device, 0.1).statuses  # tick() goes on answering
+    assert all(s.state is S.FAULT and not s.wrote for s in statuses)
 
     emu2 = timed_buses(servo_setups(rig), baud=rig.bus.baud)  # plugged back in
     link.unlink()
     os.symlink(emu2.port, link)
-    assert driver.reconnect()
-    tick_until(driver, lambda s: s is RigState.RUNNING)
-    assert driver.fault is None
+    assert device.reset("test") is S.CONNECTING
+    tick_until(device, lambda s: s is S.DISARMED)  # not moving: reset never arms
+    assert device.fault is None
+    emu2.settle()
+    assert all(torque(emu2, i) == 0 for i in (1, 2, 3))
+    device.close()
+
+
+def test_a_second_process_cannot_share_the_bus(timed_buses: Callable[..., TimedBus]) -> None:
+    device, emu = rig_on(timed_buses)
+    connect(device)
+    other = rig_device(rig_of(device), port=emu.port)
+    other.connect("test")
+    drive(other, 0.1)
+    assert other.state is S.CONNECTING and "held by another process" in other.detail
+    assert other.counters["port_busy"] >= 1
+    device.close()  # the lock goes with the file
+    tick_until(other, lambda s: s is S.DISARMED)
+    other.close()
 
 
 def test_stalled_ticks_trip_the_watchdog_then_park(timed_buses: Callable[..., TimedBus]) -> None:
-    driver, emu = rig_on(timed_buses, bus_watchdog_ms=300)
+    device, emu = rig_on(timed_buses, bus_watchdog_ms=300)
     rider = list(NEUTRAL)
     rider[RIDER.index(next(c for c in RIDER if c.name == "hip.ry"))] = 15.0
-    start_running(driver)
-    drive(driver, 0.05, lambda t: rider)  # servo 2 starts moving toward 210 deg
+    start_running(device)
+    drive(device, 0.05, lambda t: rider)  # servo 2 starts moving toward 210 deg
     time.sleep(0.7)  # the service hangs
-    assert emu.read_item(2, Item.BUS_WATCHDOG) == -1  # the servos stopped themselves
+    assert emu.read_item(2, Item.BUS_WATCHDOG) == -1  # the servos stopped themselves...
+    assert torque(emu, 2) == 1  # ...but keep their torque on (X-series e-manual)
     stopped_at = emu.position(2)
     time.sleep(0.05)
     assert emu.position(2) == pytest.approx(stopped_at, abs=1.0)
-    drive(driver, 0.5, lambda t: rider, until=lambda s: s.state is not RigState.RUNNING)
-    fault = driver.fault
+    drive(device, 0.5, lambda t: rider, until=lambda s: s.state is not S.RUNNING)
+    fault = device.fault
     assert fault is not None and fault.kind is FaultKind.TICK_GAP
-    assert driver.state is RigState.PARKING
+    assert device.state is S.PARKING
     emu.settle()
     assert emu.read_item(2, Item.BUS_WATCHDOG) == 15  # re-armed (300 ms), goals writable again
-    tick_until(driver, lambda s: s is RigState.FAULT)
+    tick_until(device, lambda s: s is S.FAULT)
     emu.settle()
-    assert abs(pulses_to_deg(emu.read_item(2, Item.GOAL_POSITION)) - driver.config.servos["hips"].park) < 0.1
+    assert abs(pulses_to_deg(emu.read_item(2, Item.GOAL_POSITION)) - rig_of(device).servos["hips"].park) < 0.1
+    device.close()
 
 
 def test_tick_never_raises_without_a_port() -> None:
     rig: RigConfig = short_rig("bench3").with_port("/nonexistent/ttyUSB9")
-    driver = RigDriver(rig)
-    driver.open()
-    status = driver.tick(NEUTRAL, time.perf_counter())
-    assert status.state is RigState.FAULT
+    device = rig_device(rig)
+    device.connect("test")
+    status = device.tick(NEUTRAL, time.perf_counter())
+    assert status.state is S.FAULT
     assert status.fault is not None and status.fault.kind is FaultKind.PORT_LOST
     assert "/nonexistent/ttyUSB9" in status.fault.message
     for _ in range(3):
-        assert driver.tick(NEUTRAL, time.perf_counter()).state is RigState.FAULT
-    driver.close()
-    assert driver.state is RigState.CLOSED
+        assert device.tick(NEUTRAL, time.perf_counter()).state is S.FAULT
+    device.close()
+    assert device.state is S.DISCONNECTED

@@ -15,7 +15,7 @@ from dynamixel_sdk import (
 
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.protocol import PacketReader, decode_status, encode_instruction, encode_status
-from riderlive.dynamixel.tables import ALERT_BIT, Instruction, Item, StatusError
+from riderlive.dynamixel.tables import ALERT_BIT, HardwareError, Instruction, Item, StatusError
 
 from .conftest import SdkLink, open_sdk
 
@@ -289,3 +289,47 @@ def test_a_servo_without_fast_read_breaks_the_chain(bus_factory: object) -> None
         assert [reader.getData(i, PRESENT, 4) for i in (1, 2, 3)] == [2048, 2048, 2048]
     finally:
         link.close()
+
+
+def test_a_broadcast_factory_reset_is_ignored_from_firmware_42(bus: EmulatedBus, sdk: SdkLink) -> None:
+    assert sdk.ph.write1ByteTxRx(sdk.port, 1, 9, 0) == (COMM_SUCCESS, 0)
+    sdk.ph.factoryReset(sdk.port, 0xFE, 0x02)  # no reply to a broadcast
+    bus.settle()
+    assert bus.read_item(1, Item.RETURN_DELAY_TIME) == 0  # firmware 52: ignored
+    bus.write_item(1, Item.FIRMWARE_VERSION, 41)  # an old firmware obeys it
+    sdk.ph.factoryReset(sdk.port, 0xFE, 0x02)
+    bus.settle()
+    assert bus.read_item(1, Item.RETURN_DELAY_TIME) == 250
+    assert bus.read_item(2, Item.RETURN_DELAY_TIME) == 250  # untouched before: still the default
+
+
+def test_clear_resets_the_multi_turn_count_only_when_stopped(bus: EmulatedBus, sdk: SdkLink) -> None:
+    import dataclasses
+
+    from riderlive.dynamixel.tables import OperatingMode
+
+    assert sdk.ph.write1ByteTxRx(sdk.port, 2, 11, int(OperatingMode.EXTENDED_POSITION)) == (COMM_SUCCESS, 0)
+    with bus.lock:
+        servo = bus.servo(2)
+        servo.state = dataclasses.replace(servo.state, position=3 * 4096 + 100.0)  # three turns and 100 pulses
+    assert sdk.ph.clearMultiTurn(sdk.port, 2) == (COMM_SUCCESS, 0)
+    assert sdk.ph.read4ByteTxRx(sdk.port, 2, 132)[0] == 100
+    assert sdk.ph.write1ByteTxRx(sdk.port, 2, 64, 1) == (COMM_SUCCESS, 0)
+    assert sdk.ph.write4ByteTxRx(sdk.port, 2, 116, 20_000) == (COMM_SUCCESS, 0)  # off it goes
+    assert sdk.ph.clearMultiTurn(sdk.port, 2) == (COMM_SUCCESS, StatusError.RESULT_FAIL)  # moving
+    bus.write_item(3, Item.FIRMWARE_VERSION, 41)
+    assert sdk.ph.clearMultiTurn(sdk.port, 3) == (COMM_SUCCESS, StatusError.INSTRUCTION)
+
+
+def test_voltage_outside_the_limits_is_an_input_voltage_error(bus: EmulatedBus, sdk: SdkLink) -> None:
+    from riderlive.dynamixel.emulator_faults import parse_fault
+
+    bus.apply(parse_fault("voltage:3:6.5"))  # XL330: 3.5 .. 7.0 V by default
+    assert sdk.ph.read2ByteTxRx(sdk.port, 3, 144) == (65, COMM_SUCCESS, 0)
+    bus.apply(parse_fault("voltage:3:12.0"))  # an XL330 on a 12 V branch
+    assert sdk.ph.read1ByteTxRx(sdk.port, 3, 70) == (int(HardwareError.INPUT_VOLTAGE), COMM_SUCCESS, ALERT_BIT)
+    bus.apply(parse_fault("voltage:3:5.0"))
+    assert sdk.ph.read1ByteTxRx(sdk.port, 3, 70)[2] == ALERT_BIT  # latched until a reboot
+    assert sdk.ph.write2ByteTxRx(sdk.port, 1, 34, 115) == (COMM_SUCCESS, 0)  # Min Voltage Limit 11.5 V
+    bus.settle()
+    assert bus.read_item(1, Item.HARDWARE_ERROR_STATUS) == int(HardwareError.INPUT_VOLTAGE)  # 11.1 V supply

@@ -122,3 +122,15 @@ def test_cli_reads_a_rig(tmp_path: Path) -> None:
     assert [s.id for s in servos] == [s.id for s in loaded.servos.values()]
     assert baud == loaded.bus.baud
     assert all(0 <= s.position < 4096 for s in servos)
+
+
+def test_return_delay_time_is_honoured_without_wire_timing(bus_factory: Callable[..., EmulatedBus]) -> None:
+    bus = bus_factory([ServoSetup(1, "XL330-M288")], baud=4_000_000, wire_timing=False)
+    link = open_sdk(bus)
+    bus.write_item(1, Item.RETURN_DELAY_TIME, 254)  # 508 us, the register's maximum
+    slow = best_of(lambda: link.ph.ping(link.port, 1), 7)
+    bus.write_item(1, Item.RETURN_DELAY_TIME, 0)
+    fast = best_of(lambda: link.ph.ping(link.port, 1), 7)
+    assert slow >= 254 * 2e-6
+    assert slow - fast >= 254 * 2e-6 - 0.0002  # the delay, whatever the host's own cost
+    link.close()

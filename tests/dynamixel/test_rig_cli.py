@@ -1,7 +1,13 @@
-"""``riderlive rig``: checks a map, prints its wire budget, drives it on the emulator."""
+"""``riderlive rig``: checks a map, prints its wire budget, connects and drives it on the
+emulator only when armed; Ctrl-C is an e-stop; a killed driver is parked by its guardian."""
 
 from __future__ import annotations
 
+import re
+import signal
+import subprocess
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -9,9 +15,13 @@ import pytest
 
 from riderlive.cli import main
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig_cli import drive
-from riderlive.dynamixel.tables import Item
-from tests.dynamixel.rig_harness import servo_setups, short_rig
+from riderlive.dynamixel.rig import load_rig, pulses_to_deg
+from riderlive.dynamixel.rig_cli import EXIT_ESTOP, drive
+from riderlive.dynamixel.tables import Instruction, Item
+from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups, short_rig
+from tests.service.live_server import ROOT
+
+GOAL_POSITION = 116
 
 
 def test_check_prints_map_and_budget(capsys: pytest.CaptureFixture[str]) -> None:
@@ -29,12 +39,93 @@ def test_bad_map_names_the_key(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert f"{bad}: servos.a.channel: unknown rider channel 'nope.rz'" in out
 
 
-def test_drive_runs_the_lifecycle(bus_factory: Callable[..., EmulatedBus], capsys: pytest.CaptureFixture[str]) -> None:
+def goal_writes(emu: EmulatedBus) -> list[tuple[float, bytes]]:
+    return [(t, raw) for t, raw in list(emu.arrivals) if raw[7] == Instruction.SYNC_WRITE and raw[8] == GOAL_POSITION]
+
+
+def test_drive_without_arm_moves_nothing_with_arm_runs_the_lifecycle(
+    bus_factory: Callable[..., EmulatedBus], capsys: pytest.CaptureFixture[str]
+) -> None:
     rig = short_rig("bench3")
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
     assert drive(rig.with_port(emu.port), 1.0, "walk") == 0
     out = capsys.readouterr().out
-    for step in ("checking -> configuring", "soft_start -> running", "closed; fault: none"):
-        assert step in out
+    assert "connecting -> disarmed" in out and "Nothing moves without --arm" in out
     emu.settle()
+    assert goal_writes(emu) == [] and all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+
+    assert drive(rig.with_port(emu.port), 1.0, "walk", arm=True) == 0
+    out = capsys.readouterr().out
+    for step in ("disarmed -> soft_start: armed (by cli --arm)", "soft_start -> running", "running -> parking"):
+        assert step in out
+    assert "parking -> parked" in out and "closed; fault: none" in out
+    emu.settle()
+    assert goal_writes(emu) and all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+
+
+def rig_file(tmp_path: Path) -> Path:
+    """bench3 with short ramps and generous budgets for a loaded machine."""
+    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
+    for key, value in (("bus_watchdog_ms", "600"), ("soft_start_s", "0.3"), ("park_s", "0.5")):
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 20.0\n", 1)
+    path = tmp_path / "bench3.toml"
+    path.write_text(text)
+    return path
+
+
+def start_cli(path: Path, port: str) -> subprocess.Popen[str]:
+    cli = subprocess.Popen(
+        [sys.executable, "-m", "riderlive", "rig", str(path), "--port", port, "--drive", "60", "--arm"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "PYTHONUNBUFFERED": "1"},
+    )
+    assert cli.stdout is not None
+    for line in cli.stdout:
+        if "soft_start -> running" in line:
+            return cli
+    raise AssertionError(f"the CLI never ran: exit {cli.wait(10)}")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_of_a_driving_cli_is_an_estop(bus_factory: Callable[..., EmulatedBus], tmp_path: Path, sig: int) -> None:
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    cli = start_cli(path, emu.port)
+    time.sleep(0.2)
+    pressed = time.perf_counter()
+    cli.send_signal(sig)
+    out, _ = cli.communicate(timeout=20)
+    assert cli.returncode == EXIT_ESTOP, out
+    assert "running -> estop: e-stop (by signal)" in out and "torque off (read back)" in out
+    emu.settle()
+    off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > pressed]
+    assert off and off[0] - pressed < rig.bus.tick_s + 0.001 + 0.02  # one tick + 1 ms (+ signal delivery)
+    assert [t for t, _ in goal_writes(emu) if t > off[0]] == []
+    assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+
+
+def test_a_killed_driver_is_parked_by_its_guardian(bus_factory: Callable[..., EmulatedBus], tmp_path: Path) -> None:
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    cli = start_cli(path, emu.port)
+    time.sleep(0.3)
+    killed = time.perf_counter()
+    cli.kill()  # SIGKILL: no handler, no goodbye
+    cli.communicate(timeout=10)
+    deadline = time.perf_counter() + 10.0
+    while time.perf_counter() < deadline and any(emu.read_item(i, Item.TORQUE_ENABLE) for i in (1, 2, 3)):
+        time.sleep(0.02)
+    emu.settle()
+    writes = [t for t, _ in goal_writes(emu) if t > killed]
+    off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > killed]
+    assert writes and writes[0] - killed <= 0.2, "the guardian's first park goal within 200 ms"
+    assert off and off[0] - killed <= rig.bus.park_s + rig.bus.park_settle_s + 0.2
+    assert off[0] - killed >= rig.bus.park_s  # it eased to park first (category 1)
+    head = rig.servos["head"]
+    assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))

@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 
 from riderlive.channels import RIDER_INDEX, RIDER_NAMES
 from riderlive.configfile import ConfigError, read_toml
-from riderlive.dynamixel.lifecycle import IllegalTransition, Lifecycle, RigState
 from riderlive.dynamixel.rig import (
     MAX_DEG,
     RIG_DIR,
@@ -25,7 +24,6 @@ from riderlive.dynamixel.rig import (
     pulses_to_deg,
     read_tick_seconds,
     rig_from_dict,
-    smoothstep,
     wire_bytes_per_tick,
     wire_seconds_per_tick,
 )
@@ -197,24 +195,3 @@ def test_limit_clamps_and_slews(targets: list[float], previous: list[float], dt:
         # inside the limits, or moving toward them from outside at full slew
         assert inside or abs(abs(goal - previous[i]) - step) < 1e-9
         assert clamped[i] == (abs(goal - targets[i]) > 1e-9)
-
-
-def test_smoothstep_ends() -> None:
-    assert smoothstep(-1.0) == 0.0
-    assert smoothstep(0.5) == 0.5
-    assert smoothstep(2.0) == 1.0
-
-
-def test_lifecycle_refuses_illegal_transitions() -> None:
-    life = Lifecycle()
-    with pytest.raises(IllegalTransition):
-        life.go(RigState.RUNNING, 0.0, "skip the checks")
-    for target in (RigState.CONNECTING, RigState.CHECKING, RigState.CONFIGURING, RigState.SOFT_START):
-        life.go(target, 1.0, "step")
-    life.go(RigState.ESTOP, 2.0, "button")
-    with pytest.raises(IllegalTransition):
-        life.go(RigState.RUNNING, 3.0, "e-stop is latched")
-    drained = life.drain()
-    assert [t.target for t in drained][-1] is RigState.ESTOP
-    assert life.drain() == []
-    assert drained[0].to_dict() == {"at": 1.0, "from": "closed", "to": "connecting", "reason": "step"}

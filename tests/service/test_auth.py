@@ -101,3 +101,19 @@ def test_a_public_address_without_a_token_does_not_start(capsys: pytest.CaptureF
     assert ServiceConfig.model_validate({"server": {"host": "10.1.2.3"}, "security": {"token": TOKEN}}).token_required
     assert main(["serve", "--host", "0.0.0.0"]) == 2
     assert "security.token" in capsys.readouterr().err
+
+
+def test_estop_on_the_websocket_needs_the_token_health_does_not(guarded: LiveServer) -> None:
+    with connect(guarded.ws + "/ws/rider") as ws:
+        ws.send(json.dumps({"type": "estop"}))
+        replies = [json.loads(ws.recv(timeout=5)) for _ in range(60)]
+        errors = [m for m in replies if m.get("type") == "error"]
+        assert errors and errors[0]["reason"] == "unauthorized"
+        assert guarded.get("/api/state", headers={"Authorization": f"Bearer {TOKEN}"}).json()["tick"]["estop"] is False
+        ws.send(json.dumps({"type": "auth", "token": TOKEN}))
+        ws.send(json.dumps({"type": "estop", "id": 1}))
+        assert any(json.loads(ws.recv(timeout=5)).get("type") == "estop" for _ in range(200))
+    assert guarded.request("POST", "/api/arm", json={"device": "x"}).status_code == 401
+    assert guarded.request("POST", "/api/reset").status_code == 401
+    assert guarded.request("POST", "/api/reset", headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
+    assert guarded.get("/healthz").status_code == 200 and guarded.get("/readyz").status_code == 200

@@ -38,3 +38,15 @@ def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> No
     with pytest.raises(ConfigError) as err:
         load_config(path)
     assert err.value.key == key and str(path) in str(err.value)
+
+
+def test_a_rig_slower_than_the_tick_is_refused_when_asked_naming_both_rates(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from riderlive.cli import main
+
+    config = tmp_path / "service.toml"
+    config.write_text('[tick]\nrate = 120.0\n[rig]\nfile = "bench3"\nrate_policy = "refuse"\n')
+    assert main(["serve", "--config", str(config), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "bench3 is validated for 100 ticks/s but the service ticks at 120/s" in err

@@ -1,38 +1,52 @@
-"""The tick drives a Dynamixel rig: the real service, the real dynamixel-sdk, the emulated bus.
+"""The service drives a Dynamixel rig safely: the real server, the real dynamixel-sdk, the
+emulated bus in its own process, the guardian.
 
-Skipped until ``riderlive.dynamixel.driver`` (the rig helper's branch) is merged.
+- nothing moves at start; arming needs the token (even on loopback) and the rig's name;
+- the refusals of the issue (unknown rig, no token, double arm, arm while e-stopped,
+  reload while running) answer clearly and are counted in /metrics;
+- e-stop from REST and from the websocket control channel latches; reset never arms;
+- a killed or frozen tick is noticed, the guardian parks the rig, the tick comes back
+  with the rig disarmed; /healthz, /readyz, riderlive_tick_up and the restart counter say so.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import re
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import httpx
 import pytest
-
-pytest.importorskip("riderlive.dynamixel.driver")
+from websockets.sync.client import connect
 
 from tests.service.live_server import ROOT, LiveServer
 
-
-def rig_state(live: LiveServer) -> str | None:
-    rig = live.get("/api/state").json()["tick"].get("rig")
-    return None if rig is None else str(rig.get("state"))
+TOKEN = "rig-token-123"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
-def wait_state(live: LiveServer, wanted: set[str], timeout: float = 15.0) -> str:
+def rig(live: LiveServer) -> dict:
+    status = live.get("/api/state", headers=AUTH).json()["tick"]
+    return status.get("rig") or {}
+
+
+def wait_for(what: Callable[[], bool], timeout: float = 15.0, say: Callable[[], object] = lambda: None) -> float:
     deadline = time.perf_counter() + timeout
-    state = None
     while time.perf_counter() < deadline:
-        state = rig_state(live)
-        if state in wanted:
-            return state
-        time.sleep(0.1)
-    raise AssertionError(f"rig state {state!r}, wanted {wanted}: {live.get('/api/state').json()['tick']}")
+        if what():
+            return time.perf_counter()
+        time.sleep(0.02)
+    raise AssertionError(f"timed out: {say()}")
+
+
+def wait_state(live: LiveServer, wanted: str, timeout: float = 15.0) -> float:
+    return wait_for(lambda: rig(live).get("state") == wanted, timeout, lambda: (wanted, rig(live)))
 
 
 def relaxed_rig(tmp_path: Path) -> Path:
@@ -51,7 +65,8 @@ def relaxed_rig(tmp_path: Path) -> Path:
     return path
 
 
-def test_serve_runs_estops_resets_and_parks_an_emulated_rig(tmp_path: Path) -> None:
+@pytest.fixture
+def rig_server(tmp_path: Path) -> Iterator[LiveServer]:
     rig_file = relaxed_rig(tmp_path)
     emu = subprocess.Popen(
         [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
@@ -61,29 +76,141 @@ def test_serve_runs_estops_resets_and_parks_an_emulated_rig(tmp_path: Path) -> N
     )
     try:
         assert emu.stdout is not None
-        port = None
-        for line in emu.stdout:
-            match = re.match(r"port: (\S+)", line)
-            if match:
-                port = match.group(1)
-                break
-        assert port
-        config = f'[tick]\nrate = 100.0\nrealtime_priority = false\n[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
-        live = LiveServer(config, tmp_path)
+        port = next(m.group(1) for line in emu.stdout if (m := re.match(r"port: (\S+)", line)))
+        config = (
+            f'[tick]\nrate = 100.0\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
+            f'[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
+        )
+        live = LiveServer(config, tmp_path, token=TOKEN)
         try:
-            wait_state(live, {"running"})
-            rig = live.get("/api/state").json()["tick"]["rig"]
-            assert rig["servos"] and all(s["present_deg"] is not None for s in rig["servos"])
-            live.request("POST", "/api/estop")
-            wait_state(live, {"estop"}, timeout=2.0)
-            live.request("POST", "/api/reset")
-            wait_state(live, {"running"})
-            live.proc.send_signal(signal.SIGTERM)
-            live.proc.wait(20)
+            yield live
         finally:
             live.stop()
-        log = "".join(live.log)
-        assert "Traceback" not in log, log
+            assert "Traceback" not in "".join(live.log), "".join(live.log)
     finally:
         emu.terminate()
         emu.wait(10)
+
+
+def post(live: LiveServer, path: str, body: dict | None = None, token: bool = True) -> httpx.Response:
+    return live.request("POST", path, json=body, headers=AUTH if token else {})
+
+
+def refusals(live: LiveServer, action: str, reason: str) -> float:
+    return live.metric("riderlive_device_refusals_total", f'action="{action}",reason="{reason}"')
+
+
+def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: LiveServer) -> None:
+    live = rig_server
+    wait_state(live, "disarmed")
+    before = rig(live)
+    wait_for(lambda: rig(live).get("outputs_off_confirmed") is True)
+    time.sleep(0.5)  # the rig map is fine and the horse trots: still nothing may move
+    after = rig(live)
+    assert after["state"] == "disarmed" and after["counters"].get("goal_writes", 0) == 0
+    assert [s["goal_deg"] for s in after["servos"]] == [s["goal_deg"] for s in before["servos"]]
+
+    refused = post(live, "/api/arm", {"device": "bench3"}, token=False)  # loopback, but a token is configured
+    assert refused.status_code == 401 and refused.json()["detail"]["refusal"] == "unauthorized"
+    unknown = post(live, "/api/arm", {"device": "full_rider"})
+    assert unknown.status_code == 404 and "bench3" in unknown.json()["detail"]["message"]
+    assert post(live, "/api/arm", {}).status_code == 422  # the name is required
+    assert rig(live)["state"] == "disarmed"
+
+    armed = post(live, "/api/arm", {"device": "bench3", "by": "test"})
+    assert armed.status_code == 200, armed.text
+    assert armed.json()["states"] == {"bench3": "soft_start"}
+    wait_state(live, "running")
+    assert rig(live)["armed_by"] == "rest 127.0.0.1 (test)"
+    double = post(live, "/api/arm", {"device": "bench3"})
+    assert double.status_code == 409 and double.json()["detail"]["refusal"] == "already_armed"
+    reload = post(live, "/api/reload", {"device": "bench3"})
+    assert reload.status_code == 409 and reload.json()["detail"]["refusal"] == "moving", reload.text
+
+    estop = post(live, "/api/estop")
+    assert estop.status_code == 200 and estop.json()["latched_at"] >= estop.json()["received_at"]
+    wait_state(live, "estop", timeout=2.0)
+    wait_for(lambda: (rig(live).get("estop") or {}).get("confirmed") is True, timeout=3.0)
+    assert rig(live)["estop"]["source"] == "rest"
+    again = post(live, "/api/arm", {"device": "bench3"})
+    assert again.status_code == 409 and again.json()["detail"]["refusal"] == "estopped"
+    assert post(live, "/api/reset", token=False).status_code == 401
+    assert post(live, "/api/reset").status_code == 200
+    wait_state(live, "disarmed", timeout=3.0)
+    time.sleep(0.3)
+    assert rig(live)["state"] == "disarmed"  # reset never arms
+
+    assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
+    wait_state(live, "running")
+    assert post(live, "/api/disarm", {"device": "bench3"}).status_code == 200
+    wait_state(live, "parked", timeout=5.0)
+    reloaded = post(live, "/api/reload", {"device": "bench3"})
+    assert reloaded.status_code == 200
+    wait_state(live, "disarmed")
+
+    # the websocket control channel: e-stop with the token as a subprotocol
+    with connect(live.ws + "/ws/rider", subprotocols=["riderlive.v1", f"riderlive.token.{TOKEN}"]) as ws:  # type: ignore[list-item]
+        ws.send(json.dumps({"type": "estop", "id": 7}))
+        reply = next(m for m in (json.loads(ws.recv(timeout=5)) for _ in range(50)) if m.get("type") == "estop")
+        assert reply["id"] == 7
+    wait_state(live, "estop", timeout=2.0)
+    wait_for(lambda: (rig(live).get("estop") or {}).get("source") == "websocket", timeout=2.0)
+    assert post(live, "/api/reset").status_code == 200
+
+    assert refusals(live, "arm", "unauthorized") == 1
+    assert refusals(live, "arm", "unknown_device") == 1
+    assert refusals(live, "arm", "already_armed") == 1
+    assert refusals(live, "arm", "estopped") == 1
+    assert refusals(live, "reload", "moving") == 1
+    assert live.metric("riderlive_device_state", 'device="bench3",state="disarmed"') == 1
+    assert live.metric("riderlive_device_events_total", 'device="bench3",event="arms"') == 2
+    assert live.metric("riderlive_estop_requests_total") == 2
+    assert live.metric("riderlive_guardian_up") == 1
+
+    live.proc.send_signal(signal.SIGTERM)  # SIGTERM of the driving process: an e-stop, then exit
+    live.proc.wait(20)
+    log = "".join(live.log)
+    assert "-> estop: e-stop (by signal)" in log or "estop" in log
+
+
+def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(rig_server: LiveServer) -> None:
+    live = rig_server
+    wait_state(live, "disarmed")
+    assert live.get("/readyz").status_code == 200 and live.get("/healthz").status_code == 200
+    assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
+    wait_state(live, "running")
+
+    def supervision() -> dict:
+        return live.get("/api/devices", headers=AUTH).json()["supervision"]
+
+    first = supervision()
+    assert first["guardian"]["alive"] and first["up"]
+    killed = time.perf_counter()
+    os.kill(first["tick_pid"], signal.SIGKILL)
+    wait_for(lambda: not supervision()["up"], timeout=2.0)
+    noticed = supervision()["last_down_at"]
+    assert noticed - killed < 0.01 + 0.05, "a dead tick is noticed within 1 tick + 50 ms"
+    assert live.get("/readyz").status_code == 503
+    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=20.0)
+    wait_state(live, "disarmed", timeout=20.0)  # back, and not re-armed
+    second = supervision()
+    assert second["restarts"] == 1 and second["deaths"] == 1 and second["guardian"]["takeovers"] == 1
+    assert "SIGKILL" in second["last_exit"]
+    assert live.metric("riderlive_tick_up") == 1 and live.metric("riderlive_tick_restarts_total") == 1
+    wait_for(lambda: live.get("/readyz").status_code == 200, timeout=5.0)
+    log = "".join(live.log)
+    assert "category 1 stop" in log and "stopped, outputs off (read back)" in log
+
+    # frozen: SIGSTOP; the supervisor kills it (hang) and the guardian parks the rig
+    assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
+    wait_state(live, "running")
+    time.sleep(3.0)  # past the new tick's warm-up grace
+    pid = supervision()["tick_pid"]
+    frozen = time.perf_counter()
+    os.kill(pid, signal.SIGSTOP)
+    wait_for(lambda: supervision()["hangs"] == 1, timeout=3.0)
+    noticed = supervision()["last_down_at"]
+    assert noticed - frozen < 0.25 + 0.01  # tick.hang_floor (no real-time priority here) + a half-tick check
+    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=20.0)
+    wait_state(live, "disarmed", timeout=20.0)
+    assert supervision()["guardian"]["takeovers"] == 2

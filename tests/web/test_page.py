@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -271,3 +272,29 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         p.page.close()
     finally:
         s.stop()
+
+
+def test_arm_and_disarm_sit_by_the_estop_and_name_the_rig(live_page: PageUnderTest, server: Server) -> None:
+    """A status of a disarmed rig enables Arm; Arm posts the rig's name (this service has no
+    rig: it refuses, and the page says so); a running rig enables Disarm instead."""
+    page = live_page.page
+    shown = page.evaluate(
+        """() => {
+            riderlive.link.handle({type: "status", estop: false, rig: {name: "bench3", state: "disarmed", servos: []}});
+            const b = (id) => document.getElementById(id);
+            return {arm: !b("arm").hidden && !b("arm").disabled, disarm: b("disarm").disabled,
+                    state: b("rigstate").textContent};
+        }"""
+    )
+    assert shown == {"arm": True, "disarm": True, "state": "bench3: disarmed"}
+    with page.expect_request(lambda r: r.url.endswith("/api/arm")) as request:
+        page.locator("#arm").click()
+    assert json.loads(request.value.post_data or "{}") == {"device": "bench3", "by": "page"}
+    live_page.wait_for("document.getElementById('message').textContent.includes('no device')", timeout=5)
+    running = page.evaluate(
+        """() => {
+            riderlive.link.handle({type: "status", estop: false, rig: {name: "bench3", state: "running", servos: []}});
+            return [document.getElementById("arm").disabled, document.getElementById("disarm").disabled];
+        }"""
+    )
+    assert running == [True, False]

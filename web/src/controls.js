@@ -141,6 +141,9 @@ export class Controls {
 
   bind() {
     $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
+    // Arming names the device (the service refuses any other name); Disarm parks it.
+    $("arm").addEventListener("click", () => this.device && attempt(`arm ${this.device}`, () => api("POST", "/api/arm", { device: this.device, by: "page" })));
+    $("disarm").addEventListener("click", () => attempt("disarm", () => api("POST", "/api/disarm", this.device ? { device: this.device, by: "page" } : {})));
     $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
     $("src-kind").addEventListener("change", () => this.showSourceRows());
     $("src-apply").addEventListener("click", () => this.applySource());
@@ -265,8 +268,13 @@ export class Controls {
   status(msg) {
     if (typeof msg.estop === "boolean") $("estop").classList.toggle("engaged", msg.estop);
     const rig = msg.rig || null;
-    const fault = rig && rig.fault ? ` · fault: ${rig.fault.reason || rig.fault.kind || JSON.stringify(rig.fault)}` : "";
-    $("rigstate").textContent = rig ? `rig: ${rig.state}${fault}` : "";
+    const fault = rig && rig.fault ? ` · fault: ${rig.fault.message || rig.fault.kind || JSON.stringify(rig.fault)}` : "";
+    $("rigstate").textContent = rig ? `${rig.name || "rig"}: ${rig.state}${rig.detail ? ` (${rig.detail})` : ""}${fault}` : "";
+    this.device = rig ? rig.name : null;
+    const state = rig ? rig.state : "";
+    $("arm").hidden = $("disarm").hidden = !rig;
+    $("arm").disabled = !["disarmed", "parked"].includes(state);
+    $("disarm").disabled = !["homing", "soft_start", "running"].includes(state);
     const servos = rig ? rig.servos : null;
     if (!Array.isArray(servos) || servos.length === 0) {
       $("rig").hidden = true;

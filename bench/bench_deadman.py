@@ -1,0 +1,177 @@
+"""The dead-man: kill the service's processes while the rig runs; the guardian must park it.
+
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_deadman.py [--trials 20] [--cases web tick both stop]
+
+``riderlive serve`` drives a 3-servo rig (bench3, park_s 0.5 s) on the emulated bus (a
+child process, wire timing, SCHED_FIFO as the servos it stands for), trotting, with the
+other core busy. Per trial the rig is armed and running, then:
+
+- ``web``:  SIGKILL of the web process (the guardian sees it die, kills the tick, parks);
+- ``tick``: SIGKILL of the tick process (the web process restarts it after the guardian);
+- ``both``: SIGKILL of both at once;
+- ``stop``: SIGSTOP of the tick (the web process finds it hung and kills it).
+
+Measured from the signal, on the emulator's clock: the first goal write of the park
+(target <= 200 ms), the torque-off broadcast (target <= park_s + 200 ms), and the
+largest goal step between two writes after the signal against the servos' slew limit
+(max_speed_dps x the time between the writes; target ratio <= 1).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import itertools
+import os
+import signal
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write, other_core_busy, torque_offs
+from riderlive.dynamixel.rig import DEG_PER_PULSE, RigConfig
+from tests.service.live_server import LiveServer
+
+PARK_S = 0.5
+
+
+class Rig:
+    """The service and its emulated rig, restarted when a trial killed the service."""
+
+    def __init__(self, workdir: Path) -> None:
+        self.workdir = workdir
+        self.config: RigConfig = bench_rig(workdir / "bench3.toml", 100.0, park_s=PARK_S, soft_start_s=0.2)
+        self.emu = Emulator(self.config, priority=60)
+        self.live: LiveServer | None = None
+        self.retries = 0
+
+    def service(self) -> LiveServer:
+        if self.live is None or self.live.proc.poll() is not None:
+            if self.live is not None:
+                self.live.stop()
+            text = f'[tick]\nrate = 100.0\n[rig]\nfile = "{self.workdir / "bench3.toml"}"\nport = "{self.emu.port}"\n'
+            self.live = LiveServer(text, self.workdir)
+        return self.live
+
+    def supervision(self) -> dict:
+        return self.service().get("/api/devices").json()["supervision"]
+
+    def state(self) -> str:
+        devices = self.service().get("/api/devices").json()["devices"]
+        return str(devices[0]["state"]) if devices else "none"
+
+    def wait(self, wanted: str, timeout: float = 30.0) -> None:
+        deadline = time.perf_counter() + timeout
+        while True:
+            try:
+                if self.state() == wanted:
+                    return
+            except (httpx.HTTPError, KeyError, IndexError):
+                pass
+            if time.perf_counter() > deadline:
+                log = "".join(self.service().log[-20:])
+                raise SystemExit(f"the rig never got to {wanted}:\n{log}")
+            time.sleep(0.02)
+
+    def running(self) -> None:
+        """Armed and running. On a loaded machine a start can fault (a stalled tick) or the
+        tick be restarted; that is reset and retried, and counted in ``self.retries``."""
+        for _ in range(5):
+            try:
+                if self.state() in ("fault", "estop"):
+                    httpx.post(self.service().base + "/api/reset", timeout=10)
+                self.wait("disarmed")
+                for _ in range(50):
+                    sup = self.supervision()
+                    if sup["guardian"]["alive"] and sup["up"]:
+                        break
+                    time.sleep(0.1)
+                answer = httpx.post(self.service().base + "/api/arm", json={"device": self.config.name}, timeout=10)
+                if answer.status_code == 200:
+                    self.wait("running", timeout=10.0)
+                    return
+                print(f"  (arm refused, retrying: {answer.text})", flush=True)
+            except SystemExit as exc:
+                print(f"  (no start, retrying: {str(exc)[:200]})", flush=True)
+            self.retries += 1
+            time.sleep(1.0)
+        raise SystemExit("the rig could not be armed")
+
+    def close(self) -> None:
+        if self.live is not None:
+            self.live.stop()
+        self.emu.stop()
+
+
+def trial(rig: Rig, case: str) -> dict[str, float]:
+    rig.running()
+    time.sleep(0.3)
+    sup = rig.supervision()
+    web, tick = rig.service().proc.pid, sup["tick_pid"]
+    rig.emu.ask("arrivals")
+    hit = time.perf_counter()
+    if case in ("web", "both"):
+        os.kill(web, signal.SIGKILL)
+    if case in ("tick", "both"):
+        os.kill(tick, signal.SIGKILL)
+    if case == "stop":
+        os.kill(tick, signal.SIGSTOP)
+    deadline = time.perf_counter() + PARK_S + 5.0
+    packets: list[tuple[float, bytes]] = []
+    while time.perf_counter() < deadline:
+        time.sleep(0.1)
+        packets += rig.emu.ask("arrivals")
+        offs = [t for t in torque_offs(packets) if t > hit]
+        if offs and time.perf_counter() > offs[0] + 0.1:
+            break
+    offs = [t for t in torque_offs(packets) if t > hit]
+    goals = [(t, decode_goals(raw)) for t, raw in packets if is_goal_write(raw) and t > hit]
+    if not offs or not goals:
+        raise SystemExit(f"{case}: no park ({len(goals)} goals) or no torque off ({len(offs)})")
+    speed = {s.id: s.max_speed_dps for s in rig.config.servos.values()}
+    ratio = 0.0
+    for (t0, g0), (t1, g1) in itertools.pairwise(goals):
+        for sid, pulses in g1.items():
+            if sid in g0 and t1 > t0:
+                step = abs(pulses - g0[sid]) * DEG_PER_PULSE
+                ratio = max(ratio, step / (speed[sid] * max(t1 - t0, 0.01)))
+    if case == "stop":
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(tick, signal.SIGKILL)  # the supervisor has killed it already; make sure
+    return {"first_goal": goals[0][0] - hit, "torque_off": offs[0] - hit, "slew_ratio": ratio}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials", type=int, default=20)
+    parser.add_argument("--cases", nargs="+", default=["web", "tick", "both", "stop"])
+    parser.add_argument("--idle", action="store_true", help="do not keep the other core busy")
+    args = parser.parse_args()
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp, other_core_busy(7200, not args.idle):
+        rig = Rig(Path(tmp))
+        try:
+            for case in args.cases:
+                results = [trial(rig, case) for _ in range(args.trials)]
+                first = [r["first_goal"] * 1000 for r in results]
+                off = [r["torque_off"] * 1000 for r in results]
+                slew = max(r["slew_ratio"] for r in results)
+                ok &= max(first) <= 200 and max(off) <= (PARK_S + 0.2) * 1000 and slew <= 1.0
+                print(
+                    f"{case:5s} x{args.trials}: first park goal median {statistics.median(first):6.1f} max "
+                    f"{max(first):6.1f} ms (<= 200); torque off median {statistics.median(off):6.1f} max "
+                    f"{max(off):6.1f} ms (<= {(PARK_S + 0.2) * 1000:.0f}); largest goal step / slew limit {slew:.2f}",
+                    flush=True,
+                )
+        finally:
+            print(f"starts retried after a fault or a refused arm (a loaded machine): {rig.retries}")
+            rig.close()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,136 @@
+"""E-stop through the real service: REST request to torque off on the wire, and no goal after.
+
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_estop.py [--trials 200] [--rates 120 500] [--idle]
+
+``riderlive serve`` runs with a 3-servo rig (config/rigs/bench3.toml fitted to the rate)
+on the emulated bus (a child process, wire timing, SCHED_FIFO like the servos it stands
+for), the tick at SCHED_FIFO where allowed, and the other core busy. Each trial: arm,
+run a random 50-150 ms, ``POST /api/estop``, reset. Measured, per trial:
+
+- handler -> wire: from the moment the service's handler had the request
+  (``received_at`` in the answer) to the torque-off broadcast fully arrived at the
+  emulator. Target: max <= 1 tick + 1 ms (issue 10).
+- client -> wire: from this process sending the request (HTTP included), for reference.
+- goal writes after the request: goal SYNC_WRITEs that arrived after the torque-off
+  (target 0; the latch's gate makes it structural), and after ``received_at`` at all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import random
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+from bench.rig_fixtures import Emulator, bench_rig, is_goal_write, other_core_busy, torque_offs
+from tests.service.live_server import LiveServer
+
+TOKEN = "bench-token-1"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def state(live: LiveServer) -> str:
+    devices = live.get("/api/devices", headers=AUTH).json()["devices"]
+    return str(devices[0]["state"]) if devices else "none"
+
+
+def wait_state(live: LiveServer, wanted: str, timeout: float = 10.0) -> None:
+    deadline = time.perf_counter() + timeout
+    while (now := state(live)) != wanted:
+        if time.perf_counter() > deadline:
+            raise SystemExit(f"rig is {now}, wanted {wanted}")
+        time.sleep(0.01)
+
+
+def arm(client: httpx.Client, name: str, timeout: float = 20.0) -> None:
+    """Arm, retrying while the service is not ready (the guardian starting, a tick restart)."""
+    deadline = time.perf_counter() + timeout
+    while (answer := client.post("/api/arm", json={"device": name})).status_code != 200:
+        if time.perf_counter() > deadline:
+            raise SystemExit(f"arm refused: {answer.text}")
+        time.sleep(0.1)
+
+
+def run(rate: float, trials: int, workdir: Path) -> dict[str, list[float]]:
+    baud = 1_000_000 if rate <= 200 else 4_000_000
+    changes = {"soft_start_s": 0.1, "park_s": 0.2, "bus_watchdog_ms": 200, "reply_budget_s": 0.5}  # e-stops, not faults
+    rig = bench_rig(workdir / f"bench{rate:g}.toml", rate, baud, **changes)
+    emu = Emulator(rig, priority=60)
+    config = (
+        f'[tick]\nrate = {rate}\n[security]\ntoken = "{TOKEN}"\n'
+        f'[rig]\nfile = "{workdir / f"bench{rate:g}.toml"}"\nport = "{emu.port}"\n'
+    )
+    live = LiveServer(config, workdir, token=TOKEN)
+    out: dict[str, list[float]] = {"handler": [], "latch": [], "client": [], "after_off": [], "after_request": []}
+    try:
+        client = httpx.Client(base_url=live.base, headers=AUTH, timeout=10.0)
+        wait_state(live, "disarmed", 30.0)
+        emu.ask("arrivals")
+        for n in range(trials):
+            arm(client, rig.name)
+            wait_state(live, "running")
+            time.sleep(random.uniform(0.05, 0.15))
+            sent = time.perf_counter()
+            answer = client.post("/api/estop").json()
+            wait_state(live, "estop")
+            packets = emu.ask("arrivals")
+            offs = [t for t in torque_offs(packets) if t > sent]
+            if not offs:
+                raise SystemExit(f"trial {n}: no torque-off reached the emulator")
+            off = offs[0]
+            received = answer["received_at"]
+            out["handler"].append(off - received)
+            out["latch"].append(off - answer["latched_at"])
+            out["client"].append(off - sent)
+            goals = [t for t, raw in packets if is_goal_write(raw)]
+            out["after_off"].append(sum(1 for t in goals if t > off))
+            out["after_request"].append(sum(1 for t in goals if t > received))
+            assert client.post("/api/reset").status_code == 200
+            wait_state(live, "disarmed")
+        client.close()
+    finally:
+        live.stop()
+        emu.stop()
+    return out
+
+
+def summary(values: list[float]) -> str:
+    ms = sorted(v * 1000 for v in values)
+    p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
+    return f"median {statistics.median(ms):6.2f}  p99 {p99:6.2f}  max {ms[-1]:6.2f} ms"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials", type=int, default=200)
+    parser.add_argument("--rates", type=float, nargs="+", default=[120.0, 500.0])
+    parser.add_argument("--idle", action="store_true", help="do not keep the other core busy")
+    args = parser.parse_args()
+    sys.setswitchinterval(0.0005)
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp, other_core_busy(3600, not args.idle):
+        for rate in args.rates:
+            r = run(rate, args.trials, Path(tmp))
+            limit = 1000.0 / rate + 1.0
+            worst = max(r["handler"]) * 1000
+            after = sum(r["after_off"])
+            ok &= worst <= limit and after == 0
+            busy = not args.idle
+            print(f"\n{rate:g} ticks/s, {args.trials} e-stops, other core busy: {busy} (target: max <= {limit:.2f} ms)")
+            print(f"  handler -> torque off on the wire  {summary(r['handler'])}")
+            print(f"  latched -> torque off on the wire  {summary(r['latch'])}")
+            print(f"  client  -> torque off on the wire  {summary(r['client'])}   (HTTP included)")
+            print(
+                f"  goal writes after the torque-off: {after} (target 0); arriving after the handler had the "
+                f"request: {sum(r['after_request'])} in {sum(1 for x in r['after_request'] if x)} trials"
+            )
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,92 @@
+"""The safety board: what the guardian must know when a controller dies.
+
+One shared-memory segment of float64 slots, written by several processes, each slot
+by exactly one of them:
+
+- the web process: its pid and heartbeat, the tick's pid and generation (a new
+  generation per spawn), ``shutdown``;
+- the tick: its heartbeat (every tick), a clean-exit mark, and per device its state
+  and its last goal pose (seqlock'd: the guardian never reads a torn pose);
+- the guardian: its pid, heartbeat, ``ready`` once its plugs are built, the last
+  generation it has stopped, ``busy`` while it holds a bus, takeovers done.
+
+Times are ``perf_counter`` seconds (CLOCK_MONOTONIC, shared by every process here).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from riderlive.devices.lifecycle import DeviceState
+from riderlive.devices.shared import Slots
+
+MAX_DEVICES = 4
+MAX_UNITS = 64
+STATES: tuple[DeviceState, ...] = tuple(DeviceState)
+_HEADER = (
+    "web_pid",
+    "web_beat",
+    "tick_pid",
+    "tick_generation",
+    "tick_beat",
+    "tick_clean_exit",
+    "guardian_pid",
+    "guardian_beat",
+    "guardian_ready",
+    "guardian_done",
+    "guardian_busy",
+    "guardian_takeovers",
+    "shutdown",
+)
+_DEVICE = ("state", "seq", "units")
+_PER_DEVICE = len(_DEVICE) + MAX_UNITS
+
+
+def _names() -> tuple[str, ...]:
+    names = list(_HEADER)
+    for d in range(MAX_DEVICES):
+        names += [f"d{d}.{k}" for k in _DEVICE] + [f"d{d}.pose{u}" for u in range(MAX_UNITS)]
+    return tuple(names)
+
+
+class SafetyBoard(Slots):
+    """The board; ``SafetyBoard()`` creates it, ``SafetyBoard(name)`` attaches."""
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(_names(), name)
+        self._base = len(_HEADER)
+
+    def publish(self, device: int, state: DeviceState, pose: Sequence[float]) -> None:
+        """The tick, once per tick per device: its state and last goal pose."""
+        base = self._base + device * _PER_DEVICE
+        values = self.values
+        seq = values[base + 1]
+        values[base + 1] = seq + 1.0  # odd: being written
+        values[base] = float(STATES.index(state))
+        n = min(len(pose), MAX_UNITS)
+        values[base + 2] = float(n)
+        for u in range(n):
+            values[base + 3 + u] = pose[u]
+        values[base + 1] = seq + 2.0
+
+    def device(self, device: int) -> tuple[DeviceState, list[float]] | None:
+        """A device's last published state and pose (None if never published)."""
+        base = self._base + device * _PER_DEVICE
+        values = self.values
+        for _ in range(100):
+            seq = values[base + 1]
+            if seq == 0.0:
+                return None
+            if int(seq) % 2:
+                continue
+            state = STATES[int(values[base])]
+            pose = [values[base + 3 + u] for u in range(int(values[base + 2]))]
+            if values[base + 1] == seq:
+                return state, pose
+        return None
+
+    def forget_devices(self) -> None:
+        """Before a new tick starts: nothing published yet (the guardian must not park a
+        device from a dead tick's old pose on the new tick's behalf)."""
+        for device in range(MAX_DEVICES):
+            self.values[self._base + device * _PER_DEVICE + 1] = 0.0

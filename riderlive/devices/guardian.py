@@ -1,0 +1,244 @@
+"""The guardian: a dead-man process that parks the devices when their controller dies.
+
+The tick (or ``riderlive rig --drive``) drives the devices; the web process serves
+operators. Either can die or hang: SIGKILL, SIGSTOP, an exception loop, the OOM
+killer. The guardian is a third process, in its own session (a Ctrl-C in the terminal
+does not reach it), that shares nothing with them but the safety board and the e-stop
+latch in shared memory. It holds no bus while things are well.
+
+It watches (every ``POLL_S``, and at once through pidfds when a process exits):
+
+- the tick: gone, or its heartbeat older than ``tick_timeout_s``;
+- the web process (when there is one): gone, or its heartbeat older than ``web_timeout_s``.
+
+On either it performs a category 1 stop (IEC 60204-1) for the tick generation that
+failed: SIGKILL the tick if it still runs (so two writers never share a bus), take each
+device's transport (an exclusive lock that the dead tick released with its file), and
+per device in parallel: if it was moving, ease from its last published goal pose to
+park over the plug's park time, then outputs off; in any case read the outputs back
+and repeat outputs-off until every unit reports off, or the port is gone. An e-stop
+requested meanwhile cuts the park short (outputs off at once). Then it releases the
+transports and marks the generation stopped, so the web process may start a new tick
+(which connects and stays disarmed). With the web process gone there is nothing to
+hand back to: it keeps repeating outputs-off until confirmed, then exits.
+
+What it cannot do is in docs/hardware.md (the guardian dying too, a pulled USB cable,
+power loss): a hardware e-stop that cuts servo power is required near people.
+
+    python -m riderlive.devices.guardian --board NAME --latch NAME --device JSON ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+
+from riderlive.devices.board import SafetyBoard
+from riderlive.devices.device import Device
+from riderlive.devices.latch import StopLatch
+from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
+from riderlive.devices.registry import DeviceSpec, make_plug
+from riderlive.devices.shared import pid_alive
+
+log = logging.getLogger("riderlive.guardian")
+POLL_S = 0.005
+"""How often heartbeats are checked (deaths wake the guardian at once)."""
+HANDBACK_AFTER_S = 2.0
+"""With the web process alive, stop repeating an unconfirmed outputs-off after this and
+hand the bus back (the new tick repeats it while it connects)."""
+KILL_WAIT_S = 2.0
+
+
+class Guardian:
+    """The watch loop and the stop; :meth:`run` returns when there is nothing left to guard."""
+
+    def __init__(
+        self,
+        board: SafetyBoard,
+        latch: StopLatch,
+        specs: Sequence[DeviceSpec],
+        tick_timeout_s: float,
+        web_timeout_s: float,
+    ) -> None:
+        self.board = board
+        self.latch = latch
+        self.specs = list(specs)
+        self.tick_timeout_s = tick_timeout_s
+        self.web_timeout_s = web_timeout_s
+        self.exit = False
+        self._pidfds: dict[int, int] = {}
+        for spec in self.specs:  # pay imports and validation now, not in an emergency
+            make_plug(spec)
+
+    def run(self) -> int:
+        board = self.board
+        board["guardian_pid"] = float(os.getpid())
+        board["guardian_ready"] = 1.0
+        log.info("watching %s", ", ".join(s.name for s in self.specs))
+        while not self.exit and not board["shutdown"]:
+            now = time.perf_counter()
+            board["guardian_beat"] = now
+            generation = int(board["tick_generation"])
+            web_why = self._web_failed(now)
+            pending = generation > board["guardian_done"] and board["tick_clean_exit"] != generation
+            if pending:
+                why = self._tick_failed(now) or web_why
+                if why:
+                    self.stop(generation, why)
+                    if web_why or not board["web_pid"]:
+                        return 0  # nobody left to hand the bus back to
+            elif web_why:
+                log.warning("%s; no tick to stop: exiting", web_why)
+                return 0
+            self._wait()
+        return 0
+
+    def _web_failed(self, now: float) -> str | None:
+        return self._failed("web", self.web_timeout_s, now)
+
+    def _tick_failed(self, now: float) -> str | None:
+        return self._failed("tick", self.tick_timeout_s, now)
+
+    def _failed(self, process: str, timeout_s: float, now: float) -> str | None:
+        """Why the ``web`` or ``tick`` process counts as failed (None: it does not)."""
+        pid = int(self.board[f"{process}_pid"])
+        if not pid:
+            return None
+        if not pid_alive(pid):
+            return f"the {process} process {pid} is gone"
+        beat = self.board[f"{process}_beat"]
+        if beat and now - beat > timeout_s:
+            return f"the {process} process {pid} has not beaten for {(now - beat) * 1000:.0f} ms"
+        return None
+
+    def _wait(self) -> None:
+        """Sleep ``POLL_S``, waking at once when a watched process exits."""
+        wanted = {int(self.board["web_pid"]), int(self.board["tick_pid"])} - {0}
+        for pid in set(self._pidfds) - wanted:
+            os.close(self._pidfds.pop(pid))
+        for pid in wanted - set(self._pidfds):
+            with contextlib.suppress(OSError):
+                self._pidfds[pid] = os.pidfd_open(pid)
+        with contextlib.suppress(OSError, ValueError):
+            select.select(list(self._pidfds.values()), [], [], POLL_S)
+
+    # -- the stop ---------------------------------------------------------------------------
+
+    def stop(self, generation: int, why: str) -> None:
+        """Category 1 stop of every device of tick ``generation``."""
+        board = self.board
+        log.critical("%s: category 1 stop of %s", why, ", ".join(s.name for s in self.specs))
+        board["guardian_busy"] = 1.0
+        try:
+            self._kill_tick()
+            threads = [
+                threading.Thread(target=self._stop_device, args=(i, spec), name=f"guardian {spec.name}")
+                for i, spec in enumerate(self.specs)
+            ]
+            for thread in threads:
+                thread.start()
+            for thread in threads:
+                thread.join()
+        finally:
+            board["guardian_takeovers"] += 1.0
+            board["guardian_done"] = float(generation)
+            board["guardian_busy"] = 0.0
+
+    def _kill_tick(self) -> None:
+        pid = int(self.board["tick_pid"])
+        if not pid_alive(pid):
+            return
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        deadline = time.perf_counter() + KILL_WAIT_S
+        while pid_alive(pid) and time.perf_counter() < deadline:
+            time.sleep(0.0005)
+
+    def _stop_device(self, index: int, spec: DeviceSpec) -> None:
+        last = self.board.device(index)
+        if last is None:
+            return  # never connected by that tick: nothing of ours on its bus
+        state, pose = last
+        device = Device(make_plug(spec), spec.period_s, self.latch)
+        deadline = time.perf_counter() + 1.0
+        while True:
+            try:
+                device.takeover(pose, state.moving)
+                break
+            except PortBusy:
+                if time.perf_counter() > deadline:
+                    log.error("%s: the transport stays held by another process: cannot stop it", spec.name)
+                    return
+                time.sleep(0.002)
+            except PortLost as exc:
+                log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
+                return
+        started = next_tick = time.perf_counter()
+        try:
+            while True:
+                status = device.tick((), time.perf_counter())
+                if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
+                    log.error("%s: the port went away during the stop", spec.name)
+                    return
+                if not device.state.moving:
+                    if status.outputs_off_confirmed:
+                        log.warning("%s: stopped, outputs off (read back)", spec.name)
+                        return
+                    web = int(self.board["web_pid"])
+                    if web and pid_alive(web) and time.perf_counter() - started > HANDBACK_AFTER_S:
+                        log.error("%s: outputs-off not confirmed; handing the bus back", spec.name)
+                        return
+                next_tick += spec.period_s
+                time.sleep(max(0.0, next_tick - time.perf_counter()))
+        finally:
+            device.plug.close()
+
+
+def launch(
+    board: str, latch: str, specs: Sequence[DeviceSpec], tick_timeout_s: float, web_timeout_s: float
+) -> subprocess.Popen[bytes]:
+    """Start the guardian in its own session (signals to the terminal's group skip it)."""
+    args = [sys.executable, "-m", "riderlive.devices.guardian", "--board", board, "--latch", latch]
+    args += ["--tick-timeout", repr(tick_timeout_s), "--web-timeout", repr(web_timeout_s)]
+    for spec in specs:
+        args += ["--device", spec.to_json()]
+    return subprocess.Popen(args, start_new_session=True, stdin=subprocess.DEVNULL)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="riderlive-guardian", description=__doc__)
+    parser.add_argument("--board", required=True)
+    parser.add_argument("--latch", required=True)
+    parser.add_argument("--device", action="append", default=[], help="a DeviceSpec as JSON")
+    parser.add_argument("--tick-timeout", type=float, default=0.1)
+    parser.add_argument("--web-timeout", type=float, default=1.0)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    board, latch = SafetyBoard(args.board), StopLatch(args.latch)
+    guardian = Guardian(
+        board, latch, [DeviceSpec.from_json(d) for d in args.device], args.tick_timeout, args.web_timeout
+    )
+
+    def on_term(signum: int, frame: object) -> None:
+        guardian.exit = True  # after any stop in progress
+
+    signal.signal(signal.SIGTERM, on_term)
+    try:
+        return guardian.run()
+    finally:
+        board.close()
+        latch.close()
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

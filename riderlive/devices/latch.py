@@ -1,0 +1,189 @@
+"""The e-stop latch shared by every process that may ask for or act on an e-stop.
+
+An e-stop is a *request* (any thread, any process, a signal handler: the web process
+for REST and websocket e-stops, the CLI on SIGINT/SIGTERM) and a *reaction* (the
+process that owns the bus writes torque off). Between the two lives this latch: a few
+slots in shared memory and a file lock on that segment.
+
+"No goal write after the request" is structural: every goal write happens inside
+:meth:`StopView.gate`, which holds the lock and refuses (:class:`StopRequested`) when a
+request is pending. :meth:`StopLatch.request` takes the same lock to record the
+request, so a request is ordered either after a whole goal write or before its check;
+a signal handler that interrupts this process's own write (SIGINT of the CLI) has its
+request recorded the moment the write is done. The lock is held for one write system call (~20 us); a requester
+that cannot get it within ``LOCK_WAIT_S`` (the writer is frozen, say) records the
+request anyway and counts it. A killed holder releases the lock with its file.
+
+The latch stays set until :meth:`clear` (an operator's reset), across tick restarts:
+new devices that find it set go to ``estop``, not ``disarmed``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import fcntl
+import os
+import threading
+import time
+from collections.abc import Iterator
+
+from riderlive.devices.lifecycle import StopRequested
+from riderlive.devices.shared import Slots, lock_path
+
+LOCK_WAIT_S = 0.002
+"""How long a request waits for a goal write in progress before recording anyway."""
+_SLOTS = ("requested", "handled", "latched", "requested_at", "source", "lock_timeouts")
+
+
+class StopSource(enum.IntEnum):
+    """Where an e-stop came from (stored as a number in shared memory)."""
+
+    API = 1
+    REST = 2
+    WEBSOCKET = 3
+    SIGNAL = 4
+    GUARDIAN = 5
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+class StopLatch:
+    """The latch; ``StopLatch()`` creates one, ``StopLatch(name)`` attaches to it."""
+
+    def __init__(self, name: str | None = None) -> None:
+        self._slots = Slots(_SLOTS, name)
+        path = str(lock_path(self._slots.name))
+        self._gate_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+        self._request_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+        self._thread_lock = threading.Lock()  # requests from threads of one process: one at a time
+        self._gate_owner: int | None = None
+        """The thread inside a gate of this process (a signal handler may interrupt it)."""
+        self._deferred: list[StopSource] = []
+
+    @property
+    def name(self) -> str:
+        return self._slots.name
+
+    # -- the requester's side ----------------------------------------------------------
+
+    def request(self, source: StopSource = StopSource.API) -> float:
+        """Record an e-stop request; return its time (perf_counter s, after the lock).
+
+        Called by a signal handler that interrupted this process's own goal write (the
+        thread inside the gate), the request is recorded the moment the write is done."""
+        if self._gate_owner == threading.get_ident():
+            self._deferred.append(source)
+            return time.perf_counter()
+        acquired = self._thread_lock.acquire(timeout=LOCK_WAIT_S)
+        try:
+            locked = self._flock(self._request_fd, LOCK_WAIT_S)
+            try:
+                now = time.perf_counter()
+                slots = self._slots
+                slots["requested_at"] = now
+                slots["source"] = float(source)
+                slots["latched"] = 1.0
+                slots["requested"] = slots["requested"] + 1.0
+                if not locked:
+                    slots["lock_timeouts"] = slots["lock_timeouts"] + 1.0
+                return now
+            finally:
+                if locked:
+                    fcntl.flock(self._request_fd, fcntl.LOCK_UN)
+        finally:
+            if acquired:
+                self._thread_lock.release()
+
+    @staticmethod
+    def _flock(fd: int, wait_s: float) -> bool:
+        deadline = time.perf_counter() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                return True
+            except BlockingIOError:
+                if time.perf_counter() >= deadline:
+                    return False
+                time.sleep(0.00002)
+
+    # -- the reacting side -------------------------------------------------------------
+
+    @property
+    def requested(self) -> int:
+        """E-stop requests so far (each device remembers how many it has acted on)."""
+        return int(self._slots["requested"])
+
+    @property
+    def latched(self) -> bool:
+        """An e-stop was requested and no reset has cleared it since."""
+        return self._slots["latched"] != 0.0
+
+    @property
+    def requested_at(self) -> float:
+        return self._slots["requested_at"]
+
+    @property
+    def source(self) -> StopSource | None:
+        code = int(self._slots["source"])
+        return StopSource(code) if code in StopSource._value2member_map_ else None
+
+    @property
+    def lock_timeouts(self) -> int:
+        return int(self._slots["lock_timeouts"])
+
+    def view(self) -> StopView:
+        """One writer's view: which requests it has acted on, and its goal-write gate."""
+        return StopView(self)
+
+    def clear(self) -> None:
+        """An operator's reset: unlatch (requests already made stay counted)."""
+        self._slots["latched"] = 0.0
+
+    def close(self) -> None:
+        for fd in (self._gate_fd, self._request_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._slots.close()
+
+
+class StopView:
+    """A writer's side of the latch: ``pending`` means a request it has not acted on."""
+
+    def __init__(self, latch: StopLatch) -> None:
+        self.latch = latch
+        self.seen = latch.requested
+        """Requests already acted on (a new view ignores requests made before it existed;
+        a latched latch is the devices' business: they start in ``estop``)."""
+
+    @property
+    def pending(self) -> bool:
+        return self.latch.requested > self.seen
+
+    def take(self) -> bool:
+        """Mark every request so far as acted on; True if there was a new one."""
+        requested = self.latch.requested
+        if requested <= self.seen:
+            return False
+        self.seen = requested
+        return True
+
+    @contextlib.contextmanager
+    def gate(self) -> Iterator[None]:
+        """Around a goal write: raises StopRequested instead of entering if a request is
+        pending (or is being recorded right now); no request can be recorded inside."""
+        latch = self.latch
+        if not latch._flock(latch._gate_fd, LOCK_WAIT_S):
+            raise StopRequested("e-stop being requested")
+        latch._gate_owner = threading.get_ident()
+        try:
+            if self.pending:
+                raise StopRequested("e-stop requested")
+            yield
+        finally:
+            latch._gate_owner = None
+            fcntl.flock(latch._gate_fd, fcntl.LOCK_UN)
+            while latch._deferred:  # a signal handler asked while this thread wrote
+                latch.request(latch._deferred.pop(0))

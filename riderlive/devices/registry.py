@@ -1,0 +1,89 @@
+"""Which plug drives a device kind, and how a device's rate fits the tick's.
+
+A device is configured by its kind and a file (a rig map for ``dynamixel``). The
+kind's module provides two functions::
+
+    describe(file, port) -> DeviceInfo      # validate the file; name, rate, wire budget
+    make_plug(spec) -> Plug                 # the plug, in the process that drives it
+
+:func:`plan` runs in the web process at start: it validates the file (errors name the
+file and key), and fits the device to the tick: a device validated for fewer ticks per
+second than the service runs is driven every ``divider``-th tick, or refused when the
+policy says so, with both numbers in the message.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+from riderlive.devices.plug import Plug
+
+KINDS: dict[str, str] = {"dynamixel": "riderlive.dynamixel.driver"}
+"""Device kind -> the module with ``describe`` and ``make_plug``."""
+RatePolicy = Literal["divide", "refuse"]
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    name: str
+    validated_hz: float
+    """The highest tick rate the device's configuration was validated for."""
+    budget: str
+    """A few lines for the start-up log: the wire budget per tick."""
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    """A device as the tick and the guardian build it (picklable, JSON-able)."""
+
+    kind: str
+    file: str
+    port: str | None
+    name: str
+    divider: int
+    """Driven every ``divider``-th tick of the service."""
+    period_s: float
+    """Seconds between the device's ticks (``divider`` / tick rate)."""
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> DeviceSpec:
+        data: dict[str, Any] = json.loads(text)
+        return cls(**data)
+
+
+class RateMismatch(ValueError):
+    """The device cannot follow the tick rate and the policy is to refuse."""
+
+
+def _module(kind: str) -> Any:
+    if kind not in KINDS:
+        raise ValueError(f"unknown device kind {kind!r}; known: {', '.join(KINDS)}")
+    return importlib.import_module(KINDS[kind])
+
+
+def plan(
+    kind: str, file: str, port: str | None, tick_hz: float, policy: RatePolicy = "divide"
+) -> tuple[DeviceSpec, str]:
+    """Validate a device and fit it to ``tick_hz``; returns the spec and what to print."""
+    info: DeviceInfo = _module(kind).describe(file, port)
+    divider = max(1, math.ceil(tick_hz / info.validated_hz - 1e-9))
+    lines = [info.budget]
+    if divider > 1:
+        message = f"{info.name} is validated for {info.validated_hz:g} ticks/s but the service ticks at {tick_hz:g}/s"
+        if policy == "refuse":
+            raise RateMismatch(f"{message}: set tick.rate <= {info.validated_hz:g} (or rig.rate_policy = 'divide')")
+        lines.append(f"{message}: driving it every {divider} ticks ({tick_hz / divider:g} ticks/s)")
+    spec = DeviceSpec(kind, file, port, info.name, divider, divider / tick_hz)
+    return spec, "\n".join(lines)
+
+
+def make_plug(spec: DeviceSpec) -> Plug:
+    plug: Plug = _module(spec.kind).make_plug(spec)
+    return plug

@@ -1,0 +1,108 @@
+"""Named float64 slots in a shared-memory segment, for state that crosses processes.
+
+Used by the e-stop latch and the safety board (heartbeats, pids, last poses). Each
+slot is one aligned 8-byte store, so a reader on another core sees either the old or
+the new value; a slot that a single process writes needs no lock. Segments live in
+``/dev/shm`` (Linux), where a file lock on the segment itself is also available.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import tempfile
+from multiprocessing import resource_tracker, shared_memory
+from pathlib import Path
+
+
+def attach(name: str) -> shared_memory.SharedMemory:
+    """Open an existing segment without registering it with this process's tracker.
+
+    The creating process owns (and unlinks) the segment; a second registration from
+    an attaching process would unlink it early or warn at exit (Python < 3.13).
+    """
+    register = resource_tracker.register
+    resource_tracker.register = lambda *args, **kwargs: None  # type: ignore[assignment]
+    try:
+        return shared_memory.SharedMemory(name=name, create=False)
+    finally:
+        resource_tracker.register = register
+
+
+def lock_path(name: str) -> Path:
+    """A file to ``flock`` that belongs to segment ``name`` (the segment itself on Linux)."""
+    shm = Path("/dev/shm") / name
+    return shm if shm.exists() else Path(tempfile.gettempdir()) / f"{name}.lock"
+
+
+_DOUBLE = struct.Struct("d")
+
+
+class Slots:
+    """``names`` float64 slots in a segment: created (``name`` None) or attached."""
+
+    def __init__(self, names: tuple[str, ...], name: str | None = None) -> None:
+        self.names = names
+        self.index = {n: i for i, n in enumerate(names)}
+        size = 8 * len(names)
+        if name is None:
+            self._shm = shared_memory.SharedMemory(create=True, size=size)
+            self.owner = True
+        else:
+            self._shm = attach(name)
+            self.owner = False
+        self.values = _Values(self._shm)
+        if self.owner:
+            for i in range(len(names)):
+                self.values[i] = 0.0
+
+    @property
+    def name(self) -> str:
+        return self._shm.name
+
+    def __getitem__(self, key: str) -> float:
+        return self.values[self.index[key]]
+
+    def __setitem__(self, key: str, value: float) -> None:
+        self.values[self.index[key]] = value
+
+    def close(self) -> None:
+        """Detach; the owner also removes the segment (and its lock file, off Linux)."""
+        self._shm.close()
+        if self.owner:
+            path = lock_path(self._shm.name)
+            self._shm.unlink()
+            if path.parent != Path("/dev/shm"):
+                path.unlink(missing_ok=True)
+
+
+class _Values:
+    """float64 slot ``i`` of a segment, read and written in place (no exported views,
+    so the segment can always be closed)."""
+
+    def __init__(self, shm: shared_memory.SharedMemory) -> None:
+        self._shm = shm
+
+    def __getitem__(self, i: int) -> float:
+        value: float = _DOUBLE.unpack_from(self._shm.buf, 8 * i)[0]  # type: ignore[arg-type]
+        return value
+
+    def __setitem__(self, i: int, value: float) -> None:
+        _DOUBLE.pack_into(self._shm.buf, 8 * i, value)  # type: ignore[arg-type]
+
+
+def pid_alive(pid: int) -> bool:
+    """True while process ``pid`` exists and has not exited (a zombie counts as dead)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True  # no /proc: trust kill(0)
+    return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")

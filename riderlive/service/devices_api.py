@@ -1,0 +1,217 @@
+"""REST for the devices near people: arm, disarm, e-stop, reset, reload; health; metrics.
+
+    POST /api/arm     {"device": "bench3"}        the name is the confirmation
+    POST /api/disarm  {"device": "bench3"} | {}   ease to park, outputs off (all when omitted)
+    POST /api/estop                               latched e-stop of every device
+    POST /api/reset   {"device": ...} | {}        clear the e-stop / faults: disarmed, never armed
+    POST /api/reload  {"device": "bench3"}        re-read its file (refused while it moves)
+
+Arm, reset and reload need the token whenever one is configured, even on loopback;
+disarm and e-stop (stopping) follow the other control calls (a token when bound beyond
+loopback).
+    GET  /api/devices                             lifecycle of each device, supervision
+    GET  /healthz, /readyz                        liveness and readiness (no token)
+
+A refused request changes nothing and answers 401/404/409/422/503 with
+``{"detail": {"refusal": REASON, "message": ...}}``; every refusal is counted in
+``/metrics`` by action and reason.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import Counter
+from typing import TYPE_CHECKING, Any
+
+import pydantic
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.responses import JSONResponse
+
+from riderlive.devices.latch import StopSource
+from riderlive.devices.lifecycle import REFUSAL_STATUS, DeviceState, Refusal
+from riderlive.devices.registry import DeviceSpec, plan
+from riderlive.realtime import commands as cmd
+from riderlive.service import auth
+from riderlive.service.config import ServiceConfig
+
+if TYPE_CHECKING:
+    from riderlive.service.runtime import Service
+
+NAME = pydantic.Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+BY = pydantic.Field(default=None, max_length=32, pattern=r"^[A-Za-z0-9 _.-]+$")
+
+
+class DeviceRequest(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid")
+    device: str = NAME
+    by: str | None = BY
+    """Who is asking, for the log (``page``, a script's name); the client address is added."""
+
+
+class AnyDeviceRequest(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid")
+    device: str | None = pydantic.Field(default=None, min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+    by: str | None = BY
+
+
+def plan_devices(config: ServiceConfig) -> tuple[DeviceSpec, ...]:
+    """The configured devices, validated and fitted to the tick rate; prints the wire budget."""
+    if not config.rig.file:
+        return ()
+    spec, text = plan("dynamixel", config.rig.file, config.rig.port, config.tick.rate, config.rig.rate_policy)
+    print(f"riderlive serve: rig {text}", file=sys.stderr, flush=True)
+    return (spec,)
+
+
+class DeviceMetrics:
+    """What the web process counts about devices."""
+
+    def __init__(self) -> None:
+        self.refusals: Counter[tuple[str, str]] = Counter()
+        self.estops: Counter[str] = Counter()
+
+
+def add_device_routes(app: FastAPI, service: Service) -> None:
+    config = service.config
+    counts = DeviceMetrics()
+    service.device_metrics = counts
+
+    def refuse(action: str, reason: Refusal | str, message: str) -> HTTPException:
+        reason = Refusal(reason)
+        counts.refusals[(action, reason.value)] += 1
+        return HTTPException(REFUSAL_STATUS.get(reason, 409), {"refusal": reason.value, "message": message})
+
+    def operator(request: Request, action: str, *, arming: bool = False) -> str:
+        """Check the token (arming: whenever one is configured); return who asks."""
+        given = auth.bearer(request.headers.get("authorization"))
+        needed = config.arming_token is not None if arming else config.token_required
+        if needed and not auth.token_matches(config.security.token, given):
+            service.metrics.bad_frames["unauthorized"] += 1
+            raise refuse(action, Refusal.UNAUTHORIZED, "token required: Authorization: Bearer <token>")
+        return f"rest {request.client.host if request.client else '?'}"
+
+    async def answer(action: str, build: Any) -> dict[str, Any]:
+        reply: cmd.Reply = await service.supervisor.ask(build)
+        if not reply.ok:
+            raise refuse(action, reply.refusal or Refusal.NOT_READY, reply.message)
+        return {"ok": True, "states": reply.states, "message": reply.message}
+
+    def who(base: str, body: DeviceRequest | AnyDeviceRequest | None) -> str:
+        return base if body is None or not body.by else f"{base} ({body.by})"
+
+    @app.post("/api/arm", summary="Arm a device by name (token whenever one is configured): it soft-starts")
+    async def arm(request: Request, body: DeviceRequest) -> dict[str, Any]:
+        by = who(operator(request, "arm", arming=True), body)
+        return await answer("arm", lambda r: cmd.Arm(body.device, by, r))
+
+    @app.post("/api/disarm", summary="Ease a device (all when none named) to park, then outputs off")
+    async def disarm(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
+        by = who(operator(request, "disarm"), body)
+        return await answer("disarm", lambda r: cmd.Disarm(body.device if body else None, by, r))
+
+    @app.post("/api/estop", summary="Emergency stop, latched: every device's outputs off at once")
+    async def estop(request: Request) -> dict[str, Any]:
+        received = time.perf_counter()
+        operator(request, "estop")
+        latched = service.supervisor.estop(StopSource.REST)
+        counts.estops[StopSource.REST.label] += 1
+        return {"estop": True, "received_at": received, "latched_at": latched}
+
+    @app.post("/api/reset", summary="Clear the e-stop and device faults: disarmed (never arms)")
+    async def reset(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
+        by = who(operator(request, "reset", arming=True), body)
+        result = await answer("reset", lambda r: cmd.Reset(body.device if body else None, by, r))
+        return {**result, "estop": False}
+
+    @app.post("/api/reload", summary="Re-read a device's file and connect it again (refused while it moves)")
+    async def reload(request: Request, body: DeviceRequest) -> dict[str, Any]:
+        by = who(operator(request, "reload", arming=True), body)
+        return await answer("reload", lambda r: cmd.Reload(body.device, by, r))
+
+    @app.get("/api/devices", summary="Each device's lifecycle state; tick supervision and guardian")
+    async def devices(request: Request) -> dict[str, Any]:
+        if config.security.publish_requires_token:
+            operator(request, "observe")
+        status = service.link.status()
+        return {
+            "devices": status.get("devices", []),
+            "estop": service.link.latch.latched,
+            "supervision": service.supervisor.snapshot(),
+        }
+
+    @app.get("/healthz", summary="Liveness: 200 unless the tick has been down for a minute")
+    async def healthz() -> JSONResponse:
+        live = service.supervisor.live()
+        return JSONResponse({"status": "ok" if live else "down", **service.supervisor.snapshot()}, 200 if live else 503)
+
+    @app.get("/readyz", summary="Readiness: 200 while the tick is up and beating")
+    async def readyz() -> JSONResponse:
+        ready = service.supervisor.ready()
+        body = {"status": "ready" if ready else "not ready", "tick_up": service.supervisor.up}
+        return JSONResponse(body, 200 if ready else 503)
+
+
+def _escape(value: str) -> str:
+    return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+
+
+def render_device_metrics(service: Service) -> str:
+    """Prometheus text: supervision, guardian, each device's state and counters, refusals."""
+    sup = service.supervisor.snapshot()
+    out: list[str] = []
+
+    def metric(name: str, kind: str, help_text: str, lines: list[str]) -> None:
+        out.extend([f"# HELP {name} {help_text}", f"# TYPE {name} {kind}", *lines])
+
+    metric(
+        "riderlive_tick_up",
+        "gauge",
+        "1 while the tick process runs and beats.",
+        [f"riderlive_tick_up {int(sup['up'])}"],
+    )
+    for key, help_text in (
+        ("restarts", "Tick processes started again after a death or a hang."),
+        ("deaths", "Tick processes that exited unasked."),
+        ("hangs", "Tick processes killed for missing their heartbeat."),
+    ):
+        metric(f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {sup[key]}"])
+    guardian = sup["guardian"]
+    metric(
+        "riderlive_guardian_up",
+        "gauge",
+        "1 while the guardian runs.",
+        [f"riderlive_guardian_up {int(guardian['alive'])}"],
+    )
+    for key in ("restarts", "takeovers"):
+        line = f"riderlive_guardian_{key}_total {guardian[key]}"
+        metric(f"riderlive_guardian_{key}_total", "counter", f"Guardian {key}.", [line])
+    latch = service.link.latch
+    metric(
+        "riderlive_estop_latched",
+        "gauge",
+        "1 while the e-stop is latched.",
+        [f"riderlive_estop_latched {int(latch.latched)}"],
+    )
+    metric(
+        "riderlive_estop_requests_total",
+        "counter",
+        "E-stop requests (all sources).",
+        [f"riderlive_estop_requests_total {latch.requested}"],
+    )
+    states, events = [], []
+    for device in service.link.status().get("devices", []):
+        name = _escape(str(device.get("name")))
+        for state in DeviceState:
+            now_in = int(device.get("state") == state.value)
+            states.append(f'riderlive_device_state{{device="{name}",state="{state.value}"}} {now_in}')
+        for event, value in sorted((device.get("counters") or {}).items()):
+            events.append(f'riderlive_device_events_total{{device="{name}",event="{_escape(event)}"}} {value}')
+    metric("riderlive_device_state", "gauge", "1 for the state each device is in.", states)
+    metric("riderlive_device_events_total", "counter", "Device lifecycle and bus events by kind.", events)
+    refusals = service.device_metrics.refusals
+    lines = [
+        f'riderlive_device_refusals_total{{action="{a}",reason="{r}"}} {n}' for (a, r), n in sorted(refusals.items())
+    ]
+    metric("riderlive_device_refusals_total", "counter", "Operator requests refused, by action and reason.", lines)
+    return "\n".join(out) + "\n"
