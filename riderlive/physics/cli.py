@@ -39,9 +39,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strands", metavar="NPZ", help="with --reference: write every strand vertex per frame here")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
     parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
-    parser.add_argument(
-        "--numpy", action="store_true", help="step the skinned tail with NumPy, not the compiled kernels (slower)"
-    )
 
 
 def run_take(
@@ -50,20 +47,15 @@ def run_take(
     rider_rules: RiderModel | None,
     rate: float,
     reference: bool,
-    *,
-    compiled: bool | None = None,
 ) -> tuple[FrameTable, np.ndarray | None]:
-    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None.
-
-    ``compiled``: the skinned tail's kernels (None: whenever numba is installed) or NumPy.
-    """
+    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None."""
     horse = horse_matrix(table)
     times = table.times(rate)
     if len(times) > 1 and np.any(np.diff(times) <= 0.0):
         raise FrameFileError("input", "the t column must increase strictly")
     rider = None if rider_rules is None else rider_rules.evaluate_batch(horse)
     source = TakeSource(times, horse, rider)
-    skinned = SkinnedModel.build(config, compiled)
+    skinned = SkinnedModel.build(config)
     names = channel_names(skinned)
     sk = FixedStepper(skinned.step, skinned.initial(source(times[0])), config.rate, start=float(times[0]))
     ref_model = ReferenceModel.build(config) if reference else None
@@ -94,8 +86,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("--strands needs --reference")
         rules = None if args.no_rider else RiderModel(params=load_preset(args.preset), scale=DEFAULT_SCALE)
         table = read_frames(args.input, fmt=args.format)
-        compiled = False if args.numpy else None
-        result, vertices = run_take(table, config, rules, args.rate, args.reference, compiled=compiled)
+        result, vertices = run_take(table, config, rules, args.rate, args.reference)
         write_frames(args.output, result, args.format)
         if args.strands and vertices is not None:
             np.savez_compressed(args.strands, t=result.times(args.rate), vertices=vertices)
