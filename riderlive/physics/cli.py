@@ -15,7 +15,7 @@ import numpy as np
 
 from riderlive.bake import DEFAULT_RATE, horse_matrix
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.framefile import FORMATS, FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.physics.config import PhysicsConfig, load_physics
 from riderlive.physics.drive import FixedStepper, TakeSource
@@ -30,15 +30,15 @@ REFERENCE_CHANNELS = ("tail_ref.tx", "tail_ref.ty", "tail_ref.tz")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="horse take: .csv or .jsonl (metres, degrees), or - for stdin")
-    parser.add_argument("-o", "--output", required=True, help="bone channels to write (.csv, .jsonl, or -)")
+    parser.add_argument("input", help="horse take: .csv, .jsonl or .parquet (metres, degrees), or - for stdin")
+    parser.add_argument("-o", "--output", required=True, help="bone channels to write (.csv, .jsonl, .parquet, -)")
     parser.add_argument("--config", help="physics TOML (default config/physics/tail.toml)")
     parser.add_argument("--preset", default="kuhnel2003", help="rider rules preset for the braid (default kuhnel2003)")
     parser.add_argument("--no-rider", action="store_true", help="no rider rules: the braid hangs from an upright rider")
     parser.add_argument("--reference", action="store_true", help="also run the many-strand tail; adds tail_ref.t*")
     parser.add_argument("--strands", metavar="NPZ", help="with --reference: write every strand vertex per frame here")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
-    parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+    parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
 
 
 def run_take(

@@ -22,7 +22,7 @@ from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.publish import Hub
-from riderlive.takes.recorder import TakeRecorder, take_path
+from riderlive.takes.recorder import TakeRecorder, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
 
 log = logging.getLogger(__name__)
@@ -151,7 +151,7 @@ class Service:
             self.link.send(cmd.SetMode(Mode.INPUT))
             self.source = {"kind": "live"}
         else:
-            path = take_path(self.config.takes.directory, request["take"])
+            path = replay_path(self.config.takes.directory, request["take"])
             replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate)
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
             self.arbiter.replay_id = producer.id

@@ -32,12 +32,21 @@ def take_path(directory: str | Path, name: str) -> Path:
     return Path(directory) / f"{stem}.csv"
 
 
+def replay_path(directory: str | Path, name: str) -> Path:
+    """The file to replay for take ``name``: ``NAME.csv``, or ``NAME.parquet`` when only that exists."""
+    if name.endswith(".parquet"):
+        return take_path(directory, name[: -len(".parquet")]).with_suffix(".parquet")
+    path = take_path(directory, name)
+    parquet = path.with_suffix(".parquet")
+    return parquet if not path.exists() and parquet.exists() else path
+
+
 def list_takes(directory: str | Path) -> list[dict[str, object]]:
     """Takes in ``directory``, newest first: name, bytes, modification time."""
     folder = Path(directory)
     if not folder.is_dir():
         return []
-    files = sorted(folder.glob("*.csv"), key=lambda p: p.stat().st_mtime, reverse=True)
+    files = sorted([*folder.glob("*.csv"), *folder.glob("*.parquet")], key=lambda p: p.stat().st_mtime, reverse=True)
     return [{"name": p.stem, "bytes": p.stat().st_size, "modified": p.stat().st_mtime} for p in files]
 
 
