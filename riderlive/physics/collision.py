@@ -132,8 +132,9 @@ def push_out(x: FloatArray, first: int, a: FloatArray, b: FloatArray, radius: Fl
                 dist = math.sqrt(dist2)
                 if dist < 1e-12:  # on the axis: no direction to push along, leave sideways
                     off[k, 0], off[k, 1], off[k, 2] = perpendicular(ab[k, 0], ab[k, 1], ab[k, 2])
-                    dist = 1.0
-                scale[k] = (r + skin) / fmax(dist, 1e-12) - 1.0
+                    scale[k] = r + skin
+                else:
+                    scale[k] = (r + skin) / dist - 1.0
                 deepest = max(deepest, r - dist)
             if pushed:
                 for c in range(3):
