@@ -1,37 +1,48 @@
-"""Strand physics timings: the reference tail (400 and 4000 strands) and the skinned tail plus braid.
+"""Strand physics timings: the single-source compiled step against the code it replaced, in the same run.
 
-Prints CPU microseconds per internal step (1/240 s) on one core (the thread's CPU
-clock, so waiting for a core on the shared machine does not count), best of
-blocks, and the ratio to a baseline measured in the same run: one 12-vertex strand
-stepped in plain Python floats (Verlet, 4 distance iterations, follow-the-leader; no
-bending, no collisions), the cheapest honest way to simulate one strand without NumPy.
-The skinned tail plus braid runs twice: compiled (numba kernels, the default) and on
-the NumPy path, the second baseline (same results within 1e-12 per step).
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_tail.py [--rounds 3] [--baseline COMMIT]
 
-    PYTHONPATH=$PWD /work/main/.venv/bin/python bench/bench_tail.py [--quick]
+What is timed, per internal step (1/240 s), as CPU microseconds of one thread (time
+spent waiting for a core on a shared machine does not count; each figure is the best
+of several blocks, and the best over ``--rounds`` child processes):
+
+- the skinned tail + braid: the whole step (posing, 2 strands, 2 x 11-bone chains,
+  the state objects), and posing alone;
+- the reference tail, 400 and 4000 strands x 12 vertices (posing + solver).
+
+The baseline is the previous implementation (hand-written numba twins in
+``riderlive/physics/kernels.py`` for the skinned tail, NumPy for the reference),
+measured from git in the same run: ``git archive BASELINE riderlive config`` is
+unpacked into ``~/.cache/riderlive-bench/<commit>`` (kept, so its numba cache
+survives between runs) and the same measuring code runs in a child process with
+that tree first on ``sys.path``, alternating with a child on this tree. Both trees'
+kernels are compiled or loaded before anything is timed.
+
+Targets (issue 18): skinned tail + braid <= the baseline's step (0.020 ms on a quiet
+machine), reference 400 strands <= the baseline's (0.8 ms).
 """
 
 from __future__ import annotations
 
-import math
+import argparse
+import json
+import os
+import subprocess
 import sys
+import tarfile
 import time
 from collections.abc import Callable
+from io import BytesIO
+from pathlib import Path
 
-import numpy as np
-
-from riderlive.horse import ProceduralHorse
-from riderlive.physics import chain, kernels, strands
-from riderlive.physics.config import PhysicsConfig
-from riderlive.physics.drive import Drive
-from riderlive.physics.reference import ReferenceModel
-from riderlive.physics.skinned import SkinnedModel
+BASELINE = "e7afd0b"
+"""The last commit with the hand-written kernels (main before issue 18)."""
+REPO = Path(__file__).resolve().parent.parent
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "riderlive-bench"
 
 
 def per_call_us(fn: Callable[[], object], calls: int, blocks: int) -> float:
-    """Best over ``blocks`` of the CPU time per call (this thread's CPU clock: time spent
-    waiting for a core on a shared machine does not count; cache and frequency effects
-    of the other work do, and only ever add, hence the minimum)."""
+    """Best over ``blocks`` of this thread's CPU time per call, microseconds."""
     samples = []
     for _ in range(blocks):
         start = time.thread_time()
@@ -41,99 +52,86 @@ def per_call_us(fn: Callable[[], object], calls: int, blocks: int) -> float:
     return min(samples)
 
 
-def python_strand(n: int = 12, iterations: int = 4) -> Callable[[], None]:
-    """The baseline: one strand in lists of floats."""
-    rest = 0.08
-    x = [[0.0, -rest * i, 0.0] for i in range(n)]
-    x[5][0] += 0.05  # not at rest, so every projection does work
-    prev = [p[:] for p in x]
-    g = 9.81 / 240.0**2
+def measure(blocks: int) -> dict[str, float]:
+    """The figures, for whichever ``riderlive`` is importable (the API used here is the same in both trees)."""
+    import numpy as np
 
-    def step() -> None:
-        for i in range(1, n):
-            p, q = x[i], prev[i]
-            nx, ny, nz = 2 * p[0] - q[0], 2 * p[1] - q[1] - g, 2 * p[2] - q[2]
-            q[0], q[1], q[2] = p[0], p[1], p[2]
-            p[0], p[1], p[2] = nx, ny, nz
-        for _ in range(iterations):
-            for i in range(n - 1):
-                a, b = x[i], x[i + 1]
-                dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                f = (d - rest) / d
-                if i == 0:
-                    b[0] -= f * dx
-                    b[1] -= f * dy
-                    b[2] -= f * dz
-                else:
-                    h = 0.5 * f
-                    a[0] += h * dx
-                    a[1] += h * dy
-                    a[2] += h * dz
-                    b[0] -= h * dx
-                    b[1] -= h * dy
-                    b[2] -= h * dz
-        for i in range(1, n):
-            a, b = x[i - 1], x[i]
-            dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-            f = rest / math.sqrt(dx * dx + dy * dy + dz * dz)
-            b[0], b[1], b[2] = a[0] + f * dx, a[1] + f * dy, a[2] + f * dz
+    from riderlive.horse import ProceduralHorse
+    from riderlive.physics.config import PhysicsConfig
+    from riderlive.physics.drive import Drive
+    from riderlive.physics.reference import ReferenceModel
+    from riderlive.physics.skinned import SkinnedModel
 
-    return step
-
-
-def skinned_rows(drive: Drive, compiled: bool, blocks: int) -> list[tuple[str, float]]:
-    """The skinned tail + braid's whole step and its parts, compiled or on the NumPy path."""
-    sk = SkinnedModel.build(PhysicsConfig(), compiled=compiled)
+    drive = Drive(np.asarray(ProceduralHorse("gallop").sample(0.5)))
+    out: dict[str, float] = {}
+    sk = SkinnedModel.build(PhysicsConfig())
     state = sk.initial(drive)
-    for _ in range(120):  # let the strands fall onto the body; also compiles (or loads) the kernels
+    for _ in range(120):  # let the strands fall onto the body; compiles or loads the kernels
         state = sk.step(state, drive)
-    anchors = sk.anchors(drive)
-    step_strands = kernels.strand_step if compiled else strands.step
-    step_chain = kernels.chain_step if compiled else chain.step
-    calls = 3000 if compiled else 300
-    return [
-        (
-            f"skinned tail + braid, whole step ({'compiled' if compiled else 'NumPy'})",
-            per_call_us(lambda: sk.step(state, drive), calls, blocks),
-        ),
-        ("  posing (dock, rider, colliders)", per_call_us(lambda: sk.anchors(drive), calls, blocks)),
-        (
-            "  strand solver (2 strands)",
-            per_call_us(
-                lambda: step_strands(sk.strands, state.strands, anchors.pins, anchors.colliders), calls, blocks
-            ),
-        ),
-        (
-            "  bone chains (2 x 11 bones)",
-            per_call_us(lambda: step_chain(sk.bones, state.bones, state.strands.x, anchors.up), calls, blocks),
-        ),
-    ]
+    out["skinned"] = per_call_us(lambda: sk.step(state, drive), 3000, blocks)
+    out["posing"] = per_call_us(lambda: sk.anchors(drive), 3000, blocks)
+    for n in (400, 4000):
+        ref = ReferenceModel.build(PhysicsConfig.model_validate({"reference": {"strands": n}}))
+        ref_state = ref.initial(drive)
+        for _ in range(120):  # fallen onto the body, so collisions do work
+            ref_state = ref.step(ref_state, drive)
+        out[f"reference {n}"] = per_call_us(
+            lambda ref=ref, s=ref_state: ref.step(s, drive), 30 if n == 400 else 3, blocks
+        )
+    return out
+
+
+def baseline_tree(commit: str) -> Path:
+    """The baseline's ``riderlive`` and ``config`` unpacked from git (once per commit)."""
+    sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", commit], check=True, capture_output=True, text=True)
+    tree = CACHE / sha.stdout.strip()
+    if not (tree / "riderlive").is_dir():
+        archive = subprocess.run(
+            ["git", "-C", str(REPO), "archive", commit, "riderlive", "config"], check=True, capture_output=True
+        )
+        tree.mkdir(parents=True, exist_ok=True)
+        with tarfile.open(fileobj=BytesIO(archive.stdout)) as tar:
+            tar.extractall(tree, filter="data")
+    return tree
+
+
+def child(tree: Path, blocks: int) -> dict[str, float]:
+    """Run :func:`measure` in a fresh interpreter with ``tree`` first on the path."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    code = f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+    code += f"from bench_tail import measure; print(json.dumps(measure({blocks})))"
+    done = subprocess.run([sys.executable, "-c", code], env=env, cwd=tree, check=True, capture_output=True, text=True)
+    figures: dict[str, float] = json.loads(done.stdout.strip().splitlines()[-1])
+    return figures
 
 
 def main() -> int:
-    quick = "--quick" in sys.argv
-    blocks = 3 if quick else 7
-    horse = ProceduralHorse("gallop")
-    drive = Drive(np.asarray(horse.sample(0.5)))
-    baseline = per_call_us(python_strand(), 200, blocks)
-    print(f"baseline: one strand in plain Python                 {baseline:8.1f} us/step")
-    rows = []
-    for n in (400, 4000):
-        cfg = PhysicsConfig.model_validate({"reference": {"strands": n}})
-        ref = ReferenceModel.build(cfg)
-        state = ref.initial(drive)
-        for _ in range(120):  # let the strands fall onto the body, so collisions do work
-            state = ref.step(state, drive)
-        calls = 20 if n == 400 else 3
-        full = per_call_us(lambda ref=ref, state=state: ref.step(state, drive), calls, blocks)
-        rows.append((f"reference {n} x 12 (posing + solver)", full))
-    compiled = skinned_rows(drive, True, blocks)
-    numpy_path = skinned_rows(drive, False, blocks)
-    rows += compiled + numpy_path
-    for label, us in rows:
-        print(f"{label:52s} {us:8.1f} us/step  ({us / baseline:5.2f} x baseline)")
-    print(f"skinned tail + braid, NumPy path / compiled          {numpy_path[0][1] / compiled[0][1]:8.1f} x")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rounds", type=int, default=3, help="child processes per tree, alternating")
+    parser.add_argument("--blocks", type=int, default=5)
+    parser.add_argument("--baseline", default=BASELINE)
+    args = parser.parse_args()
+    trees = {"baseline": baseline_tree(args.baseline), "single source": REPO}
+    for tree in trees.values():  # compile or load both trees' kernels before timing anything
+        child(tree, 1)
+    best: dict[str, dict[str, float]] = {name: {} for name in trees}
+    for _ in range(args.rounds):
+        for name, tree in trees.items():
+            for key, value in child(tree, args.blocks).items():
+                best[name][key] = min(best[name].get(key, float("inf")), value)
+    print(f"per internal step, CPU us, best of {args.rounds} processes x {args.blocks} blocks")
+    print(f"baseline: {args.baseline} from git (the hand-written kernels and the NumPy reference tail)")
+    print(f"{'':40s} {'single source':>14s} {'baseline':>10s} {'ratio':>7s}")
+    labels = {
+        "skinned": "skinned tail + braid, whole step",
+        "posing": "  of which posing (anchors)",
+        "reference 400": "reference tail, 400 strands x 12",
+        "reference 4000": "reference tail, 4000 strands x 12",
+    }
+    for key, label in labels.items():
+        new, old = best["single source"][key], best["baseline"][key]
+        print(f"{label:40s} {new:14.1f} {old:10.1f} {new / old:7.2f}")
+    print("ratio < 1: the single-source compiled step is faster than the code it replaced")
     return 0
 
 

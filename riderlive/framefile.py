@@ -1,12 +1,17 @@
-"""Frame files: CSV and JSONL takes of horse or rider channels, read and written.
+"""Frame files: CSV, JSONL and Parquet takes of horse or rider channels, read and written.
 
 CSV: a header of channel names, an optional ``t`` column (seconds), one frame per
-line. JSONL: one object per line with ``t`` and channel values. ``-`` reads stdin or
-writes stdout. Reading validates everything once at the edge: an unknown column, a
-missing required channel, a cell that is not a number, NaN or inf raise
-:class:`FrameFileError` naming the file, line and column. Writing goes to a file
-beside the target and is renamed at the end, so a failed run leaves nothing partial
-under the output's name.
+line. JSONL: one object per line with ``t`` and channel values. Parquet (``.parquet``,
+``.pq``): one numeric column per channel (float64 written; any float or integer type
+read), an optional ``t`` column; binary, so a 10^7-frame take reads and writes
+without parsing text. ``-`` reads stdin or writes stdout. Reading validates
+everything once at the edge: an unknown, duplicate or missing column, a cell that is
+not a number (Parquet: a column that is not numeric), an empty cell, NaN or inf raise
+:class:`FrameFileError` naming the file, the line (CSV, JSONL; the header is line 1)
+or row (Parquet; the first frame is row 1) and the column. Channel values come back
+as an (N, C) array whose columns are contiguous. Writing goes to a file beside the
+target and is renamed at the end, so a failed run leaves nothing partial under the
+output's name.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -30,14 +35,22 @@ from riderlive.channels import is_known
 
 FloatArray = npt.NDArray[np.float64]
 TIME = "t"
+FORMATS = ("csv", "jsonl", "parquet")
+"""The frame file formats (``--format`` choices)."""
+PARQUET_COMPRESSION: Final = "lz4"
+"""Parquet compression on write: lz4 is fast both ways; motion channels barely compress anyway."""
 
 
 class FrameFileError(ValueError):
     """Bad frame data; the message names the file, line and column."""
 
-    def __init__(self, source: str, message: str, line: int | None = None, column: str | None = None) -> None:
-        self.source, self.line, self.column = source, line, column
+    def __init__(
+        self, source: str, message: str, line: int | None = None, column: str | None = None, row: int | None = None
+    ) -> None:
+        self.source, self.line, self.column, self.row = source, line, column, row
         where = source if line is None else f"{source}:{line}"
+        if row is not None:
+            where += f": row {row}"
         if column is not None:
             where += f": column {column!r}"
         super().__init__(f"{where}: {message}")
@@ -65,28 +78,30 @@ class FrameTable:
 
 
 def file_format(path: str, override: str | None = None) -> str:
-    """``csv`` or ``jsonl`` from an explicit choice or the file's extension."""
+    """``csv``, ``jsonl`` or ``parquet`` from an explicit choice or the file's extension."""
     if override:
         return override
     suffix = Path(path).suffix.lower()
     if suffix in (".jsonl", ".ndjson"):
         return "jsonl"
+    if suffix in (".parquet", ".pq"):
+        return "parquet"
     if suffix == ".csv" or path == "-":
         return "csv"
-    raise FrameFileError(path, f"unknown file type {suffix!r} (use .csv or .jsonl)")
+    raise FrameFileError(path, f"unknown file type {suffix!r} (use .csv, .jsonl or .parquet)")
 
 
-def _check_names(source: str, names: Sequence[str], required: Iterable[str]) -> None:
+def _check_names(source: str, names: Sequence[str], required: Iterable[str], line: int | None = 1) -> None:
     seen: set[str] = set()
     for name in names:
         if name != TIME and not is_known(name):
-            raise FrameFileError(source, "unknown channel", line=1, column=name)
+            raise FrameFileError(source, "unknown channel", line=line, column=name)
         if name in seen:
-            raise FrameFileError(source, "duplicate column", line=1, column=name)
+            raise FrameFileError(source, "duplicate column", line=line, column=name)
         seen.add(name)
     missing = [r for r in required if r not in seen]
     if missing:
-        raise FrameFileError(source, f"missing required channel(s): {', '.join(missing)}", line=1)
+        raise FrameFileError(source, f"missing required channel(s): {', '.join(missing)}", line=line)
 
 
 def _first_bad_cell(source: str, text: str, names: Sequence[str]) -> FrameFileError:
@@ -147,7 +162,7 @@ def _read_csv(source: str, data: bytes | Path, required: Iterable[str]) -> Frame
     except Exception:  # any parse failure gets an exact location below
         raise _first_bad_cell(source, _text(source, data), names) from None
     channels = [n for n in names if n != TIME]
-    values = frame.select(channels).to_numpy(order="c").astype(np.float64, copy=False)
+    values = frame.select(channels).to_numpy(order="fortran").astype(np.float64, copy=False)
     times = frame[TIME].to_numpy().astype(np.float64) if TIME in names else None
     del frame
     finite = np.isfinite(values).all() and (times is None or np.isfinite(times).all())
@@ -196,15 +211,60 @@ def _read_jsonl(source: str, text: str, required: Iterable[str]) -> FrameTable:
     return _split_time(names, np.array(rows, dtype=np.float64).reshape(len(rows), len(names)))
 
 
+def _read_parquet(source: str, data: bytes | Path, required: Iterable[str]) -> FrameTable:
+    """Read with polars (columnar, multi-threaded), then check names, types, empty cells and finiteness."""
+    import polars as pl
+
+    raw = io.BytesIO(data) if isinstance(data, bytes) else data
+    try:
+        schema = pl.read_parquet_schema(raw)
+    except Exception as exc:  # polars raises its own error types for a file that is not Parquet
+        raise FrameFileError(source, f"not a Parquet file ({type(exc).__name__})") from None
+    names = list(schema)
+    _check_names(source, names, required, line=None)
+    for name, dtype in schema.items():
+        if not (dtype.is_float() or dtype.is_integer()):
+            raise FrameFileError(source, f"not numbers: the column holds {dtype}", column=name)
+    if isinstance(raw, io.BytesIO):
+        raw.seek(0)
+    try:
+        frame = pl.read_parquet(raw)
+    except Exception as exc:  # a damaged file: its metadata read, its data did not
+        raise FrameFileError(source, f"unreadable Parquet data ({type(exc).__name__}: {exc})") from None
+    for name, nulls in zip(names, frame.null_count().row(0), strict=True):
+        if nulls:
+            row = int(frame[name].is_null().arg_true()[0]) + 1
+            raise FrameFileError(source, "empty cell", row=row, column=name)
+    channels = [n for n in names if n != TIME]
+    values = frame.select(pl.col(channels).cast(pl.Float64)).to_numpy(order="fortran")
+    times = frame[TIME].cast(pl.Float64).to_numpy() if TIME in names else None
+    del frame
+    for name, column in ([(TIME, times)] if times is not None else []) + list(zip(channels, values.T, strict=True)):
+        _check_finite(source, name, column)
+    return FrameTable(tuple(channels), values, times)
+
+
+def _check_finite(source: str, name: str, column: FloatArray) -> None:
+    """Raise naming the first row that is NaN or inf. The sum is finite only if every value is (fast path;
+    a sum that overflows is then checked value by value)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(column)):
+            return
+    bad = np.flatnonzero(~np.isfinite(column))
+    if len(bad):
+        raise FrameFileError(source, f"not finite: {column[bad[0]]}", row=int(bad[0]) + 1, column=name)
+
+
 def read_frames(path: str, required: Iterable[str] = (), fmt: str | None = None) -> FrameTable:
     """Read a whole frame file, validated; see the module docstring."""
     kind = file_format(path, fmt)
     source = "<stdin>" if path == "-" else path
     required = tuple(required)
-    if kind == "csv":
+    if kind in ("csv", "parquet"):
         if path != "-" and not Path(path).is_file():
             raise FrameFileError(path, "file not found")
-        return _read_csv(source, _read_bytes(path) if path == "-" else Path(path), required)
+        read = _read_csv if kind == "csv" else _read_parquet
+        return read(source, _read_bytes(path) if path == "-" else Path(path), required)
     return _read_jsonl(source, _decode(source, _read_bytes(path)), required)
 
 
@@ -215,22 +275,29 @@ def _umask() -> int:
 
 
 @contextmanager
-def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
-    """Yield a file beside ``path`` that replaces it only on success."""
-    if path == "-":
-        yield sys.stdout.buffer
-        sys.stdout.buffer.flush()
-        return
+def _atomic_path(path: str) -> Iterator[Path]:
+    """Yield the path of a file beside ``path`` that replaces it only on success."""
     target = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
+        yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+@contextmanager
+def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
+    """Yield a file beside ``path`` that replaces it only on success (stdout for ``-``)."""
+    if path == "-":
+        yield sys.stdout.buffer
+        sys.stdout.buffer.flush()
+        return
+    with _atomic_path(path) as tmp, tmp.open("wb") as fh:
+        yield fh
 
 
 ProgressCallback = Callable[[int], None]
@@ -244,6 +311,11 @@ def write_frames(
     kind = file_format(path, fmt)
     names = ([TIME] if table.t is not None else []) + list(table.names)
     columns = ([table.t] if table.t is not None else []) + [table.values[:, i] for i in range(len(table.names))]
+    if kind == "parquet":
+        _write_parquet(path, dict(zip(names, columns, strict=True)))
+        if progress:
+            progress(len(table))
+        return
     with _atomic_binary(path) as fh:
         if kind == "csv":
             import polars as pl
@@ -260,3 +332,18 @@ def write_frames(
                 fh.write(b"".join(orjson.dumps(dict(zip(names, row, strict=True))) + b"\n" for row in block))
                 if progress:
                     progress(len(block))
+
+
+def _write_parquet(path: str, columns: dict[str, FloatArray]) -> None:
+    """One Parquet file, written by polars from the columns (no copy when they are contiguous)."""
+    import polars as pl
+
+    frame = pl.DataFrame(columns)
+    if path == "-":
+        buffer = io.BytesIO()
+        frame.write_parquet(buffer, compression=PARQUET_COMPRESSION)
+        sys.stdout.buffer.write(buffer.getvalue())
+        sys.stdout.buffer.flush()
+        return
+    with _atomic_path(path) as tmp:
+        frame.write_parquet(tmp, compression=PARQUET_COMPRESSION)

@@ -108,7 +108,7 @@ def save(fig: Any, path: Path, dpi: int) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="frame file (.csv or .jsonl)")
+    parser.add_argument("input", help="frame file (.csv, .jsonl or .parquet)")
     parser.add_argument(
         "--channels", default="", help="comma-separated channels to plot (horse or, with --bake, rider)"
     )

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FrameFileError, write_frames
+from riderlive.framefile import FORMATS, FrameFileError, write_frames
 from riderlive.frameunits import METRES, record_scale
 from riderlive.horse.gaits import GAITS
 from riderlive.horse.script import ShotScript, gait_script, generate, load_script
@@ -21,9 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
     parser.add_argument("--seed", type=int, help="turn on seeded stride-to-stride variation")
     parser.add_argument(
-        "-o", "--output", required=True, help="frame file to write (.csv, .jsonl, or -); metres, recorded in NAME.json"
+        "-o", "--output", required=True, help="frame file to write (.csv, .jsonl, .parquet, or -); metres, recorded in NAME.json"
     )
-    parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+    parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
 
 
 def run(args: argparse.Namespace) -> int:

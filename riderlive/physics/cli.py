@@ -15,7 +15,7 @@ import numpy as np
 
 from riderlive.bake import DEFAULT_RATE, horse_matrix
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.framefile import FORMATS, FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.frameunits import recorded_scale, rescale_lengths
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.physics.config import PhysicsConfig, load_physics
@@ -31,18 +31,15 @@ REFERENCE_CHANNELS = ("tail_ref.tx", "tail_ref.ty", "tail_ref.tz")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("input", help="horse take: .csv or .jsonl (metres, degrees), or - for stdin")
-    parser.add_argument("-o", "--output", required=True, help="bone channels to write (.csv, .jsonl, or -)")
+    parser.add_argument("input", help="horse take: .csv, .jsonl or .parquet (metres, degrees), or - for stdin")
+    parser.add_argument("-o", "--output", required=True, help="bone channels to write (.csv, .jsonl, .parquet, -)")
     parser.add_argument("--config", help="physics TOML (default config/physics/tail.toml)")
     parser.add_argument("--preset", default="kuhnel2003", help="rider rules preset for the braid (default kuhnel2003)")
     parser.add_argument("--no-rider", action="store_true", help="no rider rules: the braid hangs from an upright rider")
     parser.add_argument("--reference", action="store_true", help="also run the many-strand tail; adds tail_ref.t*")
     parser.add_argument("--strands", metavar="NPZ", help="with --reference: write every strand vertex per frame here")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
-    parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
-    parser.add_argument(
-        "--numpy", action="store_true", help="step the skinned tail with NumPy, not the compiled kernels (slower)"
-    )
+    parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
 
 
 def run_take(
@@ -51,20 +48,15 @@ def run_take(
     rider_rules: RiderModel | None,
     rate: float,
     reference: bool,
-    *,
-    compiled: bool | None = None,
 ) -> tuple[FrameTable, np.ndarray | None]:
-    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None.
-
-    ``compiled``: the skinned tail's kernels (None: whenever numba is installed) or NumPy.
-    """
+    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None."""
     horse = horse_matrix(table)
     times = table.times(rate)
     if len(times) > 1 and np.any(np.diff(times) <= 0.0):
         raise FrameFileError("input", "the t column must increase strictly")
     rider = None if rider_rules is None else rider_rules.evaluate_batch(horse)
     source = TakeSource(times, horse, rider)
-    skinned = SkinnedModel.build(config, compiled)
+    skinned = SkinnedModel.build(config)
     names = channel_names(skinned)
     sk = FixedStepper(skinned.step, skinned.initial(source(times[0])), config.rate, start=float(times[0]))
     ref_model = ReferenceModel.build(config) if reference else None
@@ -97,8 +89,7 @@ def run(args: argparse.Namespace) -> int:
         table = read_frames(args.input, fmt=args.format)
         recorded = recorded_scale(args.input)  # the physics works in metres
         table = rescale_lengths(table, recorded / DEFAULT_SCALE) if recorded else table
-        compiled = False if args.numpy else None
-        result, vertices = run_take(table, config, rules, args.rate, args.reference, compiled=compiled)
+        result, vertices = run_take(table, config, rules, args.rate, args.reference)
         write_frames(args.output, result, args.format)
         if args.strands and vertices is not None:
             np.savez_compressed(args.strands, t=result.times(args.rate), vertices=vertices)

@@ -1,17 +1,22 @@
 """Collision primitives (capsules; a sphere is a capsule with equal ends) and projection out of them.
 
-Everything is in world metres. Projection moves a vertex that lies inside a capsule
-to the capsule's surface along the shortest way out; all capsules are handled in one
-vectorised pass (a vertex inside two of them gets both pushes), and the solver
-repeats passes so a vertex pushed from one into another is handled too.
+Everything is in world metres. Projection (:func:`push_out`, compiled) moves a vertex
+that lies inside a capsule to the capsule's surface along the shortest way out; every
+capsule pushes from the same positions (a vertex inside two of them gets both
+pushes), and the solver repeats passes so a vertex pushed from one into another is
+handled too. :func:`depth` measures (NumPy; for checks and tests).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from riderlive.fastpath import inline, kernel
+from riderlive.physics.vec3 import fmax
 
 FloatArray = npt.NDArray[np.float64]
 SKIN = 1e-9
@@ -89,39 +94,65 @@ def depth(x: FloatArray, caps: Capsules) -> FloatArray:
     return np.asarray(caps.radius[:, None, None] - np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), dtype=np.float64)
 
 
-def push_out(x: FloatArray, caps: Capsules, skin: float = SKIN) -> float:
-    """Project the (V, 3, N) points ``x`` out of every capsule to ``skin`` beyond its surface, in place.
+@kernel
+def push_out(x: FloatArray, first: int, a: FloatArray, b: FloatArray, radius: FloatArray, skin: float) -> float:  # noqa: PLR0917
+    """Project vertices ``first:`` of (V, 3, N) ``x`` out of every capsule to ``skin`` beyond its surface, in place.
 
-    A point inside several capsules gets every push. Returns the largest depth a
-    point was pushed from (metres), 0.0 when none was inside.
+    Capsule ends ``a``, ``b`` (K, 3), ``radius`` (K,). Returns the largest depth a vertex
+    was pushed from (metres), 0.0 when none was inside.
     """
-    d0, d1, d2 = _offsets(x, caps)
-    dist2 = d0 * d0
-    dist2 += d1 * d1
-    dist2 += d2 * d2
-    radius = caps.radius[:, None, None]
-    inside = dist2 < radius * radius
-    if not inside.any():
+    n_vert, _, n = x.shape
+    k_caps = radius.shape[0]
+    ab = np.empty((k_caps, 3))
+    inv_len2 = np.empty(k_caps)
+    for k in range(k_caps):
+        for c in range(3):
+            ab[k, c] = b[k, c] - a[k, c]
+        inv_len2[k] = 1.0 / fmax(ab[k, 0] * ab[k, 0] + ab[k, 1] * ab[k, 1] + ab[k, 2] * ab[k, 2], 1e-18)
+    off = np.empty((k_caps, 3))
+    scale = np.empty(k_caps)
+    deepest = -np.inf
+    inside_any, outside_any = False, False
+    for v in range(first, n_vert):
+        for s in range(n):
+            pushed = False
+            for k in range(k_caps):
+                p0, p1, p2 = x[v, 0, s] - a[k, 0], x[v, 1, s] - a[k, 1], x[v, 2, s] - a[k, 2]
+                t = (p0 * ab[k, 0] + p1 * ab[k, 1] + p2 * ab[k, 2]) * inv_len2[k]
+                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                p0, p1, p2 = p0 - t * ab[k, 0], p1 - t * ab[k, 1], p2 - t * ab[k, 2]
+                dist2 = p0 * p0 + p1 * p1 + p2 * p2
+                r = radius[k]
+                scale[k] = 0.0
+                off[k, 0], off[k, 1], off[k, 2] = p0, p1, p2
+                if not dist2 < r * r:
+                    outside_any = True
+                    continue
+                inside_any, pushed = True, True
+                dist = math.sqrt(dist2)
+                if dist < 1e-12:  # on the axis: no direction to push along, leave sideways
+                    off[k, 0], off[k, 1], off[k, 2] = perpendicular(ab[k, 0], ab[k, 1], ab[k, 2])
+                    scale[k] = r + skin
+                else:
+                    scale[k] = (r + skin) / dist - 1.0
+                deepest = max(deepest, r - dist)
+            if pushed:
+                for c in range(3):
+                    acc = 0.0
+                    for k in range(k_caps):
+                        acc += off[k, c] * scale[k]
+                    x[v, c, s] += acc
+    if not inside_any:
         return 0.0
-    dist = np.sqrt(dist2)
-    on_axis = inside & (dist < 1e-12)
-    if on_axis.any():  # no direction to push along: leave sideways (perpendicular to the axis)
-        k, v, n = np.nonzero(on_axis)
-        side = _perpendicular(caps.b[k] - caps.a[k])
-        d0[k, v, n], d1[k, v, n], d2[k, v, n] = side[:, 0], side[:, 1], side[:, 2]
-        dist[k, v, n] = 1.0
-    scale = np.where(inside, (radius + skin) / np.maximum(dist, 1e-12) - 1.0, 0.0)
-    deepest = float(np.max(np.where(inside, radius - dist, 0.0)))
-    flat = scale.reshape(len(caps), -1)
-    for c, d in enumerate((d0, d1, d2)):
-        x[:, c] += (np.ones(len(caps)) @ (d.reshape(flat.shape) * flat)).reshape(x[:, c].shape)
-    return deepest
+    return max(deepest, 0.0) if outside_any else deepest
 
 
-def _perpendicular(axis: FloatArray) -> FloatArray:
-    """A unit vector perpendicular to each row of (M, 3) ``axis`` (any, for zero rows)."""
-    helper = np.where(np.abs(axis[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    out = np.cross(axis, helper)
-    norm = np.linalg.norm(out, axis=1, keepdims=True)
-    out = np.where(norm > 1e-12, out / np.maximum(norm, 1e-12), [[0.0, 0.0, 1.0]])
-    return np.asarray(out, dtype=np.float64)
+@inline
+def perpendicular(a0: float, a1: float, a2: float) -> tuple[float, float, float]:
+    """A unit vector perpendicular to axis (a0, a1, a2): its cross product with +x, or +y when near x."""
+    h0, h1 = (1.0, 0.0) if abs(a0) < 0.9 else (0.0, 1.0)
+    o0, o1, o2 = -a2 * h1, a2 * h0, a0 * h1 - a1 * h0
+    norm = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    if norm > 1e-12:
+        return (o0 / norm, o1 / norm, o2 / norm)
+    return (0.0, 0.0, 1.0)

@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.horse import ProceduralHorse
+from riderlive.physics.attach import HINDQUARTERS
 from riderlive.physics.config import PhysicsConfig
 from riderlive.physics.drive import FixedStepper, Source, TakeSource
 from riderlive.physics.reference import ReferenceModel, mean_tip
@@ -65,7 +66,7 @@ def tip_paths(config: PhysicsConfig, source: Source, duration: float, sample_rat
     for t in times:
         r.advance_to(float(t), source)
         s.advance_to(float(t), source)
-        hq = ref.horse.hindquarters(source(r.time).horse)
+        hq = ref.body.pose(source(r.time).horse).frame(HINDQUARTERS)
         a.append(hq.rotation.T @ (s.state.strands.x[-1, :, TAIL] - hq.origin))
         b.append(hq.rotation.T @ (mean_tip(r.state) - hq.origin))
     return TipPaths(times, np.array(a), np.array(b))

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import strands
-from riderlive.physics.attach import Frame, HorseAttachment
+from riderlive.physics.attach import DOCK, Body, Frame
 from riderlive.physics.config import PhysicsConfig, StrandParams
 from riderlive.physics.drive import Drive
 from riderlive.physics.strands import MAX_BEND, StrandModel, StrandState
@@ -41,12 +41,12 @@ def pinned_vertices(frame: Frame, offsets: FloatArray, root_length: float) -> Fl
 
 @dataclass(frozen=True, eq=False)
 class ReferenceModel:
-    """The strands' solver model, root offsets (3, N) in the dock frame, and the config."""
+    """The strands' solver model, root offsets (3, N) in the dock frame, the config and the body they hang from."""
 
     strands: StrandModel
     root_offsets: FloatArray
     config: PhysicsConfig
-    horse: HorseAttachment
+    body: Body
 
     @staticmethod
     def build(config: PhysicsConfig) -> ReferenceModel:
@@ -68,20 +68,20 @@ class ReferenceModel:
             damping=ref.strand.damping,
             collision_passes=config.collision_passes,
         )
-        return ReferenceModel(model, offsets, config, HorseAttachment(config.horse))
+        return ReferenceModel(model, offsets, config, Body(config.horse, config.rider))
 
     def initial(self, drive: Drive) -> StrandState:
         """Straight strands along the dock, at rest, for the first frame."""
-        frame = self.horse.dock(self.horse.hindquarters(drive.horse))
+        frame = self.body.pose(drive.horse).frame(DOCK)
         pins = pinned_vertices(frame, self.root_offsets, self.config.reference.strand.root_length)
         direction = np.broadcast_to(frame.rotation[:, :1], (3, self.strands.n_strands))
         return strands.rest_state(self.strands, pins[0], np.ascontiguousarray(direction))
 
     def step(self, state: StrandState, drive: Drive) -> StrandState:
-        """One fixed step toward the horse pose of ``drive``."""
-        hq = self.horse.hindquarters(drive.horse)
-        pins = pinned_vertices(self.horse.dock(hq), self.root_offsets, self.config.reference.strand.root_length)
-        return strands.step(self.strands, state, pins, self.horse.colliders(drive.horse, hq))
+        """One fixed step toward the horse pose of ``drive`` (the horse alone: the rider is not posed)."""
+        pose = self.body.pose(drive.horse)
+        pins = pinned_vertices(pose.frame(DOCK), self.root_offsets, self.config.reference.strand.root_length)
+        return strands.step(self.strands, state, pins, pose.horse_colliders)
 
 
 def mean_tip(state: StrandState) -> FloatArray:

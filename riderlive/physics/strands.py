@@ -1,9 +1,11 @@
-"""A strand solver vectorised over strands: Verlet, distance and bending projection, collisions.
+"""The strand solver: Verlet, distance and bending projection, follow-the-leader, collisions (compiled).
 
 Units and frames: metres, seconds, a right-handed world frame with +y up (the rigs'
 ``tx`` forward, ``ty`` up, ``tz`` side). Positions are stored as ``(V, 3, N)``:
-vertex, coordinate, strand, so each vertex of every strand is one contiguous
-``(3, N)`` block and one NumPy call works on all strands at once.
+vertex, coordinate, strand; the kernels loop over vertices, then strands (innermost,
+contiguous), so 2 strands or 4000 run the same code. Written once, as loops, and
+compiled (:mod:`riderlive.fastpath`); ``advance.py_func`` runs the same source
+interpreted (tests).
 
 Model / State / step: :class:`StrandModel` holds everything static (rest lengths,
 masses, stiffness, step size); :class:`StrandState` holds the two position sets
@@ -19,8 +21,8 @@ One step (size ``model.dt``):
    ``bend``) toward the line through its two neighbours, the neighbours move the
    other way so the centre of mass stays put (the "softer projection" of the post).
 4. Distance constraints, ``iterations`` times, in red-black Gauss-Seidel order: the
-   even segments together, then the odd ones (segments in one half share no
-   vertex, so each half is one vectorised projection).
+   even segments, then the odd ones (segments in one half share no vertex, so the
+   order within a half does not matter).
 5. Follow the leader (Mueller et al. 2012): one sweep from root to tip puts each
    vertex at exactly its rest distance from its predecessor, fixing what the few
    Gauss-Seidel iterations left (they converge slowly along an 11-segment chain
@@ -33,12 +35,15 @@ One step (size ``model.dt``):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.physics.collision import WEDGE_SKIN, Capsules, push_out
+from riderlive.fastpath import kernel
+from riderlive.physics.collision import SKIN, WEDGE_SKIN, Capsules, push_out
+from riderlive.physics.vec3 import fmax
 
 FloatArray = npt.NDArray[np.float64]
 EXTRA_PASSES = 32
@@ -63,7 +68,8 @@ class StrandModel:
     in 1/s; ``dt`` the fixed step in seconds. Scalars broadcast to every strand.
     ``collide_each_iteration`` adds a collision pass after every distance iteration:
     dearer, but short segments resting on a body (the braid on the back) then keep
-    their lengths within 1 %.
+    their lengths within 1 %. Derived: ``keep`` (N,), the velocity kept per step
+    ``exp(-damping dt)``; ``bends``, whether any strand bends.
     """
 
     rest: FloatArray
@@ -77,8 +83,8 @@ class StrandModel:
     collision_passes: int = 2
     leader_correction: float = 1.0
     collide_each_iteration: bool = False
-    _pre: dict[str, FloatArray] = field(init=False, repr=False)
-    _bends: bool = field(init=False, repr=False)
+    keep: FloatArray = field(init=False, repr=False)
+    bends: bool = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         rest = np.ascontiguousarray(self.rest, dtype=np.float64)
@@ -99,10 +105,8 @@ class StrandModel:
         object.__setattr__(self, "inv_mass", w)
         object.__setattr__(self, "bend", bend)
         object.__setattr__(self, "damping", damping)
-        pre = _precompute(rest, w, bend)
-        pre["keep"] = np.exp(-damping * self.dt)
-        object.__setattr__(self, "_pre", pre)
-        object.__setattr__(self, "_bends", bool(n_vert >= 3 and np.any(bend > 0.0)))
+        object.__setattr__(self, "keep", np.exp(-damping * self.dt))
+        object.__setattr__(self, "bends", bool(n_vert >= 3 and np.any(bend > 0.0)))
 
     @property
     def n_vertices(self) -> int:
@@ -112,31 +116,22 @@ class StrandModel:
     def n_strands(self) -> int:
         return int(self.rest.shape[1])
 
-
-def _pair_coefficients(wa: FloatArray, wb: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Shares of a distance correction for the two ends of each segment, (S, 1, N)."""
-    total = wa + wb
-    safe = np.where(total > 0.0, total, 1.0)
-    return (wa / safe)[:, None, :], (wb / safe)[:, None, :]
-
-
-def _precompute(rest: FloatArray, w: FloatArray, bend: FloatArray) -> dict[str, FloatArray]:
-    pre: dict[str, FloatArray] = {}
-    for name, first in (("even", 0), ("odd", 1)):
-        a = slice(first, -1, 2)
-        b = slice(first + 1, None, 2)
-        pre[f"{name}_rest"] = np.ascontiguousarray(rest[first::2])
-        pre[f"{name}_ca"], pre[f"{name}_cb"] = _pair_coefficients(w[a], w[b])
-    # Bending of vertex i toward the line through i-1 and i+1: gradient 1 for i and
-    # -1/2 for each neighbour (the nearest point is near the midpoint).
-    wa, wb, wc = w[:-2], w[1:-1], w[2:]
-    den = wb + 0.25 * (wa + wc)
-    safe = np.where(den > 0.0, den, 1.0)
-    k = bend[None, :] / safe
-    pre["bend_b"] = (k * wb)[:, None, :]
-    pre["bend_a"] = (0.5 * k * wa)[:, None, :]
-    pre["bend_c"] = (0.5 * k * wc)[:, None, :]
-    return pre
+    @property
+    def solver(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int, int, int, bool, bool, float, float]:
+        """The arguments :func:`advance` takes after the positions, pins and colliders."""
+        return (
+            self.rest,
+            np.asarray(self.inv_mass),
+            np.asarray(self.bend),
+            self.keep,
+            int(self.pinned),
+            int(self.iterations),
+            int(self.collision_passes),
+            self.bends,
+            bool(self.collide_each_iteration),
+            float(self.gravity * self.dt * self.dt),
+            float(self.leader_correction),
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,104 +153,173 @@ def rest_state(model: StrandModel, roots: FloatArray, directions: FloatArray) ->
     return StrandState(x, x.copy())
 
 
-_ONES3 = np.ones(3)
-
-
-def _dot3(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Dot product over the coordinate axis of (S, 3, N) arrays, (S, N) (a matmul: the cheapest reduction)."""
-    out: FloatArray = _ONES3 @ (a * b)
-    return out
-
-
-def _distance_pass(x: FloatArray, pre: dict[str, FloatArray], name: str, first: int) -> None:
-    a = x[first:-1:2]
-    b = x[first + 1 :: 2]
-    d = b - a
-    length = np.sqrt(_dot3(d, d))
-    np.maximum(length, 1e-12, out=length)
-    f = pre[f"{name}_rest"] / length
-    np.subtract(1.0, f, out=f)
-    d *= f[:, None, :]
-    a += pre[f"{name}_ca"] * d
-    b -= pre[f"{name}_cb"] * d
-
-
-def _bend_pass(x: FloatArray, pre: dict[str, FloatArray]) -> None:
-    a, b, c = x[:-2], x[1:-1], x[2:]
-    u = c - a
-    m = b - a
-    uu = _dot3(u, u)
-    np.maximum(uu, 1e-18, out=uu)
-    t = _dot3(m, u)
-    t /= uu
-    u *= t[:, None, :]
-    m -= u  # m is now the offset of b from its nearest point on the line a-c
-    b -= pre["bend_b"] * m
-    a += pre["bend_a"] * m
-    c += pre["bend_c"] * m
-
-
-def _follow_the_leader(x: FloatArray, rest: FloatArray, pinned: int) -> FloatArray:
-    """Put every free vertex at its rest distance from its (already placed) predecessor, root to tip.
-
-    Modifies ``x``; returns the moves (V, 3, N).
-    """
-    before = x[pinned:].copy()
-    for i in range(pinned, x.shape[0]):
-        d = x[i] - x[i - 1]
-        f = rest[i - 1] / np.sqrt(np.maximum(_ONES3 @ (d * d), 1e-24))
-        f -= 1.0
-        d *= f
-        x[i] += d
-    moves = np.zeros_like(x)
-    np.subtract(x[pinned:], before, out=moves[pinned:])
-    return moves
+_NO_CAPS = Capsules.empty()
 
 
 def step(model: StrandModel, state: StrandState, pins: FloatArray, colliders: Capsules | None = None) -> StrandState:
     """Advance ``state`` by ``model.dt``; ``pins`` (pinned, 3, N) are the kinematic vertices' new positions."""
-    x, prev = state.x, state.x_prev
-    new = x - prev
-    new *= model._pre["keep"]
-    new += x
-    new[:, 1, :] -= model.gravity * model.dt * model.dt
-    new[: model.pinned] = pins
-    pre = model._pre
-    if model._bends:
-        _bend_pass(new, pre)
-    caps = colliders if colliders is not None and len(colliders) > 0 else None
-    free = new[model.pinned :]
-    for _ in range(model.iterations):
-        _distance_pass(new, pre, "even", 0)
-        if model.n_vertices >= 3:
-            _distance_pass(new, pre, "odd", 1)
-        if caps is not None and model.collide_each_iteration:
-            push_out(free, caps)
-    moves = _follow_the_leader(new, model.rest, model.pinned)
-    if caps is not None:
-        for _ in range(model.collision_passes):
-            if push_out(free, caps) < REPAIR_DEPTH:
+    caps = _NO_CAPS if colliders is None else colliders
+    new, prev = advance(state.x, state.x_prev, pins, caps.a, caps.b, caps.radius, *model.solver)
+    return StrandState(new, prev)
+
+
+# ----------------------------------------------------------------------------- the kernels
+
+
+@kernel
+def advance(  # noqa: PLR0917
+    x: FloatArray,
+    prev: FloatArray,
+    pins: FloatArray,
+    cap_a: FloatArray,
+    cap_b: FloatArray,
+    cap_r: FloatArray,
+    rest: FloatArray,
+    w: FloatArray,
+    bend: FloatArray,
+    keep: FloatArray,
+    pinned: int,
+    iterations: int,
+    collision_passes: int,
+    bends: bool,
+    collide_each: bool,
+    fall: float,
+    leader: float,
+) -> tuple[FloatArray, FloatArray]:
+    """One step (see the module docstring): new positions and the new previous positions, (V, 3, N) each.
+
+    Colliders: capsule ends ``cap_a``, ``cap_b`` (K, 3), radii ``cap_r`` (K,); the rest is
+    :attr:`StrandModel.solver` (``fall`` is gravity * dt * dt).
+    """
+    n_vert, _, n = x.shape
+    new = np.empty_like(x)
+    for i in range(n_vert):  # Verlet with damping, and gravity
+        for c in range(3):
+            for s in range(n):
+                new[i, c, s] = (x[i, c, s] - prev[i, c, s]) * keep[s] + x[i, c, s]
+        for s in range(n):
+            new[i, 1, s] -= fall
+    for i in range(pinned):
+        for c in range(3):
+            for s in range(n):
+                new[i, c, s] = pins[i, c, s]
+    if bends:
+        bend_pass(new, w, bend)
+    caps = cap_r.shape[0] > 0
+    for _ in range(iterations):
+        distance_pass(new, rest, w, 0)
+        distance_pass(new, rest, w, 1)
+        if caps and collide_each:
+            push_out(new, pinned, cap_a, cap_b, cap_r, SKIN)
+    moves = follow_the_leader(new, rest, pinned)
+    if caps:
+        for _ in range(collision_passes):
+            if push_out(new, pinned, cap_a, cap_b, cap_r, SKIN) < REPAIR_DEPTH:
                 break
-            _distance_pass(new, pre, "even", 0)  # a deep push broke lengths: repair them...
-            if model.n_vertices >= 3:
-                _distance_pass(new, pre, "odd", 1)
+            distance_pass(new, rest, w, 0)  # a deep push broke lengths: repair them...
+            distance_pass(new, rest, w, 1)
         wedge = WEDGE_SKIN  # ...and end outside every shape (this pass finds nothing, normally);
         for _ in range(EXTRA_PASSES):  # a vertex wedged between two shapes gets a growing margin
-            if push_out(free, caps, wedge) == 0.0:
+            if push_out(new, pinned, cap_a, cap_b, cap_r, wedge) == 0.0:
                 break
             wedge = min(2.0 * wedge, MAX_WEDGE_SKIN)
     # Each vertex's velocity loses the part of its child's move that was not its own
     # (Mueller 2012's velocity correction), so the one-sided projection does not add a
     # drag toward the root.
-    prev_out = x.copy()
-    prev_out[:-1] += model.leader_correction * moves[1:]
-    return StrandState(new, prev_out)
+    out_prev = x.copy()
+    for i in range(n_vert - 1):
+        for c in range(3):
+            for s in range(n):
+                out_prev[i, c, s] += leader * moves[i + 1, c, s]
+    return new, out_prev
+
+
+@kernel
+def distance_pass(x: FloatArray, rest: FloatArray, w: FloatArray, first: int) -> None:
+    """Project segments ``first``, ``first + 2``, ... to their rest lengths, shared by inverse mass."""
+    n_vert, _, n = x.shape
+    for i in range(first, n_vert - 1, 2):
+        for s in range(n):
+            wa, wb = w[i, s], w[i + 1, s]
+            total = wa + wb
+            safe = total if total > 0.0 else 1.0
+            d0 = x[i + 1, 0, s] - x[i, 0, s]
+            d1 = x[i + 1, 1, s] - x[i, 1, s]
+            d2 = x[i + 1, 2, s] - x[i, 2, s]
+            f = 1.0 - rest[i, s] / fmax(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), 1e-12)
+            d0, d1, d2 = d0 * f, d1 * f, d2 * f
+            ca, cb = wa / safe, wb / safe
+            x[i, 0, s] += ca * d0
+            x[i, 1, s] += ca * d1
+            x[i, 2, s] += ca * d2
+            x[i + 1, 0, s] -= cb * d0
+            x[i + 1, 1, s] -= cb * d1
+            x[i + 1, 2, s] -= cb * d2
+
+
+@kernel
+def bend_pass(x: FloatArray, w: FloatArray, bend: FloatArray) -> None:
+    """Move each interior vertex part of the way toward its neighbours' line, the neighbours the other way.
+
+    Every correction is computed from the same positions, then applied: the middle
+    vertices first, then the first neighbours, then the second ones (gradient 1 for
+    the vertex, -1/2 for each neighbour: the nearest point is near the midpoint).
+    """
+    n_vert, _, n = x.shape
+    m = np.empty((n_vert - 2, 3, n))  # offsets of each vertex from its neighbours' line
+    k = np.empty((n_vert - 2, 3, n))  # shares of the first neighbour, the vertex, the second neighbour
+    for i in range(n_vert - 2):
+        for s in range(n):
+            u0, u1, u2 = x[i + 2, 0, s] - x[i, 0, s], x[i + 2, 1, s] - x[i, 1, s], x[i + 2, 2, s] - x[i, 2, s]
+            m0, m1, m2 = x[i + 1, 0, s] - x[i, 0, s], x[i + 1, 1, s] - x[i, 1, s], x[i + 1, 2, s] - x[i, 2, s]
+            t = (m0 * u0 + m1 * u1 + m2 * u2) / fmax(u0 * u0 + u1 * u1 + u2 * u2, 1e-18)
+            m[i, 0, s], m[i, 1, s], m[i, 2, s] = m0 - u0 * t, m1 - u1 * t, m2 - u2 * t
+            wa, wb, wc = w[i, s], w[i + 1, s], w[i + 2, s]
+            den = wb + 0.25 * (wa + wc)
+            kk = bend[s] / (den if den > 0.0 else 1.0)
+            k[i, 0, s], k[i, 1, s], k[i, 2, s] = 0.5 * kk * wa, kk * wb, 0.5 * kk * wc
+    for i in range(n_vert - 2):
+        for c in range(3):
+            for s in range(n):
+                x[i + 1, c, s] -= k[i, 1, s] * m[i, c, s]
+    for i in range(n_vert - 2):
+        for c in range(3):
+            for s in range(n):
+                x[i, c, s] += k[i, 0, s] * m[i, c, s]
+    for i in range(n_vert - 2):
+        for c in range(3):
+            for s in range(n):
+                x[i + 2, c, s] += k[i, 2, s] * m[i, c, s]
+
+
+@kernel
+def follow_the_leader(x: FloatArray, rest: FloatArray, pinned: int) -> FloatArray:
+    """Put every free vertex at its rest distance from its (already placed) predecessor, root to tip.
+
+    Modifies ``x``; returns the moves (V, 3, N).
+    """
+    n_vert, _, n = x.shape
+    moves = np.zeros_like(x)
+    for i in range(pinned, n_vert):
+        for s in range(n):
+            d0 = x[i, 0, s] - x[i - 1, 0, s]
+            d1 = x[i, 1, s] - x[i - 1, 1, s]
+            d2 = x[i, 2, s] - x[i - 1, 2, s]
+            f = rest[i - 1, s] / math.sqrt(fmax(d0 * d0 + d1 * d1 + d2 * d2, 1e-24)) - 1.0
+            for c, d in ((0, d0), (1, d1), (2, d2)):
+                before = x[i, c, s]
+                x[i, c, s] += d * f
+                moves[i, c, s] = x[i, c, s] - before
+    return moves
+
+
+# ----------------------------------------------------------------------------- diagnostics (NumPy)
 
 
 def stretch(model: StrandModel, x: FloatArray) -> FloatArray:
     """Relative segment length error |len - rest| / rest, (V-1, N)."""
     d = x[1:] - x[:-1]
-    return np.abs(np.sqrt(_dot3(d, d)) / model.rest - 1.0)
+    return np.asarray(np.abs(np.sqrt(np.einsum("icn,icn->in", d, d)) / model.rest - 1.0), dtype=np.float64)
 
 
 def energy(model: StrandModel, state: StrandState) -> float:
@@ -269,5 +333,5 @@ def energy(model: StrandModel, state: StrandState) -> float:
     w = np.asarray(model.inv_mass)[free]
     mass = np.where(w > 0.0, 1.0 / np.where(w > 0.0, w, 1.0), 0.0)
     v = (state.x[free] - state.x_prev[free]) / model.dt
-    kinetic = 0.5 * float(np.sum(mass * _dot3(v, v)))
+    kinetic = 0.5 * float(np.sum(mass * np.einsum("icn,icn->in", v, v)))
     return kinetic + model.gravity * float(np.sum(mass * state.x[free, 1]))

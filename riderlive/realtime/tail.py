@@ -1,6 +1,6 @@
 """The horse's tail and the rider's braid in the tick: strand physics driven by the tick's own frames.
 
-:class:`TickPhysics` wraps :class:`riderlive.physics.skinned.SkinnedModel` (the compiled
+:class:`TickPhysics` wraps :class:`riderlive.physics.skinned.SkinnedModel` (compiled
 kernels) and a :class:`riderlive.physics.drive.FixedStepper`. Each tick hands it the
 horse and rider frames the tick produced at engine time ``now``; the stepper takes
 every internal step (``PhysicsConfig.rate``, 240 Hz) that ends by ``now``, each one
@@ -41,7 +41,7 @@ _RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
 
 def physics_channels(file: str | Path | None = None) -> tuple[str, ...]:
     """The ``tail_NN.*`` / ``braid_NN.*`` channels the tick publishes for a physics config."""
-    return channel_names(SkinnedModel.build(load_physics(file), compiled=False))
+    return channel_names(SkinnedModel.build(load_physics(file)))
 
 
 class TickFrames:
@@ -72,9 +72,9 @@ class TickFrames:
 class TickPhysics:
     """The skinned tail and braid as the tick runs them; :meth:`tick` once per tick."""
 
-    def __init__(self, file: str | Path | None, length_scale: float, compiled: bool | None = None) -> None:
+    def __init__(self, file: str | Path | None, length_scale: float) -> None:
         self.config = load_physics(file)
-        self.model = SkinnedModel.build(self.config, compiled)
+        self.model = SkinnedModel.build(self.config)
         self.names = channel_names(self.model)
         self.to_metres = length_scale / DEFAULT_SCALE
         self._lengths = np.array([lookup(n).kind is Kind.TRANSLATION for n in self.names])

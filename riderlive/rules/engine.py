@@ -5,18 +5,21 @@ frame is a sequence in the order of ``channels.RIDER``. Lengths come in the user
 units and are multiplied by ``scale`` into the thesis rig's units; translation
 outputs are divided by ``scale`` on the way out. The animator layer (gain, offset)
 applies in output units. Both paths evaluate the same rule source
-(:mod:`riderlive.rules.kuhnel2003`); :func:`evaluate_batch` works in cache-sized
-chunks so a million frames stay fast.
+(:mod:`riderlive.rules.kuhnel2003`): :meth:`RiderModel.evaluate` on floats, and
+:meth:`RiderModel.evaluate_batch` either on NumPy arrays in cache-sized chunks or, from
+:data:`COMPILED_FROM` frames, as the same scalar source compiled into a batch kernel
+(:func:`riderlive.fastpath.batch`), which runs at the memory-traffic floor.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import astuple, dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
+from riderlive import fastpath
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER, Kind
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.kuhnel2003 import ARRAY_OPS, RULE_INPUTS, SCALAR_OPS, RuleFunction, make_rules
@@ -28,7 +31,10 @@ _INPUT_COLUMNS: tuple[int, ...] = tuple(HORSE_INDEX[name] for name in RULE_INPUT
 _INPUT_IS_LENGTH: tuple[bool, ...] = tuple(HORSE[HORSE_INDEX[name]].kind is Kind.TRANSLATION for name in RULE_INPUTS)
 _OUTPUT_IS_LENGTH: tuple[bool, ...] = tuple(c.kind is Kind.TRANSLATION for c in RIDER)
 BATCH_CHUNK = 4096
-"""Frames per chunk of the batch path: its temporaries stay in the CPU cache."""
+"""Frames per chunk of the NumPy batch path: its temporaries stay in the CPU cache."""
+COMPILED_FROM = 1_000_000
+"""Takes of at least this many frames use the compiled batch kernel (when numba is installed). Its first
+use with a preset compiles it (seconds; then cached on disk); shorter takes are as quick on NumPy."""
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,7 @@ class RiderModel:
         offset = self.animator.offset_vector()
         identity = bool(np.all(gain == 1.0) and np.all(offset == 0.0))
         object.__setattr__(self, "_in_gain", in_gain)
+        object.__setattr__(self, "_in_gain_array", np.array(in_gain))
         object.__setattr__(self, "_unit_input", all(g == 1.0 for g in in_gain))
         object.__setattr__(self, "_out_gain", gain)
         object.__setattr__(self, "_out_offset", offset)
@@ -69,18 +76,40 @@ class RiderModel:
             return list(out)
         return [v * g + o for v, (g, o) in zip(out, pairs, strict=True)]
 
-    def evaluate_batch(self, horse: FloatArray) -> FloatArray:
-        """Many frames at once: ``horse`` is (N, len(HORSE)), the result (N, len(RIDER))."""
+    def evaluate_batch(self, horse: FloatArray, compiled: bool | None = None) -> FloatArray:
+        """Many frames at once: ``horse`` is (N, len(HORSE)), the result (N, len(RIDER)).
+
+        ``compiled``: the compiled kernel (True), NumPy chunks (False), or by take length (None).
+        """
         horse = np.asarray(horse, dtype=np.float64)
         if horse.ndim != 2 or horse.shape[1] != len(HORSE):
             raise ValueError(f"expected an (N, {len(HORSE)}) array, got {horse.shape}")
-        n = horse.shape[0]
+        return self._batch([horse[:, i] for i in _INPUT_COLUMNS], horse.shape[0], compiled)
+
+    def evaluate_columns(
+        self, columns: Mapping[str, FloatArray], frames: int, compiled: bool | None = None
+    ) -> FloatArray:
+        """:meth:`evaluate_batch` on named horse columns of ``frames`` values (absent channels are zero)."""
+        zero = np.zeros(frames)
+        return self._batch([columns.get(name, zero) for name in RULE_INPUTS], frames, compiled)
+
+    def _batch(self, inputs: list[FloatArray], n: int, compiled: bool | None) -> FloatArray:
+        """The rules on ``inputs`` (RULE_INPUTS order); (N, len(RIDER)), each channel contiguous."""
+        if compiled is None:
+            compiled = fastpath.AVAILABLE and n >= COMPILED_FROM
         by_channel = np.empty((len(RIDER), n), dtype=np.float64)
+        if compiled:
+            if self._out_pairs is None:  # type: ignore[attr-defined]
+                self._kernel()(inputs, by_channel, self._in_gain_array)  # type: ignore[attr-defined]
+            else:
+                gain, offset = self._out_gain, self._out_offset  # type: ignore[attr-defined]
+                self._kernel()(inputs, by_channel, self._in_gain_array, gain, offset)  # type: ignore[attr-defined]
+            return by_channel.T
         rules: RuleFunction = self._array  # type: ignore[attr-defined]
-        in_gain = np.array(self._in_gain)[:, None]  # type: ignore[attr-defined]
+        in_gain = self._in_gain_array[:, None]  # type: ignore[attr-defined]
         for start in range(0, n, BATCH_CHUNK):
             stop = min(start + BATCH_CHUNK, n)
-            columns = np.ascontiguousarray(horse[start:stop, _INPUT_COLUMNS].T)
+            columns = np.array([c[start:stop] for c in inputs], dtype=np.float64)
             if not self._unit_input:  # type: ignore[attr-defined]
                 columns *= in_gain
             for row, column in zip(by_channel, rules(*columns), strict=True):
@@ -90,3 +119,12 @@ class RiderModel:
             out *= self._out_gain  # type: ignore[attr-defined]
             out += self._out_offset  # type: ignore[attr-defined]
         return out
+
+    def _kernel(self) -> fastpath.BatchKernel:
+        """The compiled batch kernel of this preset's rules (built on first use)."""
+        built: fastpath.BatchKernel | None = self.__dict__.get("_compiled")
+        if built is None:
+            rules = make_rules(self.params, SCALAR_OPS)
+            built = fastpath.batch(rules, len(RULE_INPUTS), len(RIDER), helpers=astuple(SCALAR_OPS))
+            object.__setattr__(self, "_compiled", built)
+        return built

@@ -28,7 +28,7 @@ from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.service.supervisor import TickSupervisor
-from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, take_path
+from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
 
 log = logging.getLogger(__name__)
@@ -178,7 +178,7 @@ class Service:
             self.link.send(cmd.SetMode(Mode.INPUT))
             self.source = {"kind": "live"}
         else:
-            path = take_path(self.config.takes.directory, request["take"])
+            path = replay_path(self.config.takes.directory, request["take"])
             if not path.is_file():
                 raise FileNotFoundError(path.name)
             if self.recorder is not None and self.recorder.path == path:

@@ -64,13 +64,22 @@ def _write_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
+def replay_path(directory: str | Path, name: str) -> Path:
+    """The file to replay for take ``name``: ``NAME.csv``, or ``NAME.parquet`` when only that exists."""
+    if name.endswith(".parquet"):
+        return take_path(directory, name[: -len(".parquet")]).with_suffix(".parquet")
+    path = take_path(directory, name)
+    parquet = path.with_suffix(".parquet")
+    return parquet if not path.exists() and parquet.exists() else path
+
+
 def list_takes(directory: str | Path) -> list[dict[str, object]]:
     """Takes in ``directory``, newest first: name, bytes, modification time, rows and complete (sidecar)."""
     folder = Path(directory)
     if not folder.is_dir():
         return []
     out: list[tuple[float, dict[str, object]]] = []
-    for path in folder.glob("*.csv"):
+    for path in [*folder.glob("*.csv"), *folder.glob("*.parquet")]:
         if path.name.startswith("."):
             continue
         try:

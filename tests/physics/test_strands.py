@@ -124,3 +124,15 @@ def test_no_vertex_inside_a_collider_after_a_step(swing: float, side: float, spe
         pins = pins + np.array([speed, 0.0, side])[None, :, None] / RATE * math.cos(8.0 * k / RATE)
         state = step(model, state, pins, caps)
         assert depth(state.x[1:], caps).max() <= 0.0
+
+
+def test_a_vertex_on_a_capsule_axis_leaves_sideways_to_the_surface() -> None:
+    """No direction to push along: the vertex leaves perpendicular to the axis, to ``radius + skin`` from it."""
+    from riderlive.physics.collision import SKIN, push_out
+
+    a, b = np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])
+    x = np.array([[[0.0], [0.5], [0.0]]])  # one vertex on the axis of a vertical capsule
+    deepest = push_out(x, 0, a, b, np.array([0.2]), SKIN)
+    assert deepest == pytest.approx(0.2)
+    assert math.hypot(x[0, 0, 0], x[0, 2, 0]) == pytest.approx(0.2 + SKIN, abs=1e-12)
+    assert x[0, 1, 0] == 0.5 and depth(x, Capsules(a, b, np.array([0.2]))).max() <= 0.0

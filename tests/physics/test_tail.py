@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
+from riderlive.physics.attach import HINDQUARTERS
 from riderlive.physics.collision import Capsules, depth
 from riderlive.physics.config import PhysicsConfig
 from riderlive.physics.drive import Drive, FixedStepper, LiveSource
@@ -48,10 +49,11 @@ def run(kind: str) -> Run:
         r.advance_to(t, src)
         s.advance_to(t, src)
         drive = src(r.time)
-        hq = ref.horse.hindquarters(drive.horse)
+        pose = ref.body.pose(drive.horse)
+        hq = pose.frame(HINDQUARTERS)
         if kind != "trot_rear_gallop":  # its reference is only compared, not checked
             out.ref_stretch = max(out.ref_stretch, float(stretch(ref.strands, r.state.x).max()))
-            out.ref_depth = max(out.ref_depth, float(depth(r.state.x[2:], ref.horse.colliders(drive.horse, hq)).max()))
+            out.ref_depth = max(out.ref_depth, float(depth(r.state.x[2:], pose.horse_colliders).max()))
         st = stretch(sk.strands, s.state.strands.x)
         out.tail_stretch = max(out.tail_stretch, float(st[:, TAIL].max()))
         out.braid_stretch = max(out.braid_stretch, float(st[:, BRAID].max()))
@@ -148,7 +150,7 @@ def test_take_source_interpolates_and_holds_the_ends() -> None:
 def test_collision_shapes_follow_the_horse() -> None:
     ref = ReferenceModel.build(CONFIG)
     drive: Drive = source("buck")(2.0)
-    caps: Capsules = ref.horse.colliders(drive.horse, ref.horse.hindquarters(drive.horse))
+    caps: Capsules = ref.body.pose(drive.horse).horse_colliders
     assert len(caps) == 3
     assert np.all(caps.b[1:, 1] < caps.a[1:, 1])  # legs run down from the hips toward the hooves
 

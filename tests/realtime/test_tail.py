@@ -46,7 +46,7 @@ def run_live(physics: TickPhysics, times: np.ndarray, h: np.ndarray, r: np.ndarr
 
 def test_channels_are_the_physics_outputs() -> None:
     names = physics_channels()
-    assert names == channel_names(SkinnedModel.build(TickPhysics(None, 25.0).config, compiled=False))
+    assert names == channel_names(SkinnedModel.build(TickPhysics(None, 25.0).config))
     assert any(n.startswith("tail_10.") for n in names) and any(n.startswith("braid_10.") for n in names)
 
 

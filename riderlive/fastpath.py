@@ -1,0 +1,317 @@
+"""Compile one source: plain Python loops on floats and float64 arrays, run by numba.
+
+The project writes each algorithm once. Where it must be fast, that one source is
+compiled, never mirrored by hand (the rules run it on floats, on NumPy arrays and
+here; the strand physics is written as loops and only ever compiled)::
+
+    from riderlive.fastpath import batch, inline, kernel
+
+    @inline
+    def dot(a0, a1, a2, b0, b1, b2):          # a helper kernels call: inlined by LLVM
+        return a0 * b0 + a1 * b1 + a2 * b2
+
+    @kernel
+    def normalise(x):                          # loops over a float64 array, in place
+        for i in range(x.shape[1]):
+            n = math.sqrt(dot(x[0, i], x[1, i], x[2, i], x[0, i], x[1, i], x[2, i]))
+            x[:, i] /= n
+
+    normalise(x)             # compiled on first call, cached on disk for the next process
+    normalise.py_func(x)     # the very same source, interpreted (tests, debugging)
+
+    rules = make_rules(params, SCALAR_OPS)   # scalar: 13 floats in, a tuple of 37 out
+    run = batch(rules, 13, 37)
+    run(columns, out)        # every frame: out[:, i] = rules(*columns[:, i]), vectorised
+
+- :func:`kernel`: ``numba.njit`` with NumPy's division semantics (no zero checks, so
+  loops vectorise), the GIL released, and a disk cache that goes stale whenever any
+  source compiled into the kernel changes: its own file, the files of the kernels
+  and :func:`inline` helpers it calls (transitively), and the values of the module
+  constants it reads. (numba's own cache watches only the kernel's file.)
+- :func:`inline`: a helper for kernels; LLVM inlines it into its callers (no call
+  overhead, so a loop over frames can vectorise). Python callers get the function
+  unchanged.
+- :func:`batch`: turns a scalar function of ``n_in`` floats returning ``n_out``
+  floats into a kernel over columns. It works in blocks of :data:`BLOCK` frames:
+  inputs are gathered into one small buffer, the function runs over the block (LLVM
+  vectorises it across frames: 4 frames per AVX2 instruction), and each output
+  channel is written as one contiguous run. Each distinct function (for the rules:
+  each preset) compiles once, a few seconds, and is then loaded from the cache.
+
+Without numba (a dependency; only a broken install lacks it) the decorators return
+the Python source unchanged and :func:`batch` loops in Python: slow, but the same
+results.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import types
+from collections.abc import Callable, Iterator, Sequence
+from functools import cache
+from importlib.util import find_spec
+from pathlib import Path
+from typing import Any, TypeVar, cast
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+F = TypeVar("F", bound=Callable[..., Any])
+
+AVAILABLE = find_spec("numba") is not None
+"""numba is installed."""
+BLOCK = 1000
+"""Frames per block of :func:`batch`: one block of inputs and outputs stays in L2 (~400 KB for 13 + 37
+channels), and each output run is 8 KB. Not a power of two, so the 50 rows do not compete for cache sets."""
+OPTIONS: dict[str, Any] = {"error_model": "numpy", "nogil": True}
+"""numba options of every kernel."""
+
+
+def inline(fn: F) -> F:
+    """A helper for kernels, inlined by LLVM into each kernel that calls it (a plain function for Python).
+
+    Idempotent; anything but a plain Python function (a builtin such as ``abs``, which
+    numba knows already) is returned untouched.
+    """
+    if not AVAILABLE or not isinstance(fn, types.FunctionType) or getattr(fn, "_fastpath_inline", False):
+        return fn
+    from numba.extending import register_jitable
+
+    register_jitable(forceinline=True)(fn)
+    fn._fastpath_inline = True  # type: ignore[attr-defined]
+    return fn
+
+
+def kernel(fn: F) -> F:
+    """Compile ``fn`` with numba (on first call; then from the disk cache). ``.py_func`` is ``fn`` itself."""
+    if not AVAILABLE:  # pragma: no cover
+        fn.py_func = fn  # type: ignore[attr-defined]
+        return fn
+    import numba
+
+    dispatcher = numba.njit(**OPTIONS)(fn)
+    dispatcher._cache = _cache_for(dispatcher.py_func)  # numba's cache, stamped with every source compiled in
+    return cast(F, dispatcher)
+
+
+# ----------------------------------------------------------------------------- batch
+
+
+def batch(
+    fn: Callable[..., tuple[float, ...]], n_in: int, n_out: int, helpers: Sequence[Any] = (), block: int = BLOCK
+) -> BatchKernel:
+    """A kernel applying scalar ``fn`` (``n_in`` floats -> tuple of ``n_out`` floats) to every frame of columns.
+
+    ``helpers``: the plain Python functions ``fn`` calls (such as the rules' ``Ops``),
+    compiled with it (:func:`inline`).
+    """
+    for helper in helpers:
+        inline(helper)
+    return BatchKernel(fn, n_in, n_out, block)
+
+
+class BatchKernel:
+    """``run(columns, out, in_gain=None, out_gain=None, out_offset=None)``; see :func:`batch`.
+
+    ``columns``: ``n_in`` 1-D float64 arrays of ``N`` frames (copied when not contiguous);
+    ``out``: a C-contiguous ``(n_out, N)`` float64 array (one row per output channel).
+    Each input is multiplied by ``in_gain`` before ``fn`` sees it; each output becomes
+    ``value * out_gain + out_offset`` (both skipped when not given).
+    """
+
+    def __init__(self, fn: Callable[..., tuple[float, ...]], n_in: int, n_out: int, block: int) -> None:
+        self.fn, self.n_in, self.n_out, self.block = fn, n_in, n_out, block
+        self._run = _compile_batch(inline(fn), n_in, n_out, block)
+
+    def __call__(
+        self,
+        columns: Sequence[FloatArray],
+        out: FloatArray,
+        in_gain: FloatArray | None = None,
+        out_gain: FloatArray | None = None,
+        out_offset: FloatArray | None = None,
+    ) -> None:
+        if len(columns) != self.n_in or out.ndim != 2 or out.shape[0] != self.n_out:
+            raise ValueError(f"expected {self.n_in} input columns and an ({self.n_out}, N) output")
+        if not (out.flags.c_contiguous and out.dtype == np.float64):
+            raise ValueError("the output must be a C-contiguous float64 array")
+        n = out.shape[1]
+        cols = tuple(np.ascontiguousarray(c, dtype=np.float64) for c in columns)
+        if any(c.shape != (n,) for c in cols):
+            raise ValueError(f"every input column must have {n} frames")
+        affine = out_gain is not None or out_offset is not None
+        self._run(
+            cols,
+            _vector(in_gain, self.n_in, 1.0),
+            out,
+            _vector(out_gain, self.n_out, 1.0),
+            _vector(out_offset, self.n_out, 0.0),
+            affine,
+        )
+
+
+def _vector(values: FloatArray | None, n: int, default: float) -> FloatArray:
+    return np.full(n, default) if values is None else np.ascontiguousarray(values, dtype=np.float64).reshape(n)
+
+
+def _compile_batch(one: Callable[..., tuple[float, ...]], n_in: int, n_out: int, block: int) -> Callable[..., None]:
+    """The batch loop around ``one``, compiled: a closure, so numba's cache keys it on ``one``'s code and constants."""
+    if AVAILABLE:
+        _define_intrinsics()
+
+    def batch_kernel(  # noqa: PLR0917
+        columns: Any, in_gain: Any, out: Any, out_gain: Any, out_offset: Any, affine: bool
+    ) -> None:
+        n = out.shape[1]
+        work = np.empty((n_in + n_out) * block)  # rows of ``block`` frames: the inputs, then the outputs
+        for start in range(0, n, block):
+            m = min(block, n - start)
+            for k, column in enumerate(columns):
+                gain = in_gain[k]
+                for i in range(m):
+                    work[k * block + i] = column[start + i] * gain
+            for i in range(m):  # constant row offsets in one buffer: LLVM vectorises this across frames
+                _store_strided(work, n_in * block + i, block, one(*_load_strided(work, i, block, columns)))
+            for j in range(n_out):
+                row = (n_in + j) * block
+                if affine:
+                    g, o = out_gain[j], out_offset[j]
+                    for i in range(m):
+                        out[j, start + i] = work[row + i] * g + o
+                else:
+                    for i in range(m):
+                        out[j, start + i] = work[row + i]
+
+    return kernel(batch_kernel) if AVAILABLE else batch_kernel
+
+
+def _load_strided(work: FloatArray, start: int, step: int, like: Sequence[Any]) -> tuple[float, ...]:
+    """``(work[start], work[start + step], ...)``, as many values as ``like`` has items (in Python)."""
+    return tuple(float(work[start + k * step]) for k in range(len(like)))
+
+
+def _store_strided(work: FloatArray, start: int, step: int, values: Sequence[float]) -> None:
+    """``work[start + j * step] = values[j]`` for every item of ``values`` (in Python)."""
+    for j, v in enumerate(values):
+        work[start + j * step] = v
+
+
+@cache
+def _define_intrinsics() -> None:
+    """Replace the two helpers above by numba intrinsics (on first compile: importing numba takes ~0.5 s)."""
+    from numba import types as nbtypes
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    def pointers(context: Any, builder: Any, signature: Any, args: Any, count: int) -> list[Any]:
+        """Pointers to ``array[start + k * step]``, k < count, for an intrinsic's (array, start, step, ...)."""
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        out = []
+        for k in range(count):
+            index = builder.add(args[1], builder.mul(args[2], context.get_constant(nbtypes.intp, k)))
+            out.append(cgutils.get_item_pointer(context, builder, aryty, ary, [index]))  # type: ignore[no-untyped-call]
+        return out
+
+    @intrinsic
+    def load_strided(typingctx: Any, array: Any, start: Any, step: Any, like: Any) -> Any:
+        result = nbtypes.UniTuple(array.dtype, like.count)  # type: ignore[no-untyped-call]
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            values = [builder.load(p) for p in pointers(context, builder, signature, args, like.count)]
+            return context.make_tuple(builder, result, values)
+
+        return result(array, start, step, like), codegen
+
+    @intrinsic
+    def store_strided(typingctx: Any, array: Any, start: Any, step: Any, values: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> None:
+            for j, p in enumerate(pointers(context, builder, signature, args, values.count)):
+                builder.store(builder.extract_value(args[3], j), p)
+
+        return nbtypes.void(array, start, step, values), codegen
+
+    globals().update(_load_strided=load_strided, _store_strided=store_strided)
+
+
+# ----------------------------------------------------------------------------- the disk cache
+
+
+def _cache_for(py_func: Callable[..., Any]) -> Any:
+    """numba's per-function disk cache whose freshness stamp also covers every source compiled in."""
+    from numba.core.caching import FunctionCache
+
+    class SourcesCache(FunctionCache):  # type: ignore[misc]
+        stamped = False
+
+        def _stamp(self) -> None:
+            if not self.stamped:  # on first use: by then every module the kernel calls is imported
+                own = self._cache_file._source_stamp
+                self._cache_file._source_stamp = (own, sources_stamp(py_func))
+                self.stamped = True
+
+        def load_overload(self, sig: Any, target_context: Any) -> Any:
+            self._stamp()
+            return super().load_overload(sig, target_context)  # type: ignore[no-untyped-call]
+
+        def save_overload(self, sig: Any, data: Any) -> None:
+            self._stamp()
+            super().save_overload(sig, data)  # type: ignore[no-untyped-call]
+
+    return SourcesCache(py_func)  # type: ignore[no-untyped-call]
+
+
+def sources_stamp(fn: Callable[..., Any]) -> str:
+    """A digest of the source files and module constants ``fn`` compiles in (kernels and helpers it calls,
+    transitively). Closure values are left out: numba's cache keys entries on them already, and one index
+    file holds the entries of every closure made by the same code (the rules of every preset)."""
+    files: set[str] = {__file__}
+    constants: list[str] = []
+    seen: set[int] = set()
+    pending = [fn]
+    while pending:
+        f = cast(types.FunctionType, pending.pop())
+        if id(f) in seen:
+            continue
+        seen.add(id(f))
+        files.add(inspect.getfile(f))
+        for name, value, is_global in _referenced(f):
+            target = getattr(value, "py_func", value)
+            if isinstance(target, types.FunctionType):
+                pending.append(target)
+            elif not is_global:
+                continue
+            elif isinstance(value, int | float | bool | str | tuple):
+                constants.append(f"{name}={value!r}")
+            elif isinstance(value, np.ndarray):
+                constants.append(f"{name}={hashlib.sha256(value.tobytes()).hexdigest()}")
+    digest = hashlib.sha256()
+    for path in sorted(files):
+        digest.update(path.encode() + _file_digest(path))
+    digest.update("\n".join(sorted(constants)).encode())
+    return digest.hexdigest()
+
+
+def _referenced(fn: types.FunctionType) -> Iterator[tuple[str, Any, bool]]:
+    """The globals and closure values ``fn``'s code reads (nested code objects included): name, value, global."""
+    codes = [fn.__code__]
+    names: set[str] = set()
+    while codes:
+        code = codes.pop()
+        names.update(code.co_names)
+        codes.extend(c for c in code.co_consts if isinstance(c, types.CodeType))
+    for name in sorted(names):
+        if name in fn.__globals__:
+            yield name, fn.__globals__[name], True
+    for name, cell in zip(fn.__code__.co_freevars, fn.__closure__ or (), strict=True):
+        yield name, cell.cell_contents, False
+
+
+@cache
+def _file_digest(path: str) -> bytes:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).digest()
+    except OSError:
+        return b""
