@@ -154,6 +154,7 @@ COUNTERS = (
     "rx_gap",
     "refused",
     "clipped",
+    "limited",
     "deadman",
     "tx_dropped",
 )

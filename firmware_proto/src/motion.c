@@ -1,0 +1,49 @@
+/* Trajectory limiter: see motion.h. */
+#include "motion.h"
+
+#include <math.h>
+
+static float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vscale, float dt)
+{
+    uint8_t acted = 0;
+    float goal = clampf(target, lim->min, lim->max);
+    float error, distance, a_dt, v_stop, v_cap, v_want, dv;
+    if (goal != target)
+        acted |= LIM_SOFT;
+    error = goal - axis->pos;
+    distance = fabsf(error);
+    a_dt = lim->amax * dt;
+    /* The fastest speed from which braking at amax, one period at a time, stops within
+     * distance: v^2 / 2a + v dt / 2 = distance. */
+    v_stop = a_dt * (sqrtf(0.25f + 2.0f * distance / (a_dt * dt)) - 0.5f);
+    v_cap = lim->vmax * vscale;
+    v_want = v_stop < v_cap ? v_stop : v_cap;
+    if (v_cap <= v_stop && distance > 0.0f && fabsf(axis->vel) >= v_cap * 0.999f)
+        acted |= LIM_VELOCITY;
+    if (error < 0.0f)
+        v_want = -v_want;
+    dv = v_want - axis->vel;
+    if (dv > a_dt || dv < -a_dt) {
+        dv = clampf(dv, -a_dt, a_dt);
+        acted |= LIM_ACCELERATION;
+    }
+    axis->vel += dv;
+    axis->pos += axis->vel * dt;
+    if (fabsf(goal - axis->pos) < 0.01f && fabsf(axis->vel) <= a_dt) { /* arrived: snap */
+        axis->pos = goal;
+        axis->vel = 0.0f;
+    }
+    if (axis->pos < lim->min || axis->pos > lim->max) { /* last guard: never past a limit */
+        axis->pos = clampf(axis->pos, lim->min, lim->max);
+        axis->vel = 0.0f;
+        acted |= LIM_SOFT;
+    }
+    return acted;
+}
+
+int axis_settled(const axis_t *axis, float where, float tolerance, const axis_limits_t *lim, float dt)
+{
+    return fabsf(axis->pos - where) <= tolerance && fabsf(axis->vel) <= lim->amax * dt;
+}
