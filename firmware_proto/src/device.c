@@ -149,10 +149,12 @@ static uint8_t motion_allowed(const device_t *d, const link_frame_t *f)
 static uint8_t configure(device_t *d, const link_frame_t *f)
 {
     const actuator_spec_t *a = &d->profile->actuator;
-    axis_limits_t *lim = &d->limits[f->index];
+    axis_limits_t *lim;
     int32_t v = f->value;
-    if (f->key >= K_SOFT_MIN && f->key <= K_ACCELERATION_LIMIT && f->index >= d->profile->actuators)
+    int per_actuator = f->key >= K_SOFT_MIN && f->key <= K_ACCELERATION_LIMIT;
+    if (per_actuator ? f->index >= d->profile->actuators : f->index != 0)
         return REASON_UNKNOWN_KEY;
+    lim = &d->limits[f->index < LINK_MAX_ACTUATORS ? f->index : 0];
     switch (f->key) {
     case K_HEARTBEAT_TIMEOUT_MS:
         if (v < 20 || v > d->profile->heartbeat_max_ms) return REASON_OUT_OF_RANGE;
@@ -307,8 +309,10 @@ void device_receive(device_t *d, const uint8_t *bytes, size_t n, uint32_t now_ms
         link_rx_result_t r = link_rx_byte(&d->rx, *bytes++, &frame);
         if (r == RX_FRAME)
             on_frame(d, &frame);
-        else if (r != RX_NONE)
+        else if (r != RX_NONE) {
             count(d, (link_counter_t)COUNTER_OF[r]);
+            d->link_errors += 1.0f;
+        }
     }
 }
 
@@ -413,6 +417,13 @@ void device_step(device_t *d, const device_inputs_t *in, uint32_t now_ms)
         (!d->link_seen || now_ms - d->last_rx_ms >= d->heartbeat_ms)) { /* the dead-man */
         count(d, C_DEADMAN);
         d->pending_faults |= F_LINK_TIMEOUT;
+        park(d);
+    }
+    d->link_errors -= p->error_leak_per_s * dt_s(d);
+    if (d->link_errors < 0.0f)
+        d->link_errors = 0.0f;
+    if (d->outputs_on && d->link_errors > p->error_budget && !(d->pending_faults & F_LINK_ERRORS)) {
+        d->pending_faults |= F_LINK_ERRORS; /* each rejected packet risks an undetected one: stop */
         park(d);
     }
     if (d->outputs_on && d->has_feedback)

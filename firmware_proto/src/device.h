@@ -7,8 +7,9 @@
  * States (coord/LIFECYCLE.md): boots DISARMED, outputs off. ARM (naming the device) ->
  * HOMING (first time, profiles that need it) -> SOFT_START -> RUNNING. PARK / DISARM /
  * a new HELLO -> PARKING -> PARKED. E-stop (input or link) -> ESTOP at once, outputs off,
- * latched. Dead-man (no valid frame for heartbeat_ms while outputs are on), following
- * error -> PARKING, then FAULT, latched. RESET -> DISARMED, never motion.
+ * latched. Dead-man (no valid frame for heartbeat_ms while outputs are on), a noisy link
+ * (rejected packets over the profile's budget), following error -> PARKING, then FAULT,
+ * latched. RESET -> DISARMED, never motion.
  */
 #ifndef DEVICE_H
 #define DEVICE_H
@@ -50,7 +51,8 @@ typedef struct {
     link_seq_t rx_seq;
     uint16_t tx_seq;
     uint16_t counters[C_COUNT];
-    uint32_t now_ms, last_rx_ms, state_since_ms, last_telemetry_ms, follow_since_ms, blend_ms;
+    uint32_t now_ms, last_rx_ms, state_since_ms, last_telemetry_ms, follow_since_ms;
+    float link_errors; /* the leaky bucket of rejected packets */
 
     uint16_t heartbeat_ms, telemetry_ms, pwm_hz; /* live config */
     axis_limits_t limits[LINK_MAX_ACTUATORS];

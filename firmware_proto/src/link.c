@@ -15,8 +15,12 @@ uint16_t link_crc16(const uint8_t *data, size_t n)
     while (n--) {
         uint8_t bit;
         crc ^= (uint16_t)((uint16_t)*data++ << 8);
-        for (bit = 0; bit < 8; bit++)
-            crc = (crc & 0x8000u) ? (uint16_t)((uint16_t)(crc << 1) ^ 0x1021u) : (uint16_t)(crc << 1);
+        for (bit = 0; bit < 8; bit++) {
+            if (crc & 0x8000u)
+                crc = (uint16_t)((unsigned)(crc << 1) ^ 0x1021u);
+            else
+                crc = (uint16_t)(crc << 1);
+        }
     }
     return crc;
 }

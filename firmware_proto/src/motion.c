@@ -9,15 +9,17 @@ uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vs
 {
     uint8_t acted = 0;
     float goal = clampf(target, lim->min, lim->max);
-    float error, distance, a_dt, v_stop, v_cap, v_want, dv;
+    float error, distance, a_dt, q, v_stop, v_cap, v_want, dv;
     if (goal != target)
         acted |= LIM_SOFT;
     error = goal - axis->pos;
     distance = fabsf(error);
     a_dt = lim->amax * dt;
-    /* The fastest speed from which braking at amax, one period at a time, stops within
-     * distance: v^2 / 2a + v dt / 2 = distance. */
-    v_stop = a_dt * (sqrtf(0.25f + 2.0f * distance / (a_dt * dt)) - 0.5f);
+    /* The fastest speed that can still stop within distance when the speed drops by a_dt a
+     * period (what this loop does): with D = distance / (a_dt dt) and q whole periods of
+     * braking after this one, (q + 1)(q / 2 + m - q) <= D gives m = q / 2 + D / (q + 1). */
+    q = floorf((sqrtf(1.0f + 8.0f * distance / (a_dt * dt)) - 1.0f) * 0.5f);
+    v_stop = a_dt * (0.5f * q + distance / (a_dt * dt) / (q + 1.0f));
     v_cap = lim->vmax * vscale;
     v_want = v_stop < v_cap ? v_stop : v_cap;
     if (v_cap <= v_stop && distance > 0.0f && fabsf(axis->vel) >= v_cap * 0.999f)
@@ -31,7 +33,7 @@ uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vs
     }
     axis->vel += dv;
     axis->pos += axis->vel * dt;
-    if (fabsf(goal - axis->pos) < 0.01f && fabsf(axis->vel) <= a_dt) { /* arrived: snap */
+    if (fabsf(goal - axis->pos) < 0.01f && fabsf(axis->vel) + fabsf(dv) <= a_dt) { /* arrived: snap */
         axis->pos = goal;
         axis->vel = 0.0f;
     }

@@ -3,11 +3,12 @@
 
 #include <string.h>
 
-/* Timing shared by the profiles: 250 Hz control, 200 ms dead-man, 50 Hz telemetry. */
+/* Timing shared by the profiles: 250 Hz control, 200 ms dead-man, 50 Hz telemetry; a moving
+ * device parks when the link rejects more than 25 packets beyond 10 a second. */
 #define COMMON_TIMING \
     .period_ms = 4, .heartbeat_ms = 200, .heartbeat_max_ms = 1000, .telemetry_ms = 20, \
     .soft_start_scale = 0.2f, .park_scale = 0.25f, .homing_scale = 0.2f, .homing_timeout_ms = 30000, \
-    .settle_counts = 5, .follow_counts = 1000, .follow_ms = 200
+    .settle_counts = 5, .follow_counts = 1000, .follow_ms = 200, .error_budget = 25.0f, .error_leak_per_s = 10.0f
 
 /* 150 mm linear actuators with an RC/pulse position input (1000-2000 us = retracted-extended),
  * 250 mm/s, 5 m/s^2; parked fully down on the soft minimum, homed at mid stroke. */

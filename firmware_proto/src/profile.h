@@ -34,6 +34,8 @@ typedef struct {
     int16_t settle_counts;     /* "arrived" tolerance */
     int16_t follow_counts;     /* following error tolerance (with feedback) ... */
     uint16_t follow_ms;        /* ... held this long -> fault */
+    float error_budget;        /* rejected packets a moving device tolerates ... */
+    float error_leak_per_s;    /* ... forgetting this many a second (a leaky bucket) */
     actuator_spec_t actuator;  /* every actuator of the profile */
 } profile_t;
 

@@ -109,6 +109,7 @@ class Fault(enum.IntFlag):
     LINK_TIMEOUT = 0x0004
     FOLLOWING_ERROR = 0x0008
     HOMING_TIMEOUT = 0x0010
+    LINK_ERRORS = 0x0020  # too many rejected packets while moving: parked
 
 
 class Flag(enum.IntFlag):
