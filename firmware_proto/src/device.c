@@ -381,7 +381,8 @@ static void check_following(device_t *d)
     uint8_t i, off = 0;
     for (i = 0; i < d->profile->actuators; i++) {
         float e = (float)d->measured[i] - d->axis[i].pos;
-        off |= (uint8_t)(e > d->profile->follow_counts || e < -d->profile->follow_counts);
+        if (e > d->profile->follow_counts || e < -d->profile->follow_counts)
+            off = 1;
     }
     if (!off) {
         d->following = 0;
