@@ -26,12 +26,13 @@ int fw_poll(fw_t *fw)
     device_inputs_t in;
     uint32_t now;
     size_t n;
+    uint8_t was_on = d->outputs_on;
     while ((n = hal_serial_read(buf, sizeof buf)) > 0)
         device_receive(d, buf, n, hal_millis());
-    if (hal_estop_input() && d->state != ST_ESTOP) { /* latch at once, not at the next step */
+    if (hal_estop_input() && d->state != ST_ESTOP) /* latch at once, not at the next step */
         device_estop(d, F_ESTOP_INPUT);
+    if (was_on && !d->outputs_on) /* an e-stop frame or input: outputs off now */
         hal_write_outputs(d);
-    }
     now = hal_millis();
     if ((int32_t)(now - fw->next_step_ms) < 0)
         return 0;
