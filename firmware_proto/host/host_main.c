@@ -228,6 +228,7 @@ int main(int argc, char **argv)
     size_t line_len = 0;
     uint64_t start;
     uint8_t last_state;
+    uint16_t last_parks;
     host.tau_s = 0.02f;
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--profile") && i + 1 < argc) profile_name = argv[++i];
@@ -262,6 +263,7 @@ int main(int argc, char **argv)
            fw.device.heartbeat_ms);
     fflush(stdout);
     last_state = fw.device.state;
+    last_parks = fw.device.parks;
     while (!stop_requested && (duration <= 0.0 || (double)(now_ns() - start) * 1e-9 < duration)) {
         struct pollfd fds[2] = {{host.master, POLLIN, 0}, {0, POLLIN, 0}};
         int wait_ms = (int)fw_ms_until_step(&fw);
@@ -282,20 +284,21 @@ int main(int argc, char **argv)
                 line_len++;
             }
         }
-        if (fw_poll(&fw) && fw.device.state != last_state) {
+        if (fw_poll(&fw) && (fw.device.state != last_state || fw.device.parks != last_parks)) {
             uint64_t t = now_ns();
             printf("{\"event\":\"state\",\"t_ns\":%llu,\"from\":\"%s\",\"to\":\"%s\",\"faults\":%u}\n",
                    (unsigned long long)t, device_state_name(last_state), device_state_name(fw.device.state),
                    fw.device.faults | fw.device.pending_faults);
-            if (fw.device.state == ST_PARKING) { /* this step was the first park step */
+            if (fw.device.parks != last_parks) { /* this step was the first park step */
                 printf("{\"event\":\"park_step\",\"t_ns\":%llu,\"last_rx_t_ns\":%llu,\"deadman\":%d",
                        (unsigned long long)t, (unsigned long long)host.last_rx_ns,
-                       (fw.device.pending_faults & F_LINK_TIMEOUT) != 0);
+                       ((fw.device.pending_faults | fw.device.faults) & F_LINK_TIMEOUT) != 0);
                 print_positions("commanded", 0, device_commanded, &fw.device);
                 printf("}\n");
             }
             fflush(stdout);
             last_state = fw.device.state;
+            last_parks = fw.device.parks;
         }
     }
     printf("{\"event\":\"exit\",\"t_ns\":%llu,\"state\":\"%s\"}\n", (unsigned long long)now_ns(),

@@ -50,6 +50,7 @@ typedef struct {
     uint16_t faults, pending_faults; /* latched, and to latch once parked */
     link_seq_t rx_seq;
     uint16_t tx_seq;
+    uint16_t parks; /* parks begun since boot (the host build reports each first park step) */
     uint16_t counters[C_COUNT];
     uint32_t now_ms, last_rx_ms, state_since_ms, last_telemetry_ms, follow_since_ms;
     float link_errors; /* the leaky bucket of rejected packets */
