@@ -14,7 +14,7 @@ from riderlive.platform.firmware_host import FIRMWARE_DIR
 
 def make(*targets: str, timeout: float = 240) -> str:
     result = subprocess.run(
-        ["make", "--no-print-directory", "-C", str(FIRMWARE_DIR), *targets],
+        ["make", "-j2", "--no-print-directory", "-C", str(FIRMWARE_DIR), *targets],
         capture_output=True,
         text=True,
         timeout=timeout,
