@@ -225,3 +225,30 @@ def test_a_slightly_noisy_line_runs_on_and_counts() -> None:
     assert 1 <= lost <= 25 and status["state"] == "running"
     rejected = sum(status["counters"][k] for k in ("rx_cobs", "rx_short", "rx_oversize", "rx_crc", "rx_length"))
     assert rejected >= 1 and status["counters"]["deadman"] == 0
+
+
+def test_replayed_and_out_of_order_frames_are_never_acted_on() -> None:
+    with FirmwareHost("servo8", trace=True) as firmware, SerialPlatformLink(firmware.port) as port:
+        port.open()
+        port.command(PATIENT)
+        arm_seq = port._seq
+        arm_wire = link.encode(Arm("servo8"), arm_seq)
+        port.command(Arm("servo8"))
+        motion = Streamer(port, lambda k: trajectory(k, 8, 0, 3000))
+        motion.until(in_state(port, LinkState.RUNNING), 5.0)
+        old_seq = next(iter(motion.sent))
+        port._write(link.encode(Target((8000,) * 8), old_seq))  # an old seq with a new body: stale
+        port.command(Park())
+        port.wait_telemetry(lambda t: LinkState(t.state) is LinkState.PARKED, 5.0)
+        before = port.device_counters()["rx_stale"]
+        port._write(arm_wire)  # the ARM again, byte for byte
+        status = port.command(Reset())  # a fresh command still works: it has a new seq
+        assert status.state == LinkState.DISARMED
+        counters = port.wait_telemetry(lambda t: t.counter("rx_stale") >= before + 1, 2.0)
+        assert counters.counter("rx_stale") == before + 1
+        firmware.wait_event(lambda e: e["event"] == "state" and e["to"] == "disarmed", 5.0)
+        states = firmware.states()
+        accepted = [e for e in firmware.events if e["event"] == "rx"]
+    assert states == ["soft_start", "running", "parking", "parked", "disarmed"]  # no second arm
+    assert sum(e["seq"] == arm_seq for e in accepted) == 1
+    assert all(e.get("positions") != [8000] * 8 for e in accepted)
