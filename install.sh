@@ -16,8 +16,9 @@ if ! command -v chromium >/dev/null 2>&1; then
 fi
 
 # firmware_proto/: a C compiler and make (host build, tests), cJSON (the C test of the link
-# vectors), clang (libFuzzer), gcc-avr + avr-libc (the Arduino Mega 2560 cross build).
-FIRMWARE_PACKAGES="gcc make libcjson-dev clang gcc-avr avr-libc"
+# vectors), clang (libFuzzer), gcc-avr + avr-libc (the Arduino Mega 2560 cross build),
+# simavr (its benchmark).
+FIRMWARE_PACKAGES="gcc make libcjson-dev clang gcc-avr avr-libc simavr"
 missing=$(for p in $FIRMWARE_PACKAGES; do dpkg -s "$p" >/dev/null 2>&1 || echo "$p"; done | xargs)
 if [ -n "$missing" ]; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then

@@ -7,6 +7,9 @@ Parser: ``make bench`` (C, -O2): MB/s of mixed valid and corrupt traffic through
 ``link_rx_byte`` and ``device_receive``, against a baseline loop in the same run that only
 splits the bytes at 0x00; then the undetected rate of 10^6 corrupted frames.
 
+Size and speed on the MCU: ``make cross`` (flash, static RAM) and ``make avr-step-bench``
+(the cost of one control period on the ATmega2560 in simavr, when simavr is installed).
+
 Dead-man: the host build on a pty, servo8 profile; each trial arms, streams targets until
 RUNNING, then stops sending. The firmware prints the CLOCK_MONOTONIC time of its last valid
 frame and of its first park step; Python's last write is on the same clock. Bound: heartbeat
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import shutil
 import statistics
 import subprocess
 import sys
@@ -78,6 +82,8 @@ def main() -> int:
     deadman(args.trials)
     sizes = re.findall(r"^.*flash.*$", make("cross"), re.M)
     print("\n".join(sizes))
+    if shutil.which("simavr"):
+        print("\n".join(re.findall(r"avr .*", make("avr-step-bench"))))
     if args.fuzz_runs:
         start = time.monotonic()
         out = make("fuzz", f"FUZZ_RUNS={args.fuzz_runs}")

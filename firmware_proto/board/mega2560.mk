@@ -40,3 +40,9 @@ $(AVR_BUILD)/firmware.hex: $(AVR_BUILD)/firmware.elf
 # The Mega's stk500v2 bootloader ("wiring" in avrdude); the board resets when the port opens.
 flash: $(AVR_BUILD)/firmware.hex
 	avrdude -p $(MCU) -c wiring -P $(PORT) -b 115200 -D -U flash:w:$<:i
+
+# The control step's cost on the MCU, measured in simavr (apt install simavr).
+$(AVR_BUILD)/step_bench.elf: board/step_bench.c $(AVR_CORE_OBJS)
+	$(AVR_CC) $(AVR_CFLAGS) $(AVR_LDFLAGS) $< $(filter-out $(AVR_BUILD)/fw.o,$(AVR_CORE_OBJS)) -o $@ -lm
+avr-step-bench: $(AVR_BUILD)/step_bench.elf
+	simavr -m $(MCU) -f 16000000 $<

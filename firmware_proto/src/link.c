@@ -8,11 +8,19 @@ const char *const LINK_COUNTER_NAMES[C_COUNT] = {
     "rx_stale", "rx_gap", "refused",  "clipped",     "limited", "deadman",    "tx_dropped"};
 
 /* CRC-16/IBM-3740 (alias CCITT-FALSE): poly 0x1021, init 0xFFFF, MSB first, no xorout.
- * Bitwise: no table in flash; ~8 shifts a byte is far more than a UART needs. */
+ * Bitwise, no table in flash; on an AVR, avr-libc's _crc_xmodem_update is the same CRC step
+ * (poly 0x1021, MSB first) in a few instructions. */
+#ifdef __AVR__
+#include <util/crc16.h>
+#endif
+
 uint16_t link_crc16(const uint8_t *data, size_t n)
 {
     uint16_t crc = 0xFFFFu;
     while (n--) {
+#ifdef __AVR__
+        crc = _crc_xmodem_update(crc, *data++);
+#else
         uint8_t bit;
         crc ^= (uint16_t)((uint16_t)*data++ << 8);
         for (bit = 0; bit < 8; bit++) {
@@ -21,6 +29,7 @@ uint16_t link_crc16(const uint8_t *data, size_t n)
             else
                 crc = (uint16_t)(crc << 1);
         }
+#endif
     }
     return crc;
 }

@@ -5,11 +5,16 @@
 
 static float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+/* 1 / (q + 1) for the usual q: a multiplication instead of a soft-float division on an AVR. */
+static const float RECIPROCAL[16] = {1.0f,       0.5f,       1.0f / 3.0f,  0.25f,       0.2f,        1.0f / 6.0f,
+                                     1.0f / 7.0f, 0.125f,     1.0f / 9.0f,  0.1f,        1.0f / 11.0f, 1.0f / 12.0f,
+                                     1.0f / 13.0f, 1.0f / 14.0f, 1.0f / 15.0f, 0.0625f};
+
 uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vscale, float dt)
 {
     uint8_t acted = 0;
     float goal = clampf(target, lim->min, lim->max);
-    float error, distance, a_dt, q, v_stop, v_cap, v_want, dv;
+    float error, distance, a_dt, braking, q, v_stop, v_cap, v_want, dv;
     if (goal != target)
         acted |= LIM_SOFT;
     error = goal - axis->pos;
@@ -18,8 +23,9 @@ uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vs
     /* The fastest speed that can still stop within distance when the speed drops by a_dt a
      * period (what this loop does): with D = distance / (a_dt dt) and q whole periods of
      * braking after this one, (q + 1)(q / 2 + m - q) <= D gives m = q / 2 + D / (q + 1). */
-    q = floorf((sqrtf(1.0f + 8.0f * distance / (a_dt * dt)) - 1.0f) * 0.5f);
-    v_stop = a_dt * (0.5f * q + distance / (a_dt * dt) / (q + 1.0f));
+    braking = distance / (a_dt * dt);
+    q = floorf((sqrtf(1.0f + 8.0f * braking) - 1.0f) * 0.5f);
+    v_stop = a_dt * (0.5f * q + (q < 16.0f ? braking * RECIPROCAL[(int)q] : braking / (q + 1.0f)));
     v_cap = lim->vmax * vscale;
     v_want = v_stop < v_cap ? v_stop : v_cap;
     if (v_cap <= v_stop && distance > 0.0f && fabsf(axis->vel) >= v_cap * 0.999f)
