@@ -26,8 +26,9 @@ int fw_poll(fw_t *fw)
     device_inputs_t in;
     uint32_t now;
     size_t n;
-    uint8_t was_on = d->outputs_on;
-    while ((n = hal_serial_read(buf, sizeof buf)) > 0)
+    uint8_t was_on = d->outputs_on, chunks = 0;
+    /* at most 256 bytes a call: a host that floods the link cannot starve the control step */
+    while (chunks++ < 4 && (n = hal_serial_read(buf, sizeof buf)) > 0)
         device_receive(d, buf, n, hal_millis());
     if (hal_estop_input() && d->state != ST_ESTOP) /* latch at once, not at the next step */
         device_estop(d, F_ESTOP_INPUT);

@@ -133,7 +133,9 @@ class SerialPlatformLink:
     # --- opening and closing ---
 
     def open(self, timeout_s: float = 1.0) -> HelloReply:
-        """Open the port and shake hands: HELLO, then the device's HELLO_REPLY in our version."""
+        """Open the port and shake hands: HELLO, then the device's HELLO_REPLY in our version.
+
+        Also how to reconnect: a HELLO parks a device that was moving (docs/platform-link.md)."""
         try:
             self._serial = serial.Serial(self.port, self.baud, timeout=0, write_timeout=0.5)
             self._serial.reset_input_buffer()
@@ -142,7 +144,10 @@ class SerialPlatformLink:
             raise PortLost(f"{self.port}: {exc}") from exc
         self.health = Health.OK
         self._window.restart()
+        self._deframer = Deframer()
+        self._statuses.clear()
         self.device = None
+        self.telemetry = None  # nothing from an earlier session is trusted
         self._write(b"\x00")  # ends whatever partial frame the device holds
         self.send(Hello())
         deadline = self._clock() + timeout_s

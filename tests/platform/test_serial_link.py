@@ -114,3 +114,25 @@ def test_a_silent_device_then_a_vanished_port() -> None:
     assert port.counters["port_lost"] == 1
     with pytest.raises(PortLost):
         port.send_targets([0] * 8)
+
+
+def test_reconnecting_parks_a_moving_device_and_never_rearms() -> None:
+    with FirmwareHost("servo8") as firmware, SerialPlatformLink(firmware.port) as port:
+        port.open()
+        port.command(link.Arm("servo8"))
+        flood = 0
+        while port.telemetry is None or LinkState(port.telemetry.state) is not LinkState.RUNNING:
+            port.send_targets([1500] * 8)  # as fast as Python goes: the control step must still run
+            port.service()
+            flood += 1
+            assert flood < 200_000, "the flood starved the firmware's control step"
+        port.close()
+        hello = port.open()  # the same process reconnecting, as after a glitch
+        assert port.telemetry is None and hello.device == "servo8"
+        parked = port.wait_telemetry(lambda t: LinkState(t.state) is LinkState.PARKED, 5.0)
+        assert parked.commanded == (0,) * 8 and parked.faults == 0
+        port.send_targets([1500] * 8)
+        refused = port.wait_telemetry(lambda t: t.last_reason == Reason.NOT_ARMED, 2.0)
+        assert LinkState(refused.state) is LinkState.PARKED
+        firmware.wait_event(lambda e: e["event"] == "state" and e["to"] == "parked", 5.0)
+        assert firmware.states() == ["soft_start", "running", "parking", "parked"]
