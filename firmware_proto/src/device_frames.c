@@ -103,12 +103,12 @@ static uint8_t configure(device_t *d, const link_frame_t *f)
         if (v < d->profile->period_ms || v > 1000) return REASON_OUT_OF_RANGE;
         d->telemetry_ms = (uint16_t)v;
         return REASON_OK;
-    case K_SOFT_MIN:
-        if (v < a->soft_min || (float)v >= lim->max) return REASON_OUT_OF_RANGE;
+    case K_SOFT_MIN: /* the park and home poses stay inside: parking must always arrive */
+        if (v < a->soft_min || (float)v >= lim->max || v > a->park || v > a->home) return REASON_OUT_OF_RANGE;
         lim->min = (float)v;
         return REASON_OK;
     case K_SOFT_MAX:
-        if (v > a->soft_max || (float)v <= lim->min) return REASON_OUT_OF_RANGE;
+        if (v > a->soft_max || (float)v <= lim->min || v < a->park || v < a->home) return REASON_OUT_OF_RANGE;
         lim->max = (float)v;
         return REASON_OK;
     case K_VELOCITY_LIMIT:

@@ -14,7 +14,7 @@ uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vs
 {
     uint8_t acted = 0;
     float goal = clampf(target, lim->min, lim->max);
-    float error, distance, a_dt, braking, q, v_stop, v_cap, v_want, dv;
+    float error, distance, a_dt, braking, q, v_stop, v_cap, v_want, dv, previous;
     if (goal != target)
         acted |= LIM_SOFT;
     error = goal - axis->pos;
@@ -38,13 +38,16 @@ uint8_t axis_step(axis_t *axis, float target, const axis_limits_t *lim, float vs
         acted |= LIM_ACCELERATION;
     }
     axis->vel += dv;
+    previous = axis->pos;
     axis->pos += axis->vel * dt;
     if (fabsf(goal - axis->pos) < 0.01f && fabsf(axis->vel) + fabsf(dv) <= a_dt) { /* arrived: snap */
         axis->pos = goal;
         axis->vel = 0.0f;
     }
-    if (axis->pos < lim->min || axis->pos > lim->max) { /* last guard: never past a limit */
-        axis->pos = clampf(axis->pos, lim->min, lim->max);
+    /* Last guard: never further past a limit. An axis that starts outside (moved by hand while
+     * the outputs were off) is held, not snapped, until it moves back in. */
+    if ((axis->pos > lim->max && axis->vel > 0.0f) || (axis->pos < lim->min && axis->vel < 0.0f)) {
+        axis->pos = previous > lim->max || previous < lim->min ? previous : clampf(axis->pos, lim->min, lim->max);
         axis->vel = 0.0f;
         acted |= LIM_SOFT;
     }

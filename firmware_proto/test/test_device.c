@@ -353,13 +353,15 @@ static void config_only_tightens(void)
     CHECK_EQ(config(K_SOFT_MAX, 2, 9000), REASON_OUT_OF_RANGE); /* wider than the profile */
     CHECK_EQ(config(K_SOFT_MIN, 2, 2000), REASON_OUT_OF_RANGE); /* not below its max */
     CHECK_EQ(config(K_SOFT_MIN, 8, 0), REASON_UNKNOWN_KEY);      /* no actuator 8 */
+    CHECK_EQ(config(K_SOFT_MIN, 1, 100), REASON_OUT_OF_RANGE);   /* park (0) would be outside */
+    CHECK_EQ(config(K_SOFT_MAX, 1, -100), REASON_OUT_OF_RANGE);
     CHECK_EQ(config(K_VELOCITY_LIMIT, 0, 0), REASON_OUT_OF_RANGE);
     CHECK_EQ(config(K_VELOCITY_LIMIT, 0, 30001), REASON_OUT_OF_RANGE);
     CHECK_EQ(config(K_ACCELERATION_LIMIT, 0, 100000), REASON_OK);
     CHECK_EQ(config(K_PWM_HZ, 0, 330), REASON_OK);
     CHECK_EQ(config(K_PWM_HZ, 0, 331), REASON_OUT_OF_RANGE);
     CHECK_EQ(config(99, 0, 1), REASON_UNKNOWN_KEY);
-    CHECK_EQ(d.counters[C_REFUSED], 7);
+    CHECK_EQ(d.counters[C_REFUSED], 9);
     named(LINK_ARM, "servo8");
     run_ms(3000, 5000);
     CHECK_EQ(device_commanded(&d, 2), 2000);

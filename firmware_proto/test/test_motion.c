@@ -77,11 +77,31 @@ static void soft_limits_clamp_targets(void)
     CHECK_EQ(a.pos, 14500.0f);
 }
 
+static void an_axis_outside_its_limits_comes_back_without_a_jump(void)
+{
+    const axis_limits_t lim = {500.0f, 14500.0f, 25000.0f, 500000.0f};
+    axis_t a = {14900.0f, 0.0f};
+    float prev = a.pos, worst_jump = 0.0f;
+    int k;
+    for (k = 0; k < 100; k++) { /* a target further out is clamped inside: it comes back in */
+        axis_step(&a, 20000.0f, &lim, 1.0f, 0.004f);
+        worst_jump = fmaxf(worst_jump, fabsf(a.pos - prev));
+        prev = a.pos;
+    }
+    CHECK_EQ(a.pos, 14500.0f);
+    CHECK(worst_jump <= 25000.0f * 0.004f + 1e-3f);
+    a.pos = 14900.0f;
+    a.vel = 0.0f;
+    axis_step(&a, 14000.0f, &lim, 1.0f, 0.004f); /* first step from outside: small, inward */
+    CHECK(a.pos < 14900.0f && a.pos > 14890.0f);
+}
+
 int main(void)
 {
     limits_hold_for_random_targets();
     step_arrives_on_time_without_overshoot();
     reversal_decelerates_within_the_limit();
     soft_limits_clamp_targets();
+    an_axis_outside_its_limits_comes_back_without_a_jump();
     return CHECK_DONE("test_motion");
 }
