@@ -439,6 +439,20 @@ static void noise_never_moves_anything(void)
     CHECK(d.counters[C_RX_COBS] + d.counters[C_RX_CRC] + d.counters[C_RX_SHORT] + d.counters[C_RX_OVERSIZE] > 500);
 }
 
+static void pulses_map_positions_to_the_profiles_outputs(void)
+{
+    const profile_t *servo = profile_find("servo8"), *platform = profile_find("platform6");
+    CHECK_EQ(profile_pulse_us(servo, 0.0f), 1500);     /* centre */
+    CHECK_EQ(profile_pulse_us(servo, 9000.0f), 2500);  /* +90 deg */
+    CHECK_EQ(profile_pulse_us(servo, -4500.0f), 1000); /* -45 deg */
+    CHECK_EQ(profile_pulse_us(servo, 30000.0f), 2500); /* clamped to the output range */
+    CHECK_EQ(profile_pulse_us(platform, 0.0f), 1000);  /* retracted */
+    CHECK_EQ(profile_pulse_us(platform, 7500.0f), 1500);
+    CHECK_EQ(profile_pulse_us(platform, 15000.0f), 2000);
+    CHECK(profile_find("nope") == 0);
+    CHECK_EQ(servo->pwm_hz, 50);
+}
+
 int main(void)
 {
     boots_disarmed_and_nothing_moves_without_arm();
@@ -454,5 +468,6 @@ int main(void)
     following_error_parks_then_faults();
     a_noisy_link_parks_a_moving_device();
     noise_never_moves_anything();
+    pulses_map_positions_to_the_profiles_outputs();
     return CHECK_DONE("test_device");
 }
