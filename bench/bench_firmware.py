@@ -83,7 +83,8 @@ def main() -> int:
     sizes = re.findall(r"^.*flash.*$", make("cross"), re.M)
     print("\n".join(sizes))
     if shutil.which("simavr"):
-        print("\n".join(re.findall(r"avr .*", make("avr-step-bench"))))
+        out = re.sub(r"\x1b\[[0-9;]*m", "", make("avr-step-bench"))
+        print("\n".join(re.findall(r"^avr (?:crc16|control).*$", out, re.M)))
     if args.fuzz_runs:
         start = time.monotonic()
         out = make("fuzz", f"FUZZ_RUNS={args.fuzz_runs}")
