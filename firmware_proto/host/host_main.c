@@ -229,6 +229,7 @@ int main(int argc, char **argv)
     uint64_t start;
     uint8_t last_state;
     uint16_t last_parks;
+    int stepped;
     host.tau_s = 0.02f;
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--profile") && i + 1 < argc) profile_name = argv[++i];
@@ -284,12 +285,14 @@ int main(int argc, char **argv)
                 line_len++;
             }
         }
-        if (fw_poll(&fw) && (fw.device.state != last_state || fw.device.parks != last_parks)) {
+        stepped = fw_poll(&fw);
+        if (fw.device.state != last_state || (stepped && fw.device.parks != last_parks)) {
             uint64_t t = now_ns();
-            printf("{\"event\":\"state\",\"t_ns\":%llu,\"from\":\"%s\",\"to\":\"%s\",\"faults\":%u}\n",
-                   (unsigned long long)t, device_state_name(last_state), device_state_name(fw.device.state),
-                   fw.device.faults | fw.device.pending_faults);
-            if (fw.device.parks != last_parks) { /* this step was the first park step */
+            if (fw.device.state != last_state) /* a command's change shows at once, a step's after it */
+                printf("{\"event\":\"state\",\"t_ns\":%llu,\"from\":\"%s\",\"to\":\"%s\",\"faults\":%u}\n",
+                       (unsigned long long)t, device_state_name(last_state), device_state_name(fw.device.state),
+                       fw.device.faults | fw.device.pending_faults);
+            if (stepped && fw.device.parks != last_parks) { /* this step was the first park step */
                 printf("{\"event\":\"park_step\",\"t_ns\":%llu,\"last_rx_t_ns\":%llu,\"deadman\":%d",
                        (unsigned long long)t, (unsigned long long)host.last_rx_ns,
                        ((fw.device.pending_faults | fw.device.faults) & F_LINK_TIMEOUT) != 0);
@@ -298,7 +301,8 @@ int main(int argc, char **argv)
             }
             fflush(stdout);
             last_state = fw.device.state;
-            last_parks = fw.device.parks;
+            if (stepped)
+                last_parks = fw.device.parks;
         }
     }
     printf("{\"event\":\"exit\",\"t_ns\":%llu,\"state\":\"%s\"}\n", (unsigned long long)now_ns(),

@@ -97,15 +97,27 @@ static int counted_ok(const uint8_t *body, size_t len, size_t at, size_t item, s
     return len > at && body[at] >= 1 && body[at] <= max && len == at + 1u + item * body[at] + tail;
 }
 
+/* A counted name (1..16 bytes) of printable ASCII, 0x21-0x7E. */
+static int name_ok(const uint8_t *body, size_t len, size_t at)
+{
+    size_t i;
+    if (!counted_ok(body, len, at, 1, 0, LINK_MAX_NAME))
+        return 0;
+    for (i = at + 1; i < len; i++)
+        if (body[i] < 0x21 || body[i] > 0x7E)
+            return 0;
+    return 1;
+}
+
 static int body_ok(uint8_t type, const uint8_t *body, size_t len)
 {
     switch (type) {
     case LINK_HELLO: case LINK_DISARM: case LINK_PARK: case LINK_ESTOP: case LINK_RESET: case LINK_HEARTBEAT:
         return len == 0;
     case LINK_TARGET: return counted_ok(body, len, 0, 2, 0, LINK_MAX_ACTUATORS);
-    case LINK_ARM: case LINK_HOME: return counted_ok(body, len, 0, 1, 0, LINK_MAX_NAME);
+    case LINK_ARM: case LINK_HOME: return name_ok(body, len, 0);
     case LINK_CONFIG: return len == 6;
-    case LINK_HELLO_REPLY: return counted_ok(body, len, 8, 1, 0, LINK_MAX_NAME);
+    case LINK_HELLO_REPLY: return name_ok(body, len, 8);
     case LINK_STATUS: return len == 7;
     default: /* LINK_TELEMETRY */ return counted_ok(body, len, 9, 4, 2u * C_COUNT, LINK_MAX_ACTUATORS);
     }

@@ -295,10 +295,14 @@ _TELEMETRY = struct.Struct("<BBHIBB")
 _COUNTERS = struct.Struct(f"<{len(COUNTERS)}H")
 
 
+def _printable(raw: bytes) -> bool:
+    return all(0x21 <= b <= 0x7E for b in raw)
+
+
 def _name_body(name: str) -> bytes:
-    raw = name.encode("ascii")
-    if not 1 <= len(raw) <= MAX_NAME:
-        raise ValueError(f"device name must be 1..{MAX_NAME} ASCII characters, got {name!r}")
+    raw = name.encode("ascii")  # UnicodeEncodeError is a ValueError
+    if not 1 <= len(raw) <= MAX_NAME or not _printable(raw):
+        raise ValueError(f"device name must be 1..{MAX_NAME} printable ASCII characters, got {name!r}")
     return bytes((len(raw),)) + raw
 
 
@@ -352,7 +356,9 @@ def _name(body: bytes, offset: int) -> str:
     if not 1 <= size <= MAX_NAME:
         raise LengthError(f"name of {size} bytes")
     _expect(body, offset + 1 + size)
-    return body[offset + 1 :].decode("ascii", errors="replace")
+    if not _printable(body[offset + 1 :]):
+        raise LengthError("a name that is not printable ASCII")  # not the shape of the type
+    return body[offset + 1 :].decode("ascii")
 
 
 def _positions(body: bytes, offset: int, count: int) -> tuple[int, ...]:

@@ -133,6 +133,7 @@ def _bad() -> list[tuple[str, bytes]]:
         ("length_arm_name_long", _packet(_raw_frame(1, FrameType.ARM, 29, b"\x11" + b"x" * 17))),
         ("length_arm_name_empty", _packet(_raw_frame(1, FrameType.ARM, 30, b"\x00"))),
         ("length_arm_name_mismatch", _packet(_raw_frame(1, FrameType.ARM, 31, b"\x05abc"))),
+        ("length_arm_name_not_printable", _packet(_raw_frame(1, FrameType.ARM, 33, b"\x03a b"))),
         ("length_config_short", _packet(_raw_frame(1, FrameType.CONFIG, 32, b"\x01\x00\x96\x00"))),
     ]
 

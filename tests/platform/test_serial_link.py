@@ -119,6 +119,8 @@ def test_a_silent_device_then_a_vanished_port() -> None:
 def test_reconnecting_parks_a_moving_device_and_never_rearms() -> None:
     with FirmwareHost("servo8") as firmware, SerialPlatformLink(firmware.port) as port:
         port.open()
+        # the longest dead-man: a test process descheduled for 200 ms must not trip it here
+        port.command(link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))
         port.command(link.Arm("servo8"))
         flood = 0
         while port.telemetry is None or LinkState(port.telemetry.state) is not LinkState.RUNNING:
