@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),
     "rig": ("riderlive.dynamixel.rig_cli", "check a servo map; drive it with a procedural horse"),
     "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
+    "export": ("riderlive.export.cli", "write a take as BVH or glTF (.glb) for engines and Blender"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""
 

@@ -128,14 +128,22 @@ def to_matrix(q: FloatArray) -> FloatArray:
 
 
 def to_euler_xyz(q: FloatArray) -> FloatArray:
-    """Euler degrees (rx, ry, rz), rotate order XYZ: ``R = Rz Ry Rx``; (..., 4) -> (..., 3)."""
-    m = to_matrix(q)
-    ry = np.arcsin(np.clip(-m[..., 2, 0], -1.0, 1.0))
-    rx = np.arctan2(m[..., 2, 1], m[..., 2, 2])
-    rz = np.arctan2(m[..., 1, 0], m[..., 0, 0])
-    gimbal = np.abs(m[..., 2, 0]) > 1.0 - 1e-9  # ry = +-90 deg: put the rest in rz, rx = 0
+    """Euler degrees (rx, ry, rz), rotate order XYZ: ``R = Rz Ry Rx``; (..., 4) -> (..., 3).
+
+    Reads only the matrix entries it needs (those of :func:`to_matrix`, same arithmetic).
+    """
+    q = np.asarray(q, dtype=np.float64)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    m00, m01 = 1.0 - 2.0 * (yy + zz), 2.0 * (x * y - w * z)
+    m10, m11 = 2.0 * (x * y + w * z), 1.0 - 2.0 * (xx + zz)
+    m20, m21, m22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (xx + yy)
+    ry = np.arcsin(np.clip(-m20, -1.0, 1.0))
+    rx = np.arctan2(m21, m22)
+    rz = np.arctan2(m10, m00)
+    gimbal = np.abs(m20) > 1.0 - 1e-9  # ry = +-90 deg: put the rest in rz, rx = 0
     rx = np.where(gimbal, 0.0, rx)
-    rz = np.where(gimbal, np.arctan2(-m[..., 0, 1], m[..., 1, 1]), rz)
+    rz = np.where(gimbal, np.arctan2(-m01, m11), rz)
     return np.asarray(np.degrees(np.stack((rx, ry, rz), axis=-1)), dtype=np.float64)
 
 

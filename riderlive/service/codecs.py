@@ -28,8 +28,15 @@ BINARY_HEADER = struct.Struct("<4sHBBQddHHI")
 """magic, header size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, reserved."""
 BONES_HEADER = struct.Struct("<HHI")
 """Appended to the header when flag bit 1 is set: n_bones (floats), reserved, reserved."""
+POSE_HEADER = struct.Struct("<HHI")
+"""Appended (after the bones block, if any) when flag bit 2 is set: rider pose floats, horse pose floats, reserved."""
 FLAG_HORSE = 1
 FLAG_BONES = 2
+FLAG_POSE = 4
+SKELETONS = ("rider", "horse")
+"""Skeletons a ``pose`` subscription can ask for, in the order frames carry them."""
+POSE_FLOATS_PER_BONE = 7
+"""tx ty tz (local position, metres) then qx qy qz qw (local rotation from the rest)."""
 
 DRIVERS = ("procedural", "input", "neutral")
 
@@ -124,11 +131,13 @@ class Subscription:
     encoding: str = "json"
     bones: bool = False
     """Add the rider's per-bone quaternions (``riderlive.skeleton.bone_quaternions``)."""
+    pose: tuple[str, ...] = ()
+    """Skeletons (of :data:`SKELETONS`) whose full local pose, 7 floats per bone, each frame carries."""
 
     @property
     def key(self) -> tuple[Any, ...]:
         """Clients with the same key share one encoded frame per tick."""
-        return (self.encoding, self.rider, self.horse, self.bones)
+        return (self.encoding, self.rider, self.horse, self.bones, self.pose)
 
     def describe(self, tick_rate: float, names: Sequence[str] = RIDER_NAMES) -> dict[str, Any]:
         return {
@@ -139,6 +148,7 @@ class Subscription:
             "rate": tick_rate / self.decimation,
             "encoding": self.encoding,
             "bones": self.bones,
+            "pose": list(self.pose),
         }
 
 
@@ -180,13 +190,34 @@ def decode_subscription(
     bones = obj.get("bones", current.bones)
     if not isinstance(bones, bool):
         raise BadFrame("wrong_type", "'bones' must be true or false")
-    return Subscription(rider, horse, decimation, encoding, bones)
+    return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose))
 
 
-def encode_frame(sub: Subscription, record: np.ndarray, bones: np.ndarray | None = None) -> str | bytes:
+def _pose(obj: dict[str, Any], current: tuple[str, ...]) -> tuple[str, ...]:
+    """``pose``: true (both skeletons), false (none) or a list of skeleton names."""
+    if "pose" not in obj:
+        return current
+    value = obj["pose"]
+    if isinstance(value, bool):
+        return SKELETONS if value else ()
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise BadFrame("wrong_type", "'pose' must be true, false or a list of skeletons ('rider', 'horse')")
+    unknown = [v for v in value if v not in SKELETONS]
+    if unknown:
+        raise BadFrame("unknown_skeleton", f"unknown skeleton {unknown[0]!r}; known: {', '.join(SKELETONS)}")
+    return tuple(name for name in SKELETONS if name in value)
+
+
+def encode_frame(
+    sub: Subscription,
+    record: np.ndarray,
+    bones: np.ndarray | None = None,
+    pose: dict[str, np.ndarray] | None = None,
+) -> str | bytes:
     """One output-ring record as a frame for ``sub``: JSON text or the binary layout (docs/protocol.md).
 
     ``bones``: the rider's bone quaternions for this record, added when ``sub.bones``.
+    ``pose``: skeleton -> its pose floats (7 per bone) for this record, added for ``sub.pose``.
     """
     seq = int(record[L.OUT_SEQ])
     engine_t = float(record[L.OUT_ENGINE_T])
@@ -197,9 +228,12 @@ def encode_frame(sub: Subscription, record: np.ndarray, bones: np.ndarray | None
     rider_values = rider[list(sub.rider)] if len(sub.rider) != len(rider) else rider
     horse_values = horse[list(sub.horse)] if sub.horse else None
     bone_values = bones if sub.bones else None
+    poses = [np.asarray(pose[name], dtype="<f8") if pose else np.zeros(0) for name in sub.pose]
     if sub.encoding == "binary":
         flags = (FLAG_HORSE if horse_values is not None else 0) | (FLAG_BONES if bone_values is not None else 0)
+        flags |= FLAG_POSE if sub.pose else 0
         size = BINARY_HEADER.size + (BONES_HEADER.size if bone_values is not None else 0)
+        size += POSE_HEADER.size if sub.pose else 0
         header = BINARY_HEADER.pack(
             BINARY_MAGIC,
             size,
@@ -214,12 +248,15 @@ def encode_frame(sub: Subscription, record: np.ndarray, bones: np.ndarray | None
         )
         if bone_values is not None:
             header += BONES_HEADER.pack(len(bone_values), 0, 0)
+        if sub.pose:
+            counts = {name: len(p) for name, p in zip(sub.pose, poses, strict=True)}
+            header += POSE_HEADER.pack(counts.get("rider", 0), counts.get("horse", 0), 0)
         body = rider_values.astype("<f8").tobytes()
         if horse_values is not None:
             body += horse_values.astype("<f8").tobytes()
         if bone_values is not None:
             body += np.asarray(bone_values, dtype="<f8").tobytes()
-        return header + body
+        return header + body + b"".join(p.tobytes() for p in poses)
     message: dict[str, Any] = {
         "type": "frame",
         "seq": seq,
@@ -232,6 +269,8 @@ def encode_frame(sub: Subscription, record: np.ndarray, bones: np.ndarray | None
         message["horse"] = horse_values.tolist()
     if bone_values is not None:
         message["bones"] = np.asarray(bone_values).tolist()
+    if sub.pose:
+        message["pose"] = {name: p.tolist() for name, p in zip(sub.pose, poses, strict=True)}
     return orjson.dumps(message).decode()
 
 
@@ -251,8 +290,18 @@ def decode_binary_frame(data: bytes) -> dict[str, Any]:
     }
     if flags & FLAG_HORSE:
         out["horse"] = np.frombuffer(data, dtype="<f8", count=n_horse, offset=size + 8 * n_rider).tolist()
+    offset = size + 8 * (n_rider + (n_horse if flags & FLAG_HORSE else 0))
+    extension = BINARY_HEADER.size
     if flags & FLAG_BONES:
-        (n_bones, _, _) = BONES_HEADER.unpack_from(data, BINARY_HEADER.size)
-        offset = size + 8 * (n_rider + (n_horse if flags & FLAG_HORSE else 0))
+        (n_bones, _, _) = BONES_HEADER.unpack_from(data, extension)
+        extension += BONES_HEADER.size
         out["bones"] = np.frombuffer(data, dtype="<f8", count=n_bones, offset=offset).tolist()
+        offset += 8 * n_bones
+    if flags & FLAG_POSE:
+        n_rider_pose, n_horse_pose, _ = POSE_HEADER.unpack_from(data, extension)
+        out["pose"] = {}
+        for name, count in (("rider", n_rider_pose), ("horse", n_horse_pose)):
+            if count:
+                out["pose"][name] = np.frombuffer(data, dtype="<f8", count=count, offset=offset).tolist()
+                offset += 8 * count
     return out

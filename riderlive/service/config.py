@@ -115,6 +115,28 @@ class PhysicsSection(StrictModel):
     """Physics TOML (default ``config/physics/tail.toml``)."""
 
 
+class VmcSection(StrictModel):
+    """VMC out (``docs/vmc.md``): the rider as a VMC performer, the horse as a generic skeleton."""
+
+    target: str | None = None
+    """``HOST:PORT`` of the marionette (EVMC4U, VMC4UE, VRM4U, VMC4B; usually port 39539); unset: off."""
+    horse_target: str | None = None
+    """``HOST:PORT`` for the horse (another port or host); unset: the horse is not sent."""
+    rate: float = pydantic.Field(default=60.0, gt=0.0, le=1000.0)
+    """Bundles per second: every ``round(tick.rate / rate)``-th tick."""
+    local_port: int = pydantic.Field(default=0, ge=0, le=65535)
+    """The UDP port we send from (0: any free port)."""
+
+    @pydantic.field_validator("target", "horse_target")
+    @classmethod
+    def _host_port(cls, value: str | None) -> str | None:
+        if value is not None:
+            from riderlive.vmc.sender import parse_target
+
+            parse_target(value)
+        return value
+
+
 class ServiceConfig(StrictModel):
     server: ServerSection = ServerSection()
     security: SecuritySection = SecuritySection()
@@ -125,6 +147,7 @@ class ServiceConfig(StrictModel):
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
     physics: PhysicsSection = PhysicsSection()
+    vmc: VmcSection = VmcSection()
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:

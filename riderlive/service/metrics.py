@@ -58,6 +58,8 @@ class ServiceMetrics:
     """Ticks that arrived together with a newer one (the web process was late)."""
     clients_cut_off: int = 0
     input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+    vmc: Counter[str] = field(default_factory=Counter)
+    """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed)."""
 
 
 def _escape(value: str) -> str:
@@ -159,6 +161,13 @@ def render(
         "Ticks that reached the web process together with a newer one.",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
     )
+    if metrics.vmc:
+        metric(
+            "riderlive_vmc_bundles_total",
+            "counter",
+            "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed).",
+            [f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}' for o in ("sent", "dropped", "error")],
+        )
     metric(
         "riderlive_input_to_send_seconds",
         "histogram",

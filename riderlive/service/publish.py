@@ -30,12 +30,14 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, Kind, lookup
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, lookup
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
 from riderlive.service import auth
 from riderlive.service.codecs import (
+    POSE_FLOATS_PER_BONE,
     PROTOCOL_VERSION,
+    SKELETONS,
     BadFrame,
     Subscription,
     decode_subscription,
@@ -43,13 +45,17 @@ from riderlive.service.codecs import (
     parse_message,
 )
 from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
-from riderlive.skeleton import bone_quaternions, hello_skeletons
+from riderlive.skeleton import hello_skeletons
+from riderlive.skeleton.rig import Pose
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
+HELLO_VERSION = 2
+"""1: ``length_unit`` was a sentence. 2: it is a unit symbol (``"m"``), with ``metres_per_length_unit``,
+``time_unit`` and ``pose`` (docs/protocol.md, "Hello versions")."""
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
@@ -100,19 +106,21 @@ def skeletons() -> dict[str, Any]:
     return hello_skeletons()
 
 
-_RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
+def pose_floats(pose: Pose) -> np.ndarray:
+    """A pose as the wire carries it: per bone ``tx ty tz qx qy qz qw`` (local, metres), flattened."""
+    out = np.empty((len(pose.local_offsets), POSE_FLOATS_PER_BONE), dtype=np.float64)
+    out[:, :3] = pose.local_offsets
+    out[:, 3:] = pose.local_rotations
+    return out.ravel()
 
 
-def rider_bones(record: np.ndarray, length_scale: float) -> np.ndarray:
-    """The rider's bone quaternions (x, y, z, w per bone) for one output record.
-
-    The skeletons are in metres; rider translations are in service length units.
-    """
-    rider = record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)]
-    if length_scale != DEFAULT_SCALE:
-        rider = rider.copy()
-        rider[_RIDER_LENGTHS] *= length_scale / DEFAULT_SCALE
-    return np.asarray(bone_quaternions(rider.tolist()), dtype=np.float64)
+def units(length_scale: float) -> tuple[str, float]:
+    """The service length unit as a symbol (``m``, ``cm``, ``mm``, else ``"<k> m"``) and in metres."""
+    metres = length_scale / DEFAULT_SCALE
+    for symbol, size in (("m", 1.0), ("cm", 0.01), ("mm", 0.001)):
+        if abs(metres - size) <= 1e-12 * size:
+            return symbol, size
+    return f"{metres:g} m", metres
 
 
 def abort_transport(websocket: WebSocket) -> None:
@@ -144,6 +152,7 @@ class Hub:
     def hello(self) -> dict[str, Any]:
         service = self.service
         config = service.config
+        length_unit, metres = units(config.tick.length_scale)
         return {
             "type": "hello",
             "protocol": PROTOCOL_VERSION,
@@ -155,11 +164,21 @@ class Hub:
             "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
             "axis_convention": AXIS_CONVENTION,
             "length_scale": config.tick.length_scale,
-            "length_unit": "service length unit: thesis rig units / length_scale",
+            "length_unit": length_unit,
+            "metres_per_length_unit": metres,
             "rotation_unit": "deg",
+            "time_unit": "s",
+            "hello_version": HELLO_VERSION,
             "encodings": ["json", "binary"],
             "drivers": ["procedural", "input", "neutral"],
             "skeletons": skeletons(),
+            "pose": {
+                "skeletons": list(SKELETONS),
+                "floats_per_bone": POSE_FLOATS_PER_BONE,
+                "layout": ["tx", "ty", "tz", "qx", "qy", "qz", "qw"],
+                "length_unit": "m",
+                "frame": "local: position in the parent's frame, rotation from the rest (identity); skeletons.axes",
+            },
         }
 
     def _channels(self) -> list[Any]:
@@ -179,7 +198,7 @@ class Hub:
             rx_so_far.append(newest_rx)
         chosen: dict[int, int | None] = {}
         encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
-        bones: dict[int, np.ndarray] = {}
+        poses = self.service.poses
         now = time.perf_counter()
         timeout = self.service.config.publish.send_timeout
         fresh_rx = -1.0
@@ -199,9 +218,10 @@ class Hub:
             key = (*sub.key, index)
             data = encoded.get(key)
             if data is None:
-                if sub.bones and index not in bones:
-                    bones[index] = rider_bones(records[index], self.service.config.tick.length_scale)
-                message = encode_frame(sub, records[index], bones.get(index))
+                record = records[index]
+                bones = np.asarray(poses.rider(record).local_rotations).ravel() if sub.bones else None
+                skeleton_poses = {name: pose_floats(self._pose(name, record)) for name in sub.pose}
+                message = encode_frame(sub, record, bones, skeleton_poses)
                 data = (message, wire_frame(message))
                 encoded[key] = data
             input_rx = rx_so_far[index] if rx_so_far[index] > self._seen_input_rx else -1.0
@@ -213,6 +233,10 @@ class Hub:
         self._seen_input_rx = newest_rx
         if fresh_rx >= 0.0:
             self.service.metrics.input_to_send.observe(self.service.link.engine_time() - fresh_rx)
+
+    def _pose(self, skeleton: str, record: np.ndarray) -> Pose:
+        poses = self.service.poses
+        return poses.rider(record) if skeleton == "rider" else poses.horse(record)
 
     def _write(self, client: Subscriber, wire: bytes, now: float, timeout: float) -> None:
         """The fast path: write a frame's wire bytes, or drop it if the client is behind."""

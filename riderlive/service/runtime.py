@@ -21,6 +21,7 @@ from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
+from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.takes.recorder import TakeRecorder, take_path
 from riderlive.takes.replay import Replay, load_replay
@@ -76,6 +77,13 @@ class Service:
         self.params = load_preset(config.tick.preset)
         self.animator = AnimatorLayer()
         self.metrics = ServiceMetrics()
+        self.poses = RecordPoses(config.tick.length_scale)
+        """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
+        self.vmc = None
+        if config.vmc.target is not None:
+            from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
+
+            self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
         self.ingest = IngestEndpoint(self)
@@ -114,6 +122,8 @@ class Service:
         self.on_tick()
         self.stop_recording()
         self.link.close()
+        if self.vmc is not None:
+            self.vmc.close()
 
     # -- the tick's records ---------------------------------------------------
     def on_tick(self) -> None:
@@ -130,6 +140,8 @@ class Service:
             self.metrics.ticks_coalesced += len(records) - 1
             self.metrics.ticks_published += 1
             self.hub.publish(records)
+            if self.vmc is not None:
+                self.vmc.publish(records)
         version = link.status_blob.version
         if version != self._status_version:
             self._status_version = version
@@ -206,7 +218,12 @@ class Service:
         self.stop_recording()
         name = name or datetime.now(UTC).strftime("take-%Y%m%d-%H%M%S")
         path = take_path(self.config.takes.directory, name)
-        meta = {"session": self.session, "tick_rate": self.config.tick.rate, "preset": self.params.name}
+        meta = {
+            "session": self.session,
+            "tick_rate": self.config.tick.rate,
+            "preset": self.params.name,
+            "length_scale": self.config.tick.length_scale,
+        }
         self.recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels)
         self.take_name = path.stem
         return path.stem
@@ -239,4 +256,5 @@ class Service:
             "recording": None if self.recorder is None else {"name": self.take_name, "rows": self.recorder.rows},
             "preset": self.params.name,
             "horse_channels": list(HORSE_NAMES),
+            "vmc": None if self.vmc is None else self.vmc.status(),
         }

@@ -10,7 +10,7 @@ import sys
 
 import uvicorn
 
-from riderlive.configfile import ConfigError
+from riderlive.configfile import ConfigError, validate
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--tail", action="store_true", help="run the tail and braid physics (physics.tail = true; see docs/tail.md)"
     )
+    parser.add_argument("--vmc", metavar="HOST:PORT", help="send the rider as a VMC performer (docs/vmc.md)")
+    parser.add_argument("--vmc-horse", metavar="HOST:PORT", help="send the horse too, to another port")
+    parser.add_argument("--vmc-rate", type=float, metavar="HZ", help="VMC bundles per second (default 60)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,12 +62,27 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         overrides = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
-        if overrides or getattr(args, "tail", False):
+        vmc = {
+            k: v
+            for k, v in (
+                ("target", getattr(args, "vmc", None)),
+                ("horse_target", getattr(args, "vmc_horse", None)),
+                ("rate", getattr(args, "vmc_rate", None)),
+            )
+            if v is not None
+        }
+        if overrides or vmc or getattr(args, "tail", False):
             data = config.model_dump()
             data["server"].update(overrides)
+            data["vmc"].update(vmc)
             if getattr(args, "tail", False):
                 data["physics"]["tail"] = True
-            config = ServiceConfig.model_validate(data)
+            config = validate(ServiceConfig, data, "command line")
+    except (ConfigError, ValueError) as exc:
+        print(f"riderlive serve: {exc}", file=sys.stderr)
+        return 2
+    try:
+        app = create_app(config)
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)
         return 2
@@ -85,14 +103,13 @@ def run(args: argparse.Namespace) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
         except OSError as exc:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
-    try:
-        app = create_app(config)
-    except (ConfigError, ValueError) as exc:
-        print(f"riderlive serve: {exc}", file=sys.stderr)
-        return 2
-    server = RiderServer(uvicorn_config(app, config), app.state.service)
+    service = app.state.service
+    server = RiderServer(uvicorn_config(app, config), service)
     try:
         server.run(sockets=[sock])
     except KeyboardInterrupt:  # uvicorn re-raises Ctrl+C after its clean shutdown
         return 130
+    finally:
+        if service.vmc is not None:
+            print(f"riderlive serve: VMC out: {service.vmc.status()}", file=sys.stderr, flush=True)
     return 0

@@ -62,9 +62,18 @@ def bone_quaternions(rider_values: Sequence[float] | Mapping[str, float]) -> lis
     return [c for q in rider_pose(rider_values).local_rotations for c in q]
 
 
+def _with_bind_pose(rig: Rig) -> dict[str, Any]:
+    """The rig's JSON, each bone with its bind (rest) pose: rotation identity, position in the skeleton frame."""
+    data = rig.to_json()
+    for bone, position in zip(data["bones"], rig.rest_world(), strict=True):
+        bone["rest_rotation"] = [0.0, 0.0, 0.0, 1.0]
+        bone["rest_position"] = list(position)
+    return data
+
+
 def hello_skeletons() -> dict[str, Any]:
     """Both skeletons, their rigs and the humanoid mapping, ready for ``json.dumps``."""
-    rider = rider_rig().to_json()
+    rider = _with_bind_pose(rider_rig())
     for bone in rider["bones"]:
         unity, vrm = HUMANOID.get(bone["name"], (None, None))
         bone["unity"] = unity
@@ -73,7 +82,7 @@ def hello_skeletons() -> dict[str, Any]:
         "version": SKELETON_VERSION,
         "axes": dict(AXES),
         "rider": rider,
-        "horse": HORSE_RIG.to_json(),
+        "horse": _with_bind_pose(HORSE_RIG),
         "attach": {"rider_root": "horse.saddle"},
         "bone_quaternions": {"skeleton": "rider", "layout": "x, y, z, w per bone, in rider bone order"},
     }

@@ -27,8 +27,11 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from riderlive.skeleton import quat
-from riderlive.skeleton.quat import IDENTITY, Quat, Vec3
+from riderlive.skeleton.quat import IDENTITY, SCALAR, Ops, Quat, Vec3
 
 AXES: dict[str, str] = {
     "units": "m",
@@ -190,7 +193,13 @@ class Pose:
 
 
 def _forward(
-    rig: Rig, local_rot: list[Quat], local_off: list[Vec3], wrot: list[Quat], wpos: list[Vec3], *, bones: Iterable[int]
+    rig: Rig,
+    local_rot: list[Quat],
+    local_off: list[Vec3],
+    wrot: list[Quat],
+    wpos: list[Vec3],
+    *,
+    bones: Iterable[int],
 ) -> None:
     """World transforms of ``bones`` (parents first) from local ones, in place."""
     for i in bones:
@@ -203,30 +212,35 @@ def _forward(
             wpos[i] = quat.add(wpos[p], quat.rotate(pr, local_off[i]))
 
 
-def _any_perpendicular(u: Vec3) -> Vec3:
-    other = X if abs(u[0]) < 0.9 else Y
-    return quat.unit(quat.cross(u, other))
+def _any_perpendicular(u: Vec3, ops: Ops) -> Vec3:
+    other = quat.choose(abs(u[0]) < 0.9, X, Y, ops)
+    return quat.unit(quat.cross(u, other), ops)
 
 
-def solve(rig: Rig, values: Mapping[str, float]) -> Pose:
+def solve(rig: Rig, values: Mapping[str, Any], ops: Ops = SCALAR) -> Pose:
     """Pose ``rig`` from channel ``values`` (missing channels stay at neutral).
 
-    Pure: no state, no I/O. Rotations in degrees, lengths in metres.
+    Pure: no state, no I/O. Rotations in degrees, lengths in metres. ``values`` are
+    floats (one frame; ``ops`` = ``quat.SCALAR``) or equal-length NumPy arrays (N
+    frames at once; ``ops`` = ``quat.ARRAY``, see :func:`solve_frames`); the same
+    source poses both.
     """
     neutral = rig.neutral
 
-    def delta(channel: str) -> float:
+    def delta(channel: str) -> Any:
         v = values.get(channel)
-        if v is None or not math.isfinite(v):
+        if v is None:
             return 0.0
-        return v - neutral.get(channel, 0.0)
+        if ops is SCALAR:
+            return v - neutral.get(channel, 0.0) if math.isfinite(v) else 0.0
+        return ops.where(ops.isfinite(v), v - neutral.get(channel, 0.0), 0.0)
 
     n = len(rig.bones)
     local_rot: list[Quat] = [IDENTITY] * n
     local_off: list[Vec3] = [b.offset for b in rig.bones]
     for d in rig.rotations:
         i = rig.index[d.bone]
-        local_rot[i] = quat.mul(quat.from_axis_angle(d.axis, d.sign * delta(d.channel)), local_rot[i])
+        local_rot[i] = quat.mul(quat.from_axis_angle(d.axis, d.sign * delta(d.channel), ops), local_rot[i])
     for d in rig.translations:
         i = rig.index[d.bone]
         local_off[i] = quat.add(local_off[i], quat.scale(d.axis, d.sign * delta(d.channel)))
@@ -253,26 +267,26 @@ def solve(rig: Rig, values: Mapping[str, float]) -> Pose:
         pole = quat.add(fpos, quat.rotate(frot, pole_local))
 
         a = wpos[iu]
-        l1 = quat.norm(local_off[il])
-        l2 = quat.norm(local_off[ie])
+        l1 = quat.norm(local_off[il], ops)
+        l2 = quat.norm(local_off[ie], ops)
         to_t = quat.sub(target, a)
-        dist = quat.norm(to_t)
-        u = quat.unit(to_t) if dist > 1e-12 else _any_perpendicular(quat.unit(pole))
-        c_len = min(max(dist, abs(l1 - l2) + 1e-9), l1 + l2 - 1e-9)
+        dist = quat.norm(to_t, ops)
+        u = quat.choose(dist > 1e-12, quat.unit(to_t, ops), _any_perpendicular(quat.unit(pole, ops), ops), ops)
+        c_len = ops.minimum(ops.maximum(dist, abs(l1 - l2) + 1e-9), l1 + l2 - 1e-9)
         cos_a = (l1 * l1 + c_len * c_len - l2 * l2) / (2.0 * l1 * c_len)
-        sin_a = math.sqrt(max(0.0, 1.0 - cos_a * cos_a))
+        sin_a = ops.sqrt(ops.maximum(0.0, 1.0 - cos_a * cos_a))
         to_p = quat.sub(pole, a)
         v = quat.sub(to_p, quat.scale(u, quat.dot(to_p, u)))
-        v = quat.unit(v) if quat.norm(v) > 1e-12 else _any_perpendicular(u)
+        v = quat.choose(quat.norm(v, ops) > 1e-12, quat.unit(v, ops), _any_perpendicular(u, ops), ops)
         elbow = quat.add(a, quat.add(quat.scale(u, l1 * cos_a), quat.scale(v, l1 * sin_a)))
         end = quat.add(a, quat.scale(u, c_len))
 
-        d0u, d0l = quat.unit(local_off[il]), quat.unit(local_off[ie])
-        n0 = quat.unit(quat.cross(d0u, d0l))
-        d1u, d1l = quat.unit(quat.sub(elbow, a)), quat.unit(quat.sub(end, elbow))
-        n1 = quat.unit(quat.cross(d1u, d1l))
-        upper_world = quat.frame_rotation(d0u, n0, d1u, n1)
-        lower_world = quat.frame_rotation(d0l, n0, d1l, n1)
+        d0u, d0l = quat.unit(local_off[il], ops), quat.unit(local_off[ie], ops)
+        n0 = quat.unit(quat.cross(d0u, d0l), ops)
+        d1u, d1l = quat.unit(quat.sub(elbow, a), ops), quat.unit(quat.sub(end, elbow), ops)
+        n1 = quat.unit(quat.cross(d1u, d1l), ops)
+        upper_world = quat.frame_rotation(d0u, n0, d1u, n1, ops)
+        lower_world = quat.frame_rotation(d0l, n0, d1l, n1, ops)
         parent_u = rig.bones[iu].parent
         parent_rot = wrot[parent_u] if parent_u >= 0 else IDENTITY
         local_rot[iu] = quat.mul(quat.conj(parent_rot), upper_world)
@@ -281,8 +295,39 @@ def solve(rig: Rig, values: Mapping[str, float]) -> Pose:
         _forward(rig, local_rot, local_off, wrot, wpos, bones=rig.subtree[iu])
 
     return Pose(
-        local_rotations=[quat.normalize(q) for q in local_rot],
+        local_rotations=[quat.normalize(q, ops) for q in local_rot],
         local_offsets=local_off,
         world_rotations=wrot,
         world_positions=wpos,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class PoseArrays:
+    """N poses as arrays, bone-major (one bone's track is contiguous): rotations (B, N, 4) x y z w,
+    positions and offsets (B, N, 3) metres, in the rig's bone order."""
+
+    local_rotations: npt.NDArray[np.float64]
+    local_offsets: npt.NDArray[np.float64]
+    world_rotations: npt.NDArray[np.float64]
+    world_positions: npt.NDArray[np.float64]
+
+
+def _stack(items: Sequence[Sequence[Any]], frames: int) -> npt.NDArray[np.float64]:
+    """Per-bone tuples of components (floats or (N,) arrays) -> (bones, N, components)."""
+    out = np.empty((len(items), len(items[0]), frames), dtype=np.float64)
+    for b, item in enumerate(items):
+        for k, component in enumerate(item):
+            out[b, k] = component
+    return np.ascontiguousarray(out.transpose(0, 2, 1))
+
+
+def solve_frames(rig: Rig, columns: Mapping[str, npt.NDArray[np.float64]], frames: int) -> PoseArrays:
+    """:func:`solve` on N frames at once: ``columns`` maps channels to (N,) arrays."""
+    pose = solve(rig, columns, quat.ARRAY)
+    return PoseArrays(
+        _stack(pose.local_rotations, frames),
+        _stack(pose.local_offsets, frames),
+        _stack(pose.world_rotations, frames),
+        _stack(pose.world_positions, frames),
     )

@@ -10,6 +10,7 @@ time (seconds from the first row); the engine time of the first row is in a side
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import time
@@ -56,6 +57,7 @@ class TakeRecorder:
         self.path = path
         self.flush_interval = flush_interval
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        fcntl.flock(self._fd, fcntl.LOCK_EX)  # "being recorded" for readers (riderlive export); gone with the process
         os.write(self._fd, (",".join((*COLUMNS, *extra)) + "\n").encode())
         self._lines: list[str] = []
         self._last_flush = time.monotonic()

@@ -1,0 +1,8 @@
+"""VMC out: the rider (and the horse) to VMC marionettes over OSC/UDP.
+
+- :mod:`~riderlive.vmc.osc`: OSC 1.0 encoding (pure);
+- :mod:`~riderlive.vmc.performer`: poses -> one bundle per frame (pure; the mapping);
+- :mod:`~riderlive.vmc.sender`: the UDP sender the service runs (``serve --vmc``).
+
+The protocol, the mapping per engine and where sending runs: ``docs/vmc.md``.
+"""
