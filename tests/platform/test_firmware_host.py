@@ -44,6 +44,7 @@ def test_cli_runs_the_host_build_and_prints_its_pty() -> None:
 def test_the_estop_input_latches_and_holds_reset_off() -> None:
     with FirmwareHost("servo8") as firmware, SerialPlatformLink(firmware.port) as port:
         port.open()
+        port.command(link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))  # not the dead-man's test
         port.command(link.Arm("servo8"))
         stream(port, LinkState.RUNNING, [2000] * 8, 5.0)
         firmware.send("estop on")
