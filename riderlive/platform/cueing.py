@@ -12,7 +12,7 @@ relative to home (same units and order). Per axis:
      an IMU's drift or an offset is removed and the stride's oscillation (>= 0.67 Hz)
      passes at >= 99 % amplitude;
    - outside the envelope but below ``knee`` of the axis' room: a **move that fits**
-     is played as it is: the tracker all but stops (a tenth of the drift cut-off), so
+     is played as it is: the tracker all but stops (2 % of the drift cut-off), so
      the platform comes back to centre exactly when the saddle does, with no undershoot;
    - past the knee on any axis (a jump, a rear, a stop, a buck too big for the
      platform): **washout**, on every axis at once (a move is a whole-body event: the
@@ -159,8 +159,9 @@ NEVER = 1e9
 """Time since the cue was last outside the gait envelope, before it ever was (s)."""
 ENVELOPE_MARGIN = 1.25
 """The gait envelope is this times the scaled reference amplitude (room for stride-to-stride variation)."""
-FROZEN = 0.1
-"""Share of the drift cut-off left while a move that fits holds the cue outside the gait envelope."""
+FROZEN = 0.02
+"""Share of the drift cut-off left while a move that fits holds the cue outside the gait envelope
+(0.08 Hz -> a 100 s time constant: a move is played as it is, a stuck offset still leaks away)."""
 
 
 def cue_frame(p: Any, s: Any, u: Any, dt: float, y: Any) -> None:
@@ -249,7 +250,7 @@ def blend(p: Any, target: Any, dt: float, tau: float) -> bool:
     moving = False
     for j in range(len(p)):
         d = target[j] - p[j]
-        if abs(d) <= 1e-12 * (1.0 + abs(target[j])):
+        if abs(d) <= 1e-6 * (1.0 + abs(target[j])):
             p[j] = target[j]
         else:
             p[j] += d * f

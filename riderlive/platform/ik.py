@@ -40,8 +40,8 @@ from riderlive.platform.geometry import Geometry, Pose
 
 FloatArray = npt.NDArray[np.float64]
 DEG = math.pi / 180.0
-SHRINK_STEPS = 6
-"""Regula falsi steps of the scale-back: lambda within ~1e-6 of the boundary in practice."""
+SHRINK_STEPS = 8
+"""Regula falsi steps of the scale-back: the kept pose ends within 2 % of an actuator's range of its limit."""
 
 
 def _where_scalar(cond: Any, a: Any, b: Any) -> Any:
@@ -173,15 +173,16 @@ def _shrink(  # noqa: PLR0917
     ``m_out < 0`` is the margin at ``lam = 1``; the returned ``lam`` always has margin >= 0
     (it only ever moves to points found inside), so the result is inside for any step count.
     """
-    where = ops.where
+    where, maximum = ops.where, ops.maximum
     a: Any = 0.0 * m_out
     fa: Any = m_home + a
     b: Any = 1.0 + a
-    fb: Any = m_out
+    fb: Any = maximum(m_out, -1.0)  # far outside: a rod's reach can read -30; keep the secant sane
     side: Any = a
     for _ in range(SHRINK_STEPS):
         lam = (a * fb - b * fa) / (fb - fa)
         _, f = margin(*(h + lam * di for h, di in zip(home, d, strict=True)))
+        f = maximum(f, -1.0)
         inside, outside = f >= 0.0, f < 0.0
         fb = where(inside & (side > 0.0), fb * 0.5, fb)
         fa = where(outside & (side < 0.0), fa * 0.5, fa)
@@ -251,27 +252,63 @@ def forward(
 ) -> Pose:
     """The pose whose actuators are at ``positions`` (numerical; for checks, not for the tick).
 
-    Newton's method on the mechanism's free axes from ``guess`` (default home), with a
-    central-difference Jacobian; stops when a step is below ``tol``.
+    Newton's method on the mechanism's free axes with a central-difference Jacobian,
+    steps of at most 5 cm / 5 deg, halved until the residual shrinks with every rod in
+    reach; stops when a step is below ``tol``. From ``guess`` directly; without one it
+    walks the positions from home's in eight stages, so it stays on the assembly mode
+    (of the several poses a Stewart platform can take for one set of positions) that
+    home belongs to.
     """
+    target = np.asarray(positions, dtype=np.float64)
+    if guess is not None:
+        return _newton(g, np.array(guess, dtype=np.float64), target, tol)
+    ik = make_ik(g, SCALAR)
+    start = np.asarray(ik(*g.home)[0])
+    pose = np.array(g.home, dtype=np.float64)
+    for stage in range(1, 9):
+        pose = np.asarray(_newton(g, pose, start + stage / 8.0 * (target - start), tol if stage == 8 else 1e-6))
+    return tuple(float(v) for v in pose)  # type: ignore[return-value]
+
+
+def _newton(g: Geometry, pose: FloatArray, target: FloatArray, tol: float) -> Pose:
     ik = make_ik(g, SCALAR)
     free = [i for i, f in enumerate(g.kind.axes) if f]
-    pose = np.array(g.home if guess is None else guess, dtype=np.float64)
-    target = np.asarray(positions, dtype=np.float64)
+    limit = np.array([0.05 if axis < 3 else 5.0 for axis in free])  # largest step per iteration (m, deg)
+
+    def residual(p: FloatArray) -> FloatArray:
+        q, reach = ik(*p)
+        return np.asarray(q) - target if reach >= 0.0 else np.full(g.legs, np.inf)
+
     h = 1e-6
-    for _ in range(60):
-        f = np.asarray(ik(*pose)[0]) - target
+    f = residual(pose)
+    if not np.all(np.isfinite(f)):
+        raise ForwardKinematicsError("the starting pose is out of reach")
+    for _ in range(100):
         jac = np.empty((g.legs, len(free)))
         for col, axis in enumerate(free):
             up, down = pose.copy(), pose.copy()
             up[axis] += h
             down[axis] -= h
-            jac[:, col] = (np.asarray(ik(*up)[0]) - np.asarray(ik(*down)[0])) / (2.0 * h)
+            f_up, f_down = residual(up), residual(down)
+            if np.all(np.isfinite(f_up)) and np.all(np.isfinite(f_down)):
+                jac[:, col] = (f_up - f_down) / (2.0 * h)
+            else:  # at the edge of reach: the one-sided difference that stays inside
+                jac[:, col] = (f_up - f) / h if np.all(np.isfinite(f_up)) else (f - f_down) / h
         step = np.linalg.lstsq(jac, -f, rcond=None)[0]
-        pose[free] += step
+        step *= min(1.0, float(np.min(limit / np.maximum(np.abs(step), 1e-300))))
+        for _ in range(40):  # halve until the residual shrinks (or the step is negligible)
+            trial = pose.copy()
+            trial[free] += step
+            f_trial = residual(trial)
+            if float(np.linalg.norm(f_trial)) <= float(np.linalg.norm(f)) or float(np.max(np.abs(step))) < tol:
+                break
+            step *= 0.5
+        if not np.all(np.isfinite(f_trial)):
+            break
+        pose, f = trial, f_trial
         if float(np.max(np.abs(step))) < tol:
             return tuple(float(v) for v in pose)  # type: ignore[return-value]
-    raise ForwardKinematicsError(f"no convergence for positions {list(target)}")
+    raise ForwardKinematicsError(f"no convergence for positions {target.tolist()}")
 
 
 def axis_ranges(g: Geometry, cap: tuple[float, float] = (1.0, 90.0)) -> tuple[tuple[float, float], ...]:
