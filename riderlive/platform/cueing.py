@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import Any, NamedTuple, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -145,9 +145,10 @@ PRESETS: dict[str, CueingParams] = {
 """Shipped presets: ``gentle`` (a first ride, therapy), ``standard``, ``lively`` (a seasoned rider)."""
 
 # Parameter vector: per-axis blocks of 6, then scalars.
-K, WN, WP, OR, OW, GATE = 0, 6, 12, 18, 24, 30
-KNEE, HOLD, ATTACK, RELEASE, TILT_W, TILT_RATE, TILT_MAX, TILT_K = 36, 37, 38, 39, 40, 41, 42, 43
-N_PARAMS = 44
+K, WN, WP, GATE = 0, 6, 12, 18
+OR, OW_T, OW_R = 24, 25, 26  # replay (drift) and washout cut-offs (translations, rotations), rad/s
+KNEE, HOLD, ATTACK, RELEASE, TILT_W, TILT_RATE, TILT_MAX, TILT_K = 27, 28, 29, 30, 31, 32, 33, 34
+N_PARAMS = 35
 # State vector: per axis the tracker, the time since the cue was last outside the gait envelope and
 # the last finite input; then the washout latch and its smoothed engagement, the tilt filter, counters.
 R, H, U = 0, 6, 12
@@ -215,18 +216,38 @@ def cue_frame(p: Any, s: Any, u: Any, dt: float, y: Any) -> None:
             s[LATCH] = 0.0
     m = s[M]
     if s[LATCH] > 0.0:
-        m += (1.0 - m) * (1.0 - math.exp(-dt / p[ATTACK]))
-    else:
-        m -= m * (1.0 - math.exp(-dt / p[RELEASE]))
+        if m < 1.0:
+            m += (1.0 - m) * (1.0 - math.exp(-dt / p[ATTACK]))
+    elif m > 0.0:
+        m *= math.exp(-dt / p[RELEASE])
+        if m < 1e-9:  # released: replay exactly
+            m = 0.0
     s[M] = m
     if m > 0.5:
         s[ENGAGED] += 1.0
     compressed = False
+    # the tracker's per-frame factor 1 - exp(-omega dt): omega is one of four (translation or
+    # rotation, replaying or frozen); each is computed once, when an axis first needs it
+    f_t = f_t_frozen = f_r = f_r_frozen = -1.0
     for i in range(6):
         x = s[U + i]
-        replay = p[OR + i] if s[H + i] > 0.0 else FROZEN * p[OR + i]
-        omega = replay + (p[OW + i] - replay) * m
-        s[R + i] += (x - s[R + i]) * (1.0 - math.exp(-omega * dt))
+        replaying = s[H + i] > 0.0
+        if i < 3:
+            f = f_t if replaying else f_t_frozen
+        else:
+            f = f_r if replaying else f_r_frozen
+        if f < 0.0:
+            replay = p[OR] if replaying else FROZEN * p[OR]
+            f = 1.0 - math.exp(-(replay + ((p[OW_T] if i < 3 else p[OW_R]) - replay) * m) * dt)
+            if i < 3 and replaying:
+                f_t = f
+            elif i < 3:
+                f_t_frozen = f
+            elif replaying:
+                f_r = f
+            else:
+                f_r_frozen = f
+        s[R + i] += (x - s[R + i]) * f
         c = p[K + i] * (x - s[R + i])
         if i == 5:
             c += s[TA]
@@ -307,8 +328,9 @@ class CueingModel:
             else:
                 v[WN + i] = v[WP + i] = 1.0
             v[GATE + i] = ENVELOPE_MARGIN * v[K + i] * p.reference_amplitude[i]
-            v[OR + i] = TWO_PI * p.drift_cutoff_hz
-            v[OW + i] = TWO_PI * (p.washout_translation_hz if i < 3 else p.washout_rotation_hz)
+        v[OR], v[OW_T], v[OW_R] = (
+            TWO_PI * f for f in (p.drift_cutoff_hz, p.washout_translation_hz, p.washout_rotation_hz)
+        )
         v[KNEE], v[HOLD], v[ATTACK], v[RELEASE] = p.knee, p.washout_hold_s, p.washout_attack_s, p.washout_release_s
         v[TILT_W], v[TILT_RATE], v[TILT_MAX] = TWO_PI * p.tilt_cutoff_hz, p.tilt_rate_dps, p.tilt_max_deg
         v[TILT_K] = p.tilt_gain * p.intensity / 100.0
@@ -350,8 +372,7 @@ class CueingModel:
         return CueingModel(PRESETS[name], self.ranges, self.axes).with_params(**changes)
 
 
-@dataclass(frozen=True, eq=False)
-class CueingState:
+class CueingState(NamedTuple):
     """Everything that changes: the kernel's state vector and the blended parameters.
 
     Both arrays are never written after the state is made (:func:`step` copies)."""

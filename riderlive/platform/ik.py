@@ -227,7 +227,7 @@ class Workspace:
         """:meth:`fit` for ``(N, 6)`` poses: ``(N, legs)`` positions and ``(N,)`` lambdas."""
         poses = np.asarray(poses, dtype=np.float64)
         margin = self._margin_array  # type: ignore[attr-defined]
-        q_cols, m = margin(*poses.T)
+        q_cols, m = margin(*np.ascontiguousarray(poses.T))
         q = np.empty((poses.shape[0], self.geometry.legs))
         for j, col in enumerate(q_cols):
             q[:, j] = col

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -78,19 +78,19 @@ def follow_frame(  # noqa: PLR0917 (a numba kernel: positional arrays)
         s[2 * n + i] = t
         error = previous - q
         ad = a * dt
-        correction = math.sqrt(ad * ad + 2.0 * a * abs(error)) - ad
-        want = (t - previous) / dt + (correction if error >= 0.0 else -correction)
-        up = math.sqrt(ad * ad + 2.0 * a * max(hi - q, 0.0)) - ad
-        down = -(math.sqrt(ad * ad + 2.0 * a * max(q - lo, 0.0)) - ad)
-        new = want
+        new = (t - previous) / dt
+        if error != 0.0:
+            correction = math.sqrt(ad * ad + 2.0 * a * abs(error)) - ad
+            new += correction if error > 0.0 else -correction
         if new > vmax[i]:
             new, limited_v = vmax[i], True
         elif new < -vmax[i]:
             new, limited_v = -vmax[i], True
-        if new > up:
-            new, braked = up, True
-        elif new < down:
-            new, braked = down, True
+        # new > brake(d) exactly when the distance it needs to stop, new^2 / 2a + new dt, exceeds d
+        if new > 0.0 and new * new / (2.0 * a) + new * dt > hi - q:
+            new, braked = math.sqrt(ad * ad + 2.0 * a * max(hi - q, 0.0)) - ad, True
+        elif new < 0.0 and new * new / (2.0 * a) - new * dt > q - lo:
+            new, braked = ad - math.sqrt(ad * ad + 2.0 * a * max(q - lo, 0.0)), True
         if new > v + ad:
             new, limited_a = v + ad, True
         elif new < v - ad:
@@ -139,8 +139,7 @@ class SafetyModel:
         return int(self.lower.shape[0])
 
 
-@dataclass(frozen=True, eq=False)
-class SafetyState:
+class SafetyState(NamedTuple):
     """Commanded positions and speeds, the last target, and the counters (never written after creation)."""
 
     values: FloatArray

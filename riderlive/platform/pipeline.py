@@ -79,8 +79,7 @@ class PlatformModel:
         return replace(self, cueing=self.cueing.with_params(**changes))
 
 
-@dataclass(frozen=True, eq=False)
-class PlatformState:
+class PlatformState(NamedTuple):
     """The cueing and safety states and the number of frames the workspace scale-back acted on."""
 
     cueing: CueingState
@@ -117,12 +116,12 @@ def initial(model: PlatformModel, positions: Any = None) -> PlatformState:
 def aim(model: PlatformModel, state: CueingState, saddle: Any, dt: float) -> tuple[CueingState, Aim]:
     """Cue one saddle frame and solve its actuator targets (scaled back into the workspace)."""
     state, cue = cueing.step(model.cueing, state, saddle, dt)
-    home = model.geometry.home
-    pose = tuple(h + c for h, c in zip(home, cue, strict=True))
-    targets, scale = model.workspace.fit(pose)  # type: ignore[arg-type]
+    h = model.geometry.home
+    pose = (h[0] + cue[0], h[1] + cue[1], h[2] + cue[2], h[3] + cue[3], h[4] + cue[4], h[5] + cue[5])
+    targets, scale = model.workspace.fit(pose)
     if scale < 1.0:
-        pose = tuple(h + scale * (p - h) for h, p in zip(home, pose, strict=True))
-    return state, Aim(cue, pose, tuple(targets), scale)
+        pose = tuple(a + scale * (p - a) for a, p in zip(h, pose, strict=True))  # type: ignore[assignment]
+    return state, Aim(cue, pose, targets, scale)
 
 
 def step(model: PlatformModel, state: PlatformState, saddle: Any, dt: float) -> tuple[PlatformState, Frame]:
@@ -135,31 +134,39 @@ def step(model: PlatformModel, state: PlatformState, saddle: Any, dt: float) -> 
 
 @dataclass(frozen=True, eq=False)
 class Bake:
-    """A whole take: per frame the cue, the pose, the IK targets, the kept share and the commands."""
+    """A whole take: per frame the pose aimed at (base frame, after the scale-back; the IK targets are
+    its actuator positions), the kept share of the way from home, and the commands after the safety stage."""
 
-    cue: FloatArray
     pose: FloatArray
-    targets: FloatArray
     scale: FloatArray
     positions: FloatArray
     state: PlatformState
 
 
 def bake(model: PlatformModel, saddle: FloatArray, dt: float | FloatArray, state: PlatformState | None = None) -> Bake:
-    """Run a take of saddle poses (``(N, 6)``; ``dt`` one step or one per frame, s) through the platform."""
+    """Run a take of saddle poses (``(N, 6)``; ``dt`` one step or one per frame, s) through the platform.
+
+    Works through the take in chunks of :data:`CHUNK` frames, each through all three stages,
+    so the temporaries stay in the CPU cache and only the outputs touch new memory.
+    """
     state = initial(model) if state is None else state
-    cue_state, cue = cueing.run(model.cueing, state.cueing, saddle, dt)
-    pose = cue + np.asarray(model.geometry.home)
-    n = pose.shape[0]
-    targets = np.empty((n, model.geometry.legs))
-    scale = np.empty(n)
+    u = np.ascontiguousarray(saddle, dtype=np.float64)
+    if u.ndim != 2 or u.shape[1] != 6:
+        raise ValueError(f"expected an (N, 6) saddle array, got {u.shape}")
+    n, legs = u.shape[0], model.geometry.legs
+    steps = np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,))
+    home = np.asarray(model.geometry.home)
+    pose, scale, positions = np.empty((n, 6)), np.empty(n), np.empty((n, legs))
+    cue_state, safety_state, scaled = state.cueing, state.safety, state.scaled_back
     for start in range(0, n, CHUNK):
         stop = min(start + CHUNK, n)
-        targets[start:stop], scale[start:stop] = model.workspace.fit_batch(pose[start:stop])
-    out = np.flatnonzero(scale < 1.0)
-    if out.size:
-        home = np.asarray(model.geometry.home)
-        pose[out] = home + scale[out, None] * (pose[out] - home)
-    safety_state, positions = limits.run(model.safety, state.safety, targets, dt)
-    final = PlatformState(cue_state, safety_state, state.scaled_back + int(out.size))
-    return Bake(cue, pose, targets, scale, positions, final)
+        cue_state, cue = cueing.run(model.cueing, cue_state, u[start:stop], steps[start:stop])
+        cue += home
+        q, lam = model.workspace.fit_batch(cue)
+        out = np.flatnonzero(lam < 1.0)
+        if out.size:
+            cue[out] = home + lam[out, None] * (cue[out] - home)
+            scaled += int(out.size)
+        safety_state, positions[start:stop] = limits.run(model.safety, safety_state, q, steps[start:stop])
+        pose[start:stop], scale[start:stop] = cue, lam
+    return Bake(pose, scale, positions, PlatformState(cue_state, safety_state, scaled))
