@@ -89,6 +89,20 @@ HORSE: tuple[Channel, ...] = _table(
 )
 """Every horse input channel, in the canonical column order of files and arrays."""
 
+SADDLE: tuple[Channel, ...] = _table(
+    (
+        ("saddle.tx", "saddle point forward/back of where it sits standing square (m)"),
+        ("saddle.ty", "saddle point up/down (m)"),
+        ("saddle.tz", "saddle point side, + to the horse's right (m)"),
+        ("saddle.rx", "saddle roll, + rolling to the right (deg)"),
+        ("saddle.ry", "saddle yaw, + turning left (deg)"),
+        ("saddle.rz", "saddle pitch, + nose up (deg)"),
+    )
+)
+"""The saddle's pose (``riderlive.saddle``): a point on the horse's back, in the horse's
+travelling frame (``root.*`` excluded), same axes and signs as ``rearPivot``; metres and
+degrees. Computed from any horse frame, or the input of a saddle-only stream."""
+
 RIDER: tuple[Channel, ...] = _table(
     (
         ("lower_back.rz", "Eq. 1: lower back forward (+) / back"),
@@ -136,7 +150,9 @@ HORSE_NAMES: tuple[str, ...] = tuple(c.name for c in HORSE)
 RIDER_NAMES: tuple[str, ...] = tuple(c.name for c in RIDER)
 HORSE_INDEX: dict[str, int] = {n: i for i, n in enumerate(HORSE_NAMES)}
 RIDER_INDEX: dict[str, int] = {n: i for i, n in enumerate(RIDER_NAMES)}
-BY_NAME: dict[str, Channel] = {c.name: c for c in HORSE + RIDER}
+SADDLE_NAMES: tuple[str, ...] = tuple(c.name for c in SADDLE)
+SADDLE_INDEX: dict[str, int] = {n: i for i, n in enumerate(SADDLE_NAMES)}
+BY_NAME: dict[str, Channel] = {c.name: c for c in HORSE + RIDER + SADDLE}
 
 AXIS_CONVENTION: dict[str, str] = {
     "rz": "bend front/back",
@@ -184,5 +200,5 @@ def lookup(name: str) -> Channel:
 
 
 def is_known(name: str) -> bool:
-    """Whether ``name`` is a horse, rider or simulated-bone channel."""
+    """Whether ``name`` is a horse, rider, saddle or simulated-bone channel."""
     return name in BY_NAME or _bone_channel(name) is not None
