@@ -81,7 +81,7 @@ class CueingParams(StrictModel):
     washout_attack_s: float = Field(0.05, ge=0.005, le=1.0)
     washout_hold_s: float = Field(2.0, ge=0.0, le=10.0)
     washout_release_s: float = Field(0.5, ge=0.05, le=5.0)
-    knee: float = Field(0.6, ge=0.2, le=0.95)
+    knee: float = Field(0.7, ge=0.2, le=0.95)
     """Share of an axis' room below which the cue is played unchanged."""
     share: float = Field(0.9, gt=0.0, le=1.0)
     """Share of an axis' single-axis reach the cue may use (the rest is left for the other axes)."""
@@ -89,8 +89,9 @@ class CueingParams(StrictModel):
     tilt_cutoff_hz: float = Field(0.2, ge=0.05, le=1.0)
     tilt_rate_dps: float = Field(6.0, gt=0.0, le=60.0)
     tilt_max_deg: float = Field(10.0, ge=0.0, le=30.0)
-    reference_amplitude: Amplitudes = (0.04, 0.05, 0.02, 2.5, 3.0, 7.5)
-    """The largest gait swing per axis the automatic scale makes room for (m, deg; half peak to peak)."""
+    reference_amplitude: Amplitudes = (0.07, 0.12, 0.04, 2.5, 2.5, 11.0)
+    """The largest gait swing per axis the automatic scale makes room for (m, deg; half peak to peak):
+    the procedural horse's saddle at any gait and speed (canter heave 0.118 m, gallop pitch 11.1 deg)."""
     scale: Amplitudes | None = None
     """Explicit scale per axis (0-2) instead of the automatic one."""
     blend_s: float = Field(0.5, ge=0.0, le=10.0)
@@ -124,7 +125,7 @@ PRESETS: dict[str, CueingParams] = {
         intensity=70.0,
         washout_translation_hz=0.3,
         washout_rotation_hz=0.3,
-        knee=0.5,
+        knee=0.6,
         tilt_cutoff_hz=0.15,
         tilt_rate_dps=3.0,
         tilt_max_deg=6.0,
@@ -135,7 +136,7 @@ PRESETS: dict[str, CueingParams] = {
         washout_translation_hz=0.8,
         washout_rotation_hz=0.6,
         washout_hold_s=1.5,
-        knee=0.7,
+        knee=0.8,
         share=0.95,
         tilt_cutoff_hz=0.3,
         tilt_rate_dps=12.0,
