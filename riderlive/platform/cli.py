@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -57,12 +58,13 @@ def describe(cfg: PlatformConfig, model: PlatformModel) -> str:
         "home positions " + " ".join(f"{q:.4g}" for q in model.home_positions) + f" {unit}",
         "park positions " + " ".join(f"{q:.4g}" for q in model.park_positions) + f" {unit}",
         f"cueing preset {cfg.cueing.preset}, intensity {cfg.cueing.intensity:g} %",
-        "axis  reach down / up from home (alone)   cue scale",
+        "axis  reach from home, each axis alone   cue scale",
     ]
     scales = model.cueing.scales
     for name, (down, up), scale in zip(POSE_AXES, axis_ranges(g), scales, strict=True):
         u = "m" if name.startswith("t") else "deg"
-        lines.append(f"{name:4}  -{down:.4g} / +{up:.4g} {u:3}{'':22}{scale:.3g}")
+        reach = f"-{down:.4g} / +{up:.4g} {u}" if max(down, up) > 0.0 else "(held by the mechanism)"
+        lines.append(f"{name:4}  {reach:34} {scale:.3g}")
     return "\n".join(lines)
 
 
@@ -84,7 +86,7 @@ def plot_tracks(model: PlatformModel, saddle: np.ndarray, times: np.ndarray, res
     g = model.geometry
     home = np.asarray(g.home)
     pose = result.pose - home
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(11, 8), dpi=80)
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(10, 7), dpi=72)
     colours = ("#1f77b4", "#2ca02c", "#d62728")
     for panel, (first, unit) in zip(axes[:2], ((0, "m"), (3, "deg")), strict=True):
         for j in range(3):
@@ -145,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         if args.output:
             write_frames(args.output, tracks_table(model, result, times), args.format)
         if args.plot:
-            fig = plot_tracks(model, saddle, times, result, f"{cfg.name}: {args.input}")
+            fig = plot_tracks(model, saddle, times, result, f"{cfg.name}: {Path(args.input).name}")
             fig.savefig(args.plot)
         counters = result.state.counters
         print(

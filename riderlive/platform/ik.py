@@ -48,14 +48,6 @@ def _where_scalar(cond: Any, a: Any, b: Any) -> Any:
     return a if cond else b
 
 
-def _min_scalar(a: Any, b: Any) -> Any:
-    return a if a <= b else b
-
-
-def _max_scalar(a: Any, b: Any) -> Any:
-    return a if a >= b else b
-
-
 @dataclass(frozen=True, slots=True)
 class Ops:
     """The primitives whose scalar and array forms differ."""
@@ -71,7 +63,9 @@ class Ops:
     where: Callable[[Any, Any, Any], Any]
 
 
-SCALAR = Ops(math.sin, math.cos, math.sqrt, math.asin, math.atan2, abs, _min_scalar, _max_scalar, _where_scalar)
+SCALAR = Ops(math.sin, math.cos, math.sqrt, math.asin, math.atan2, abs, min, max, _where_scalar)
+"""Python floats. The builtin ``min``/``max`` equal NumPy's for finite values, which is all the
+cueing ever hands the IK (it holds non-finite saddle values)."""
 ARRAY = Ops(np.sin, np.cos, np.sqrt, np.arcsin, np.arctan2, np.abs, np.minimum, np.maximum, np.where)
 
 IkFunction = Callable[..., tuple[tuple[Any, ...], Any]]
@@ -88,12 +82,15 @@ def make_ik(g: Geometry, ops: Ops) -> IkFunction:
     sin, cos, sqrt, asin, atan2 = ops.sin, ops.cos, ops.sqrt, ops.asin, ops.atan2
     fabs, minimum, maximum = ops.abs, ops.minimum, ops.maximum
     free_tx, _, free_tz, _, free_ry, _ = g.kind.axes
-    legs = tuple((b[0], b[1], b[2], p[0], p[1], p[2]) for b, p in zip(g.base, g.platform, strict=True))
     min_length = g.min_length
     rotary = g.kind.rotary
     two_a = 2.0 * g.arm
     rod_minus_arm = g.rod * g.rod - g.arm * g.arm
-    arms = tuple((two_a * dx, two_a * dz) for dx, dz in g.arm_direction)
+    arms = g.arm_direction if rotary else ((0.0, 0.0),) * g.legs
+    legs = tuple(
+        (b[0], b[1], b[2], p[0], p[1], p[2], two_a * d[0], two_a * d[1])
+        for b, p, d in zip(g.base, g.platform, arms, strict=True)
+    )
 
     def ik(  # noqa: PLR0917 (the six pose components)
         tx: Any,
@@ -119,7 +116,7 @@ def make_ik(g: Geometry, ops: Ops) -> IkFunction:
         r20, r21, r22 = -sb * cg, sb * sg * ca + cb * sa, cb * ca - sb * sg * sa
         out = []
         reach: Any = 1.0
-        for i, (bx, by, bz, px, py, pz) in enumerate(legs):
+        for bx, by, bz, px, py, pz, ax, az in legs:
             lx = tx + r00 * px + r01 * py + r02 * pz - bx
             ly = ty + r10 * px + r11 * py + r12 * pz - by
             lz = tz + r20 * px + r21 * py + r22 * pz - bz
@@ -128,7 +125,7 @@ def make_ik(g: Geometry, ops: Ops) -> IkFunction:
                 continue
             big_l = lx * lx + ly * ly + lz * lz - rod_minus_arm
             m = two_a * ly
-            n = arms[i][0] * lx + arms[i][1] * lz
+            n = ax * lx + az * lz
             ratio = big_l / sqrt(m * m + n * n)
             reach = minimum(reach, 1.0 - fabs(ratio))
             ratio = minimum(maximum(ratio, -1.0), 1.0)
