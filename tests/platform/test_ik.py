@@ -27,6 +27,13 @@ def ranges(name: str) -> tuple[tuple[float, float], ...]:
     return axis_ranges(geometry(name))
 
 
+def random_poses(name: str, n: int, spread: float, seed: int) -> np.ndarray:
+    """``n`` poses around home, each axis uniform within ``spread`` x its single-axis reach."""
+    g, r = geometry(name), ranges(name)
+    span = np.array([max(d, u) for d, u in r]) * spread
+    return np.asarray(g.home) + np.random.default_rng(seed).uniform(-1.0, 1.0, size=(n, 6)) * span
+
+
 def lengths(name: str, pose: tuple[float, ...]) -> list[float]:
     g = geometry(name)
     return [q + g.min_length for q in make_ik(g, SCALAR)(*pose)[0]]
@@ -158,10 +165,8 @@ def test_forward_kinematics_round_trip(name: str, data: st.DataObject) -> None:
 
 @pytest.mark.parametrize("name", PLATFORMS)
 def test_scalar_and_array_ik_agree(name: str) -> None:
-    g, r = geometry(name), ranges(name)
-    rng = np.random.default_rng(3)
-    span = np.array([max(d, u) for d, u in r]) * 1.5
-    poses = np.asarray(g.home) + rng.uniform(-1.0, 1.0, size=(500, 6)) * span
+    g = geometry(name)
+    poses = random_poses(name, 500, 1.5, seed=3)
     q_arr, reach_arr = make_ik(g, ARRAY)(*poses.T)
     for k in range(0, 500, 7):
         q, reach = make_ik(g, SCALAR)(*poses[k])
@@ -197,10 +202,8 @@ def test_any_pose_is_fitted_inside_the_soft_limits(name: str, data: st.DataObjec
 
 @pytest.mark.parametrize("name", PLATFORMS)
 def test_batch_fit_equals_scalar_fit(name: str) -> None:
-    g, r = geometry(name), ranges(name)
-    rng = np.random.default_rng(11)
-    span = np.array([max(d, u) for d, u in r]) * 2.0
-    poses = np.asarray(g.home) + rng.uniform(-1.0, 1.0, size=(400, 6)) * span
+    g = geometry(name)
+    poses = random_poses(name, 400, 2.0, seed=11)
     ws = Workspace(g)
     q_batch, lam_batch = ws.fit_batch(poses)
     assert (lam_batch < 1.0).sum() > 50  # the test covers the scale-back
