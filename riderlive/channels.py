@@ -171,12 +171,19 @@ position ``t*`` (m), local rotation ``r*`` (deg) and ``q*`` (unit quaternion, x 
 ``fan`` (sub-chain spread, m); ``tail_ref`` is the reference tail's mean tip (m)."""
 
 
+PLATFORM_CHANNEL = re.compile(r"platform\.(?:t[xyz]|r[xyz]|a[1-9])")
+"""Motion platform tracks (``riderlive.platform``): the pose relative to home ``t*`` (m), ``r*``
+(deg), and actuator positions ``a1`` ... (m of extension, or deg of crank for a rotary platform)."""
+
+
 class UnknownChannelError(KeyError):
     """A channel name that is not part of the vocabulary."""
 
 
 @lru_cache(maxsize=4096)
 def _bone_channel(name: str) -> Channel | None:
+    if PLATFORM_CHANNEL.fullmatch(name):
+        return Channel(name, _kind_of(name.split(".", 1)[1]), "motion platform track")
     if not BONE_CHANNEL.fullmatch(name):
         return None
     attr = name.split(".", 1)[1]

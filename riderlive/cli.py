@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "plot": ("riderlive.plot", "plot channels of a frame file over time"),
     "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
     "firmware-emu": ("riderlive.platform.firmware_host", "run firmware_proto's host build on a pseudo-terminal"),
+    "platform": ("riderlive.platform.cli", "bake a take to motion-platform actuator tracks; describe a platform"),
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),
     "rig": ("riderlive.dynamixel.rig_cli", "check a servo map; drive it with a procedural horse"),
     "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
