@@ -21,7 +21,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=120.0, help="frames per second (default 120)")
     parser.add_argument("--seed", type=int, help="turn on seeded stride-to-stride variation")
     parser.add_argument(
-        "-o", "--output", required=True, help="frame file to write (.csv, .jsonl, .parquet, or -); metres, recorded in NAME.json"
+        "-o",
+        "--output",
+        required=True,
+        help="frame file to write (.csv, .jsonl, .parquet, or -); metres, recorded in NAME.json",
     )
     parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
 

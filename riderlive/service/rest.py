@@ -143,4 +143,3 @@ class RestGuard:
             return message
 
         await self.app(scope, limited, counted)
-
