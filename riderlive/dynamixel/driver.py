@@ -66,6 +66,8 @@ class RigPlug:
         n = len(self.map)
         self.goals: list[float] = list(self.map.park)
         self.clamped: list[bool] = [False] * n
+        self.goal_written_at: float | None = None
+        """perf_counter time the last goal SYNC_WRITE returned (handed to the port)."""
         self.tracking: list[float | None] = [None] * n
         self.hardware_errors: dict[int, tuple[str, ...]] = {}
         self.disabled: set[int] = set()
@@ -148,6 +150,7 @@ class RigPlug:
         pulses = {sid: deg_to_pulses(g) for sid, g in zip(self.map.ids, goals, strict=True) if sid not in self.disabled}
         with self._gate():
             self.bus.sync_write(self._spec.spec(Item.GOAL_POSITION), pulses)
+        self.goal_written_at = time.perf_counter()
         self.goals, self.clamped = goals, clamped
         self.counters["goal_writes"] += 1
         self.counters["clamps"] += sum(clamped)

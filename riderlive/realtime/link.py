@@ -26,6 +26,7 @@ import orjson
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
+from riderlive.realtime import latency
 from riderlive.realtime import layout as L
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.realtime.tick import TickSetup, tick_main
@@ -38,6 +39,9 @@ class TickLink:
         self.inputs = SharedRing(L.INPUT_CAPACITY, L.INPUT_WIDTH)
         self.outputs = SharedRing(L.OUTPUT_CAPACITY, L.OUTPUT_WIDTH + len(setup.extra_channels))
         self.counters = SharedCounters(L.COUNTERS)
+        self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS))
+        self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
+        """Filled by the tick: ``tick_lateness``, ``ingest_to_wire`` (:mod:`riderlive.realtime.latency`)."""
         self.status_blob = SharedBlob()
         self.latch = StopLatch()
         self.board = SafetyBoard()
@@ -46,6 +50,7 @@ class TickLink:
             "input": self.inputs.name,
             "output": self.outputs.name,
             "counters": self.counters.name,
+            "histograms": self.histogram_block.name,
             "status": self.status_blob.name,
         }
         self.base_setup = dataclasses.replace(
@@ -199,7 +204,8 @@ class TickLink:
     def close(self) -> None:
         self._commands.close()
         self._notify.close()
-        for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
+        self.histograms.clear()
+        for shared in (self.inputs, self.outputs, self.counters, self.histogram_block, self.status_blob):
             shared.close()
         self.latch.close()
         self.board.close()

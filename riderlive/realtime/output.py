@@ -52,6 +52,8 @@ class TickDevices:
         self.stops = latch.view()
         self.statuses: list[DeviceStatus | None] = [None] * len(self.devices)
         self._auto_armed: set[str] = set()
+        self.goal_written_at: float | None = None
+        """perf_counter time this tick's last goal write returned (None: no device wrote a goal)."""
 
     def open(self) -> None:
         for device in self.devices:
@@ -76,11 +78,14 @@ class TickDevices:
     def tick(self, frame: Sequence[float], now: float, tick_index: int) -> bool:
         """Tick each device that is due; True when a state changed (publish now)."""
         changed = False
+        self.goal_written_at = None
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
             if tick_index % spec.divider:
                 continue
             before = device.state
             status = device.tick(frame, now)
+            if status.wrote:
+                self.goal_written_at = getattr(device.plug, "goal_written_at", None) or time.perf_counter()
             self.statuses[i] = status
             changed |= status.state is not before or bool(status.transitions)
             if self.board is not None:

@@ -91,21 +91,25 @@ class DeadlineClock:
         return target, now - target
 
 
-def try_realtime_priority(priority: int = 50) -> str:
-    """Ask for SCHED_FIFO at ``priority``; return ``"fifo"`` or why not (and warn)."""
+def try_realtime_priority(priority: int = 50, reset_on_fork: bool = False, who: str = "the tick") -> str:
+    """Ask for SCHED_FIFO at ``priority``; return ``"fifo"`` or why not (and warn about ``who``).
+
+    ``reset_on_fork``: processes started afterwards begin at normal scheduling."""
     if not hasattr(os, "sched_setscheduler"):
-        log.warning("real-time priority is not available on this platform; the tick runs at normal priority")
+        log.warning("real-time priority is not available on this platform; %s runs at normal priority", who)
         return "unsupported"
     try:
         limit = os.sched_get_priority_max(os.SCHED_FIFO)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, limit)))
+        policy = os.SCHED_FIFO | (os.SCHED_RESET_ON_FORK if reset_on_fork else 0)
+        os.sched_setscheduler(0, policy, os.sched_param(min(priority, limit)))
     except PermissionError:
         log.warning(
             "SCHED_FIFO not permitted (run as root, or grant an rtprio limit in /etc/security/limits.conf); "
-            "the tick runs at normal priority and may be late under load"
+            "%s runs at normal priority and may be late under load",
+            who,
         )
         return "denied"
     except OSError as exc:
-        log.warning("SCHED_FIFO failed (%s); the tick runs at normal priority", exc)
+        log.warning("SCHED_FIFO failed (%s); %s runs at normal priority", exc, who)
         return "failed"
     return "fifo"

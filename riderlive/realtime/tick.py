@@ -37,6 +37,7 @@ from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import ProceduralHorse
 from riderlive.realtime import commands as cmd
+from riderlive.realtime import latency
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, Mode, TickCore, TickResult, Timing
 from riderlive.realtime.output import TickDevices
@@ -121,6 +122,10 @@ class TickLoop:
         self.inputs = SharedRing(0, 0, name=names["input"])
         self.outputs = SharedRing(0, 0, name=names["output"])
         self.counters = SharedCounters(L.COUNTERS, name=names["counters"])
+        self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS), name=names["histograms"])
+        self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
+        self._unsent_rx = -1.0
+        """Receive time of the newest input taken but not yet in a goal written to a device (or -1)."""
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
@@ -274,6 +279,11 @@ class TickLoop:
             values[index["outputs_clamped"]] = self.core.clamped
             if devices is not None:
                 changed = devices.tick(result.rider, deadline, clock.tick)
+                self._unsent_rx = max(self._unsent_rx, newest_rx)
+                if devices.goal_written_at is not None and self._unsent_rx >= 0.0:
+                    wire = devices.goal_written_at - setup.start - self._unsent_rx
+                    self.histograms["ingest_to_wire"].observe(wire)
+                    self._unsent_rx = -1.0
                 if changed or clock.tick % status_every == 0:
                     self.device_status = devices.status()
                     self._status_dirty = True
@@ -315,6 +325,7 @@ class TickLoop:
             values[index["lateness_max"]] = max(values[index["lateness_max"]], lateness)
             values[index["step_max"]] = max(values[index["step_max"]], done + setup.start - deadline)
             values[bucket0 + bucket_of(lateness)] += 1
+            self.histograms["tick_lateness"].observe(lateness)
             if self.stopping_since is not None and (
                 devices is None or devices.at_rest() or now - self.stopping_since > setup.park_timeout
             ):
@@ -361,7 +372,8 @@ class TickLoop:
                 log.warning("closing the devices failed: %s", exc)
         if self.board is not None and not self.running:
             self.board["tick_clean_exit"] = float(self.setup.generation)
-        for shared in (self.inputs, self.outputs, self.counters, self.status_blob):
+        self.histograms.clear()
+        for shared in (self.inputs, self.outputs, self.counters, self.histogram_block, self.status_blob):
             shared.close()
         if self._own_latch:
             self.latch.close()

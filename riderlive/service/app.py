@@ -30,6 +30,7 @@ from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
+from riderlive.service.latency_api import add_latency_routes
 from riderlive.service.metrics import render
 from riderlive.service.rest import (
     AnimatorBody,
@@ -180,11 +181,16 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         return {"takes": list_takes(config.takes.directory)}
 
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
+    add_latency_routes(app, service, obs)  # /api/latency
 
     @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
     async def metrics() -> PlainTextResponse:
         text = render(
-            service.metrics, service.link.counters.snapshot(), service.hub.snapshot(), len(service.arbiter.producers)
+            service.metrics,
+            service.link.counters.snapshot(),
+            service.hub.snapshot(),
+            len(service.arbiter.producers),
+            service.latency(),
         )
         text += render_device_metrics(service)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")

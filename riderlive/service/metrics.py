@@ -7,48 +7,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from riderlive.realtime.pacing import LATENESS_BUCKETS
+from riderlive.realtime.latency import LatencyHistogram, LatencySnapshot
 
-LATENCY_BUCKETS: tuple[float, ...] = (0.0005, 0.001, 0.002, 0.003, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5)
+TICK_LATENESS = "How late each tick started after its deadline."
+INGEST_TO_SEND = "Horse frame received to the first rider frame computed from it written to every client due that tick."
+INGEST_TO_WIRE = "Horse frame received to the first device goal computed from it handed to the device's port."
 MAX_PRODUCER_LABELS = 32
 """Producer names with their own ``riderlive_frames_in_total`` series; older ones are added to ``other``."""
 OTHER = "other"
-
-
-@dataclass
-class Histogram:
-    """A cumulative-on-render histogram of seconds."""
-
-    bounds: tuple[float, ...]
-    counts: list[int] = field(default_factory=list)
-    total: float = 0.0
-    n: int = 0
-
-    def __post_init__(self) -> None:
-        self.counts = [0] * (len(self.bounds) + 1)
-
-    def observe(self, value: float) -> None:
-        for i, bound in enumerate(self.bounds):
-            if value <= bound:
-                self.counts[i] += 1
-                break
-        else:
-            self.counts[-1] += 1
-        self.total += value
-        self.n += 1
-
-    def render(self, name: str, labels: str = "") -> list[str]:
-        lines = []
-        running = 0
-        sep = "," if labels else ""
-        for bound, count in zip((*self.bounds, float("inf")), self.counts, strict=True):
-            running += count
-            le = "+Inf" if bound == float("inf") else repr(bound)
-            lines.append(f'{name}_bucket{{{labels}{sep}le="{le}"}} {running}')
-        braces = f"{{{labels}}}" if labels else ""
-        lines.append(f"{name}_sum{braces} {self.total}")
-        lines.append(f"{name}_count{braces} {self.n}")
-        return lines
 
 
 @dataclass
@@ -66,7 +32,9 @@ class ServiceMetrics:
     ticks_coalesced: int = 0
     """Ticks not sent: the web process fell more than ``publish.CATCH_UP`` seconds behind."""
     clients_cut_off: int = 0
-    input_to_send: Histogram = field(default_factory=lambda: Histogram(LATENCY_BUCKETS))
+    ingest_to_send: LatencyHistogram = field(default_factory=LatencyHistogram)
+    """Horse frame received (decoded) to the first rider frame computed from it written to every
+    client due that tick (``Hub.publish``)."""
     vmc: Counter[str] = field(default_factory=Counter)
     """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed)."""
 
@@ -99,8 +67,11 @@ def render(
     tick: dict[str, float],
     clients: list[tuple[str, str, int, int]],
     producers: int,
+    latency: Mapping[str, LatencySnapshot] | None = None,
 ) -> str:
-    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped)."""
+    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped); ``latency``:
+    snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (see :func:`latency_snapshots`)."""
+    latency = latency or {}
     out: list[str] = []
 
     def metric(name: str, kind: str, help_text: str, lines: list[str]) -> None:
@@ -108,15 +79,13 @@ def render(
         out.append(f"# TYPE {name} {kind}")
         out.extend(lines)
 
-    running = 0.0
-    lines = []
-    for i, bound in enumerate((*LATENESS_BUCKETS, float("inf"))):
-        running += tick.get(f"lateness_bucket_{i}", 0.0)
-        le = "+Inf" if bound == float("inf") else repr(bound)
-        lines.append(f'riderlive_tick_lateness_seconds_bucket{{le="{le}"}} {int(running)}')
-    lines.append(f"riderlive_tick_lateness_seconds_sum {tick.get('lateness_sum', 0.0)}")
-    lines.append(f"riderlive_tick_lateness_seconds_count {int(tick.get('ticks', 0.0))}")
-    metric("riderlive_tick_lateness_seconds", "histogram", "How late each tick started after its deadline.", lines)
+    for name, histogram, help_text in (
+        ("riderlive_tick_lateness_seconds", latency.get("tick_lateness"), TICK_LATENESS),
+        ("riderlive_ingest_to_send_seconds", latency.get("ingest_to_send"), INGEST_TO_SEND),
+        ("riderlive_ingest_to_wire_seconds", latency.get("ingest_to_wire"), INGEST_TO_WIRE),
+    ):
+        if histogram is not None:
+            out.extend(histogram.prometheus(name, help_text))
     metric(
         "riderlive_tick_lateness_max_seconds",
         "gauge",
@@ -210,10 +179,4 @@ def render(
             "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed).",
             [f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}' for o in ("sent", "dropped", "error")],
         )
-    metric(
-        "riderlive_input_to_send_seconds",
-        "histogram",
-        "Horse frame received to the first rider frame computed from it sent.",
-        metrics.input_to_send.render("riderlive_input_to_send_seconds"),
-    )
     return "\n".join(out) + "\n"

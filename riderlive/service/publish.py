@@ -234,7 +234,7 @@ class Hub:
                 else:
                     written |= self._write(client, data[1], now, timeout)
             if fresh and written:
-                metrics.input_to_send.observe(self.service.link.engine_time() - input_rx)
+                metrics.ingest_to_send.observe(self.service.link.engine_time() - input_rx)
 
     def _pose(self, skeleton: str, record: np.ndarray) -> Pose:
         poses = self.service.poses
@@ -296,7 +296,7 @@ class Hub:
                     await asyncio.wait_for(_send(client.websocket, data), timeout)
                     client.sent += 1
                     if input_rx >= 0.0:
-                        metrics.input_to_send.observe(self.service.link.engine_time() - input_rx)
+                        metrics.ingest_to_send.observe(self.service.link.engine_time() - input_rx)
         except TimeoutError:
             metrics.clients_cut_off += 1
             log.warning("client %s did not read for %.1f s: cut off", client.id, timeout)

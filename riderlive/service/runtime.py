@@ -16,6 +16,7 @@ from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
+from riderlive.realtime.latency import LatencySnapshot
 from riderlive.realtime.link import TickLink
 from riderlive.realtime.tick import TickSetup
 from riderlive.rules.animator import AnimatorLayer
@@ -292,6 +293,12 @@ class Service:
         recorder, self.recorder = self.recorder, None
         recorder.close()
         return {"name": recorder.path.stem, "rows": recorder.rows, "path": str(Path(recorder.path))}
+
+    def latency(self) -> dict[str, LatencySnapshot]:
+        """Snapshots of ``tick_lateness``, ``ingest_to_wire`` (the tick's) and ``ingest_to_send``."""
+        out = {name: histogram.snapshot() for name, histogram in self.link.histograms.items()}
+        out["ingest_to_send"] = self.metrics.ingest_to_send.snapshot()
+        return out
 
     def state(self) -> dict[str, Any]:
         link = self.link

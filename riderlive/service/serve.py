@@ -18,6 +18,7 @@ import uvicorn
 
 from riderlive.configfile import ConfigError, validate
 from riderlive.devices.latch import StopSource
+from riderlive.realtime.pacing import try_realtime_priority
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
@@ -36,6 +37,7 @@ def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) ->
         log_level=config.server.log_level,
         timeout_graceful_shutdown=math.ceil(config.server.shutdown_timeout),
         lifespan="on",
+        loop=config.server.loop,
     )
 
 
@@ -124,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
             os.setpriority(os.PRIO_PROCESS, 0, config.server.nice)
         except OSError as exc:
             print(f"riderlive serve: warning: cannot set nice {config.server.nice}: {exc}", file=sys.stderr)
+    if config.server.realtime_priority:
+        try_realtime_priority(config.server.realtime_priority, reset_on_fork=True, who="the web process")
     service = app.state.service
     server = RiderServer(uvicorn_config(app, config), service)
     try:
