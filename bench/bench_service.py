@@ -276,6 +276,9 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     dropped = sorted(c["dropped"] for c in state["clients"])
     if sent:
         print(f"  server side: sent per client {sent[0]}..{sent[-1]}, dropped {dropped[0]}..{dropped[-1]}", flush=True)
+    rig = state["tick"].get("rig")
+    if rig:
+        print(f"  rig at the end: {rig['state']} {rig.get('fault') or ''}", flush=True)
     stop.set()
     for task in tasks:
         task.cancel()

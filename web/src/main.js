@@ -2,6 +2,7 @@
 // and the controls. Page state for tests and the curious: window.riderlive.
 
 import { bindEstop, Controls, controlToken } from "./controls.js";
+import { LatencyPanel } from "./latency.js";
 import { RiderLink } from "./link.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
@@ -114,6 +115,9 @@ async function start() {
   }, 120, controlToken());
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
+  const latency = new LatencyPanel($("panel"), $("message"));
+  page.latency = latency;
+  setInterval(() => latency.refresh(), 1000);
 
   // Dynamic resolution: render fewer pixels while the page runs below 40 fps (a busy
   // machine, software WebGL), go back up after 3 s above 55 fps.
