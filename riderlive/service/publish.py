@@ -74,6 +74,10 @@ class Subscriber:
     websocket: WebSocket
     id: str
     subscription: Subscription
+    phase: int = 0
+    """Gets the records whose ``seq % decimation == phase``: clients of one decimation are
+    spread over the ticks (``Hub.phase_for``), so each tick writes to a share of them and a
+    new input goes out at the next tick, not up to ``decimation`` ticks later."""
     frame: tuple[str | bytes, float] | None = None
     status: str | None = None
     control: deque[str] = field(default_factory=lambda: deque(maxlen=CONTROL_QUEUE))
@@ -195,7 +199,7 @@ class Hub:
     def publish(self, records: list[np.ndarray]) -> None:
         """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.
 
-        A client with decimation N gets every record whose ``seq % N == 0``, in order:
+        A client with decimation N gets every record whose ``seq % N`` is its phase, in order:
         when the web process was late and several ticks arrived at once, a client that
         keeps up still gets all of them (those of the last :data:`CATCH_UP` seconds;
         older ones are counted as coalesced). Each (subscription, record) is encoded
@@ -221,7 +225,7 @@ class Hub:
             written = False
             for client in clients:
                 sub = client.subscription
-                if seq % sub.decimation:
+                if seq % sub.decimation != client.phase:
                     continue
                 data = encoded.get(sub.key)
                 if data is None:
@@ -235,6 +239,15 @@ class Hub:
                     written |= self._write(client, data[1], now, timeout)
             if fresh and written:
                 metrics.ingest_to_send.observe(self.service.link.engine_time() - input_rx)
+
+    def phase_for(self, client: Subscriber) -> int:
+        """The least used phase among the other clients of ``client``'s decimation (lowest on a tie)."""
+        decimation = client.subscription.decimation
+        used = [0] * decimation
+        for other in self.clients.values():
+            if other is not client and not other.closed and other.subscription.decimation == decimation:
+                used[other.phase % decimation] += 1
+        return used.index(min(used))
 
     def _pose(self, skeleton: str, record: np.ndarray) -> Pose:
         poses = self.service.poses
@@ -369,6 +382,7 @@ class Hub:
                 client.subscription = decode_subscription(
                     obj, client.subscription, service.config.tick.rate, self.index
                 )
+                client.phase = self.phase_for(client)
                 client.offer_control(client.subscription.describe(service.config.tick.rate, self.names))
             elif kind == "ping":
                 pong = {"type": "pong", "id": decode_ping_id(obj), "engine_time": service.link.engine_time()}

@@ -86,3 +86,25 @@ def test_ingest_to_send_and_to_wire_are_observed_once_per_input(rig_server: Live
     assert 'riderlive_ingest_to_wire_seconds_bucket{le="+Inf"}' in text
     window = latency(live)["histograms"]["ingest_to_send"]["window"]
     assert window["count"] <= answer["histograms"]["ingest_to_send"]["total"]["count"]
+
+
+def test_clients_of_one_decimation_are_spread_over_the_ticks() -> None:
+    from types import SimpleNamespace
+    from typing import Any, cast
+
+    from riderlive.service.codecs import Subscription
+    from riderlive.service.publish import Hub, Subscriber
+
+    hub = Hub(cast(Any, SimpleNamespace(extra_channels=())))
+    phases = []
+    for i in range(10):
+        client = Subscriber(cast(Any, None), f"c{i}", Subscription(rider=(0,), decimation=4))
+        client.phase = hub.phase_for(client)
+        hub.clients[client.id] = client
+        phases.append(client.phase)
+    assert phases == [0, 1, 2, 3, 0, 1, 2, 3, 0, 1]
+    hub.clients["c1"].closed = True  # a gone client frees its phase
+    newcomer = Subscriber(cast(Any, None), "n", Subscription(rider=(0,), decimation=4))
+    assert hub.phase_for(newcomer) == 1
+    single = Subscriber(cast(Any, None), "s", Subscription(rider=(0,), decimation=3))
+    assert hub.phase_for(single) == 0  # alone at its decimation: seq % 3 == 0, as before
