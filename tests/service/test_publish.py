@@ -73,28 +73,39 @@ def test_values_equal_bake_on_the_published_horse(server: LiveServer) -> None:
 
 def test_subset_decimation_and_binary(server: LiveServer) -> None:
     wanted = ["head.rz", "lower_back.rz", "cog.ty"]
-    with connect(server.ws + "/ws/rider") as json_ws, connect(server.ws + "/ws/rider") as bin_ws:
-        for ws, encoding in ((json_ws, "json"), (bin_ws, "binary")):
+    with (
+        connect(server.ws + "/ws/rider") as json_ws,
+        connect(server.ws + "/ws/rider") as bin_ws,
+        connect(server.ws + "/ws/rider") as every_ws,
+    ):
+        for ws, encoding, rate in ((json_ws, "json", 50), (bin_ws, "binary", 50), (every_ws, "binary", 200)):
             ws.recv(timeout=5)
-            ws.send(json.dumps({"type": "subscribe", "channels": wanted, "rate": 50, "encoding": encoding}))
-        for ws in (json_ws, bin_ws):
+            ws.send(json.dumps({"type": "subscribe", "channels": wanted, "rate": rate, "encoding": encoding}))
+        for ws, decimation in ((json_ws, 4), (bin_ws, 4), (every_ws, 1)):
             while True:
                 ack = json.loads(ws.recv(timeout=5))
                 if ack["type"] == "subscribed":
                     break
-            assert ack["channels"] == wanted and ack["decimation"] == 4 and ack["rate"] == 50.0
+            assert ack["channels"] == wanted and ack["decimation"] == decimation
+            assert ack["rate"] == 200.0 / decimation
         a = frames(json_ws, 20)
         b = frames(bin_ws, 20)
+        every = frames(every_ws, 80)
+    phases = set()
     for got in (a, b):
         assert all(len(f["values"]) == 3 for f in got[-10:])
-        assert all(f["seq"] % 4 == 0 for f in got[-10:])
+        phase = got[-1]["seq"] % 4
+        assert all(f["seq"] % 4 == phase for f in got[-10:]), "one phase per client"
         gaps = np.diff([f["seq"] for f in got[-10:]])
         assert np.all(gaps % 4 == 0) and np.median(gaps) == 4
-    by_seq = {f["seq"]: f["values"] for f in a}
-    common = [f for f in b if f["seq"] in by_seq]
-    assert common, "both encodings carry the same ticks"
-    for f in common:
-        assert f["values"] == by_seq[f["seq"]], "binary float64 equals JSON's shortest round-trip repr"
+        phases.add(phase)
+    assert phases == {0, 1}, "the clients of one decimation are spread over its phases (docs/protocol.md)"
+    by_seq = {f["seq"]: f["values"] for f in every}
+    for got in (a, b):
+        common = [f for f in got if f["seq"] in by_seq]
+        assert common, "both encodings carry the same ticks"
+        for f in common:
+            assert f["values"] == by_seq[f["seq"]], "binary float64 equals JSON's shortest round-trip repr"
 
 
 def test_bad_subscription_is_answered_and_counted(server: LiveServer) -> None:
