@@ -55,6 +55,25 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
     assert not np.allclose(pose0["lower_back"], pose1["lower_back"], atol=1e-6), "the rider did not move"
 
 
+def test_latency_panel_shows_the_service_histograms(live_page: PageUnderTest) -> None:
+    live_page.wait_for(
+        "riderlive.latency.latest !== null && riderlive.latency.latest.histograms.tick_lateness.window.count > 0",
+        timeout=10,
+    )
+    answer, rows = live_page.page.evaluate(
+        """() => [riderlive.latency.latest, [...document.querySelectorAll('#latency tbody tr')].map(
+            (r) => [r.dataset.key, r.hidden, [...r.children].map((c) => c.textContent)])]"""
+    )
+    shown = {key: (hidden, cells) for key, hidden, cells in rows}
+    window = answer["histograms"]["tick_lateness"]["window"]
+    assert shown["tick_lateness"][1][1:] == [f"{window[k] * 1e3:.2f}" for k in ("p50", "p99", "max")] + [
+        str(window["count"])
+    ]
+    assert shown["ingest_to_wire"][0], "no rig: its row is hidden"
+    goal = live_page.page.locator("#latency-goal").inner_text()
+    assert goal == f"goal p99 ≤ {(answer['tick_period'] + 0.001) * 1e3:.2f} ms"
+
+
 def _wait_estop(server: Server, engaged: bool, what: str) -> None:
     deadline = time.monotonic() + 5
     while bool(server.get("/api/state")["tick"].get("estop")) is not engaged:
