@@ -155,7 +155,8 @@ class Hub:
     def __init__(self, service: Service) -> None:
         self.service = service
         self.clients: dict[str, Subscriber] = {}
-        self._seen_input_rx = -1.0
+        self._unsent_rx = -1.0
+        """Receive time of the newest input taken by a tick but in no frame sent yet (or -1)."""
         self.names: tuple[str, ...] = (*RIDER_NAMES, *service.extra_channels)
         """Published channels: the rider's, then the simulated tail and braid (when on)."""
         self.index = {name: i for i, name in enumerate(self.names)}
@@ -217,12 +218,10 @@ class Hub:
         timeout = self.service.config.publish.send_timeout
         for record in records:
             seq = int(record[L.OUT_SEQ])
-            input_rx = float(record[L.OUT_INPUT_RX])
-            fresh = input_rx > self._seen_input_rx
-            if fresh:
-                self._seen_input_rx = input_rx
+            # The newest input not yet in a frame sent: a tick may take one while no client is due.
+            unsent_rx = max(self._unsent_rx, float(record[L.OUT_INPUT_RX]))
             encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
-            written = False
+            written = offered = False
             for client in clients:
                 sub = client.subscription
                 if seq % sub.decimation != client.phase:
@@ -234,11 +233,13 @@ class Hub:
                     message = encode_frame(sub, record, bones, skeleton_poses)
                     data = encoded[sub.key] = (message, wire_frame(message))
                 if client.transport is None:
-                    client.offer_frame(data[0], input_rx if fresh else -1.0)
+                    client.offer_frame(data[0], unsent_rx)  # its sender observes the latency
+                    offered = True
                 else:
                     written |= self._write(client, data[1], now, timeout)
-            if fresh and written:
-                metrics.ingest_to_send.observe(self.service.link.engine_time() - input_rx)
+            if unsent_rx >= 0.0 and written:
+                metrics.ingest_to_send.observe(self.service.link.engine_time() - unsent_rx)
+            self._unsent_rx = -1.0 if written or offered else unsent_rx
 
     def phase_for(self, client: Subscriber) -> int:
         """The least used phase among the other clients of ``client``'s decimation (lowest on a tie)."""
