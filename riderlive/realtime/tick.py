@@ -122,7 +122,9 @@ class TickLoop:
         self.inputs = SharedRing(0, 0, name=names["input"])
         self.outputs = SharedRing(0, 0, name=names["output"])
         self.counters = SharedCounters(L.COUNTERS, name=names["counters"])
-        self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS), name=names["histograms"])
+        # No "histograms" name (a loop built without a TickLink): a block of its own, read by nobody.
+        slots = latency.slot_names(latency.TICK_HISTOGRAMS)
+        self.histogram_block = SharedCounters(slots, name=names.get("histograms"))
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
         self._unsent_rx = -1.0
         """Receive time of the newest input taken but not yet in a goal written to a device (or -1)."""
