@@ -72,9 +72,7 @@ class Producer:
 class Stream:
     """Streams recorded rows (``times`` s, ``rows``) to ``path`` at their own timing, in a thread."""
 
-    def __init__(
-        self, url: str, path: str, times: Any, rows: Any, hello: dict[str, Any] | None = None
-    ) -> None:
+    def __init__(self, url: str, path: str, times: Any, rows: Any, hello: dict[str, Any] | None = None) -> None:
         self.ws: ClientConnection = connect(url + path).__enter__()
         self.welcome = json.loads(self.ws.recv(timeout=5))
         if hello:
