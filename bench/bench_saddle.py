@@ -29,13 +29,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from riderlive.horse import ProceduralHorse
+from riderlive.horse.script import gait_script
 from riderlive.realtime.core import Mode, TickCore, Timing
 from riderlive.realtime.layout import InputKind
 from riderlive.realtime.saddle_input import saddle_pose
 from riderlive.rules import RiderModel
-from riderlive.saddle.pose import SaddlePoint
-from riderlive.horse.script import gait_script
 from riderlive.saddle.estimator import Model, State, step
+from riderlive.saddle.pose import SaddlePoint
 from riderlive.saddle.rebuild import horse_frame
 from riderlive.saddle.synthetic import IMU_STRAP, record
 
@@ -130,8 +130,9 @@ def main() -> None:
     print(f"saddle pose of a horse frame (every tick):     {pose_time() * 1e6:7.2f} us  (x{pose_time() / horse:.2f})")
     for kind in (InputKind.HORSE, InputKind.SADDLE):
         ticks = tick_times(kind)
+        median = statistics.median(ticks)
         print(
-            f"live tick at 120 Hz, 1000 Hz {kind.name.lower():6} input: median {statistics.median(ticks) * 1e6:7.1f} us,"
+            f"live tick at 120 Hz, 1000 Hz {kind.name.lower():6} input: median {median * 1e6:7.1f} us,"
             f" p99 {float(np.percentile(ticks, 99)) * 1e6:7.1f} us, max {max(ticks) * 1e6:7.1f} us"
         )
 
