@@ -118,8 +118,9 @@ def test_saddle_and_horse_producers_share_one_arbiter(server: LiveServer, follow
         loud = Producer(server.ws, _trot_saddle, hello={"name": "arb-loud", "priority": 5}, path="/ws/saddle")
         follower.wait_for(_saddle_drives, timeout=2)
         assert loud.driving() is True and horse.driving() is False
-        state = server.get("/api/state").json()["arbitration"]
-        kinds = {p["name"]: p["kind"] for p in state["producers"]}
+        state = server.get("/api/state").json()
+        assert set(state["tick"]["saddle"]) >= {"lock", "gait", "stride_hz", "phase", "age", "counters"}
+        kinds = {p["name"]: p["kind"] for p in state["arbitration"]["producers"]}
         assert kinds == {"arb-horse": "horse", "arb-saddle": "saddle", "arb-loud": "saddle"}
         assert server.metric("riderlive_clients_connected", 'path="/ws/saddle"') == 2
         loud.close()
