@@ -4,7 +4,9 @@ The tick asks, at engine time ``now`` (seconds), which *driver* makes the horse:
 
 - ``PROCEDURAL``: the procedural horse, sampled at ``now``;
 - ``INPUT``: the active producer's stream (a live engine or a replayed take),
-  resampled by :class:`~riderlive.realtime.resample.Resampler`;
+  resampled by :class:`~riderlive.realtime.resample.Resampler`; or a saddle stream
+  (``/ws/saddle``), stepped sample by sample through the saddle estimator and read as
+  the horse it rebuilds (:class:`~riderlive.realtime.saddle_input.SaddleInput`);
 - ``NEUTRAL``: the neutral pose, the rules' answer to a horse standing still (every
   channel zero), with the animator layer applied.
 
@@ -21,6 +23,10 @@ blends too, over ``Timing.param_blend``: at the next tick the difference between
 old and the new model on the current horse is added to the new model's output and
 fades out with a smoothstep, so the rider keeps moving while it changes.
 
+Whatever drives, each tick's result carries the saddle pose of its horse
+(:func:`~riderlive.realtime.saddle_input.saddle_pose`, computed once per tick for
+``/ws/rider``, takes and devices) and, while a saddle input drives, its estimate.
+
 Outputs are finite and bounded: every rider value is clamped to its plausible range
 (:mod:`riderlive.ranges`, counted in ``clamped``) before and after the stateful
 stages; a stateful stage (smoothing, the blends) that goes non-finite anyway is reset
@@ -34,15 +40,18 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from riderlive.channels import HORSE, HORSE_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
+from riderlive.realtime.layout import InputKind
 from riderlive.realtime.resample import Resampler
+from riderlive.realtime.saddle_input import NO_ESTIMATE, make_saddle_input, saddle_pose
 from riderlive.rules.animator import DamperState, damper_start, damper_step
 from riderlive.rules.engine import RiderModel
+from riderlive.saddle.pose import SaddlePoint
 
 
 class Driver(enum.IntEnum):
@@ -83,6 +92,10 @@ class TickResult:
     producer: int
     horse: list[float]
     rider: list[float]
+    saddle: list[float] = field(default_factory=lambda: [0.0] * 6)
+    """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
+    estimate: tuple[float, ...] = NO_ESTIMATE
+    """The saddle estimate (``layout.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
 
 
 _TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
@@ -111,11 +124,17 @@ class TickCore:
         horse: ProceduralHorse,
         mode: Mode = Mode.INPUT,
         bounds: Bounds | None = None,
+        *,
+        saddle_point: SaddlePoint | None = None,
     ) -> None:
         self.timing = timing
         self.horse = horse
         self.mode = mode
         self.resampler = Resampler(delay=timing.delay, hold=timing.hold)
+        self.saddle_point = saddle_point or SaddlePoint()
+        self.saddle = make_saddle_input(model.scale, self.saddle_point)
+        """The saddle producer's stream, while the producer is one (``input_kind``)."""
+        self.input_kind = InputKind.HORSE
         self.producer = -1
         self._gone: set[int] = set()
         self.driver = Driver.PROCEDURAL if timing.fallback_procedural or mode is Mode.PROCEDURAL else Driver.NEUTRAL
@@ -155,12 +174,16 @@ class TickCore:
         self.neutral_rider = model.evaluate(self.neutral_horse)
         # The procedural horse speaks metres; inputs are in the model's length unit.
         self._procedural_gain = DEFAULT_SCALE / model.scale
+        self._to_metres = model.scale / DEFAULT_SCALE
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
 
-    def push_input(self, producer: int, t: float, received: float, values: list[float]) -> bool:
-        """Buffer one input frame; a new producer replaces the old one's buffer.
+    def push_input(
+        self, producer: int, t: float, received: float, values: list[float], kind: InputKind = InputKind.HORSE
+    ) -> bool:
+        """Buffer one input frame (or step the estimator with one saddle sample); a new
+        producer replaces the old one's buffer and estimator.
 
         Frames of a producer that has gone are ignored: its last frames may still be
         in the ring when the tick learns that it left.
@@ -169,9 +192,13 @@ class TickCore:
             return False
         if producer != self.producer:
             self.resampler.clear()
+            self.saddle.clear()
             if self.driver is Driver.INPUT and self.last_rider is not None:
                 self._start_blend(received, self.timing.blend_time)
             self.producer = producer
+            self.input_kind = kind
+        if kind is InputKind.SADDLE:
+            return self.saddle.push(t, received, values)
         return self.resampler.push(t, received, values)
 
     def producer_gone(self, producer: int) -> None:
@@ -181,6 +208,7 @@ class TickCore:
             self._gone = set(sorted(self._gone)[-1024:])
         if producer == self.producer:
             self.resampler.clear()
+            self.saddle.clear()
 
     def procedural_frame(self, now: float) -> list[float]:
         frame = self.horse.sample(now)
@@ -198,7 +226,8 @@ class TickCore:
     def _choose(self, now: float) -> tuple[Driver, tuple[float, list[float]] | None]:
         if self.mode is Mode.PROCEDURAL:
             return Driver.PROCEDURAL, None
-        sample = self.resampler.sample(now)
+        saddle = self.input_kind is InputKind.SADDLE
+        sample = self.saddle.sample(now) if saddle else self.resampler.sample(now)
         if sample is not None:
             return Driver.INPUT, sample
         if self.driver is Driver.PROCEDURAL:
@@ -228,9 +257,12 @@ class TickCore:
         else:
             source_time, horse = now, self.neutral_horse
         producer = self.producer if driver is Driver.INPUT else -1
+        saddle = saddle_pose(horse, self._to_metres, self.saddle_point)
+        by_saddle = driver is Driver.INPUT and self.input_kind is InputKind.SADDLE
+        estimate = self.saddle.estimate_row(now) if by_saddle else NO_ESTIMATE
         rider = self._rules(driver, horse, now)
         if not _finite(rider):  # stateless so far: no state is touched, the caller repeats its last frame
-            return TickResult(driver, source_time, producer, list(horse), rider)
+            return TickResult(driver, source_time, producer, list(horse), rider, saddle, estimate)
         rider = self._smooth(self._bound(rider), now)
         if self._blend_from is not None:
             w = _smoothstep((now - self._blend_start) / self._blend_duration) if self._blend_duration > 0 else 1.0
@@ -243,7 +275,7 @@ class TickCore:
             rider = list(self.neutral_rider)
         rider = self._bound(rider)
         self.last_rider = rider
-        return TickResult(driver, source_time, producer, list(horse), rider)
+        return TickResult(driver, source_time, producer, list(horse), rider, saddle, estimate)
 
     def _rules(self, driver: Driver, horse: Sequence[float], now: float) -> list[float]:
         """The model's rider for ``horse``, plus what is left of a parameter change's difference."""

@@ -30,6 +30,7 @@ from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
+from riderlive.service.ingest import SADDLE_INPUT
 from riderlive.service.metrics import render
 from riderlive.service.rest import (
     AnimatorBody,
@@ -88,6 +89,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     ctl = [Depends(control)]
     obs = [Depends(observe)]
     app.add_api_websocket_route("/ws/horse", service.ingest)
+    app.add_api_websocket_route("/ws/saddle", service.saddle_ingest)
     app.add_api_websocket_route("/ws/rider", service.hub)
 
     @app.get("/api/state", dependencies=obs, summary="Everything about the running service")
@@ -183,9 +185,10 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
 
     @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
     async def metrics() -> PlainTextResponse:
-        text = render(
-            service.metrics, service.link.counters.snapshot(), service.hub.snapshot(), len(service.arbiter.producers)
-        )
+        producers = service.arbiter.producers.values()
+        saddles = sum(p.spec is SADDLE_INPUT for p in producers)
+        counters = service.link.counters.snapshot()
+        text = render(service.metrics, counters, service.hub.snapshot(), len(producers), saddles)
         text += render_device_metrics(service)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 

@@ -16,6 +16,7 @@ from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
+from riderlive.saddle.pose import SaddlePoint
 
 
 class ServerSection(StrictModel):
@@ -222,6 +223,9 @@ class ServiceConfig(StrictModel):
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
     guardian: GuardianSection = GuardianSection()
+    saddle: SaddlePoint = SaddlePoint()
+    """Where the saddle point sits on the horse's back (docs/saddle.md): the published
+    saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:

@@ -30,10 +30,11 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, lookup
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, SADDLE, lookup
 from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
+from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service import auth
 from riderlive.service.codecs import (
     POSE_FLOATS_PER_BONE,
@@ -55,9 +56,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
-HELLO_VERSION = 2
+HELLO_VERSION = 3
 """1: ``length_unit`` was a sentence. 2: it is a unit symbol (``"m"``), with ``metres_per_length_unit``,
-``time_unit`` and ``pose`` (docs/protocol.md, "Hello versions")."""
+``time_unit`` and ``pose``. 3: ``saddle`` (the saddle subscription) (docs/protocol.md, "Hello versions")."""
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
@@ -187,6 +188,18 @@ class Hub:
                 "length_unit": "m",
                 "frame": "local: position in the parent's frame, rotation from the rest (identity); skeletons.axes",
             },
+            "saddle": self._saddle_hello(),
+        }
+
+    def _saddle_hello(self) -> dict[str, Any]:
+        """What a ``saddle`` subscription carries (docs/protocol.md, "Saddle")."""
+        point = self.service.config.saddle
+        return {
+            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in SADDLE],
+            "point": {"forward": point.forward, "up": point.up, "unit": "m"},
+            "estimate": ["lock", "gait", "stride_hz", "phase", "age"],
+            "locks": list(LOCKS),
+            "gaits": list(GAITS),
         }
 
     def _channels(self) -> list[Any]:

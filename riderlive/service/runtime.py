@@ -11,7 +11,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+import numpy as np
+
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
@@ -23,7 +25,7 @@ from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import DeviceMetrics, plan_devices
-from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
+from riderlive.service.ingest import SADDLE_INPUT, Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
@@ -73,6 +75,7 @@ def make_setup(
         physics_file=config.physics.file,
         extra_channels=extra_channels,
         rider_bounds=(tuple(low), tuple(high)),
+        saddle_point=config.saddle,
     )
 
 
@@ -104,6 +107,8 @@ class Service:
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
         self.ingest = IngestEndpoint(self, self.ranges)
+        self.saddle_ingest = IngestEndpoint(self, self.ranges, SADDLE_INPUT)
+        """``/ws/saddle``: the same endpoint on the saddle's channels, the same arbiter."""
         low, high = self.ranges.limits(HORSE_NAMES, config.tick.length_scale)
         mixed = [a if i % 2 else b for i, (a, b) in enumerate(zip(low, high, strict=True))]
         self._probes = [[0.0] * len(low), low, high, mixed]
@@ -151,7 +156,8 @@ class Service:
             start = link.start
             for record in records:
                 engine_t = float(record[L.OUT_ENGINE_T])
-                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :], engine_t + start)
+                rider = np.concatenate((record[L.OUT_RIDER :], record[L.OUT_SADDLE : L.OUT_ESTIMATE]))
+                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], rider, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)
             self.hub.publish(records)
@@ -280,7 +286,8 @@ class Service:
             "preset": self.params.name,
             "length_scale": self.config.tick.length_scale,
         }
-        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels, overwrite)
+        extra = (*self.extra_channels, *SADDLE_NAMES)  # the saddle of every tick's horse, after the rider's
+        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, extra, overwrite)
         self.stop_recording()
         self.recorder = recorder
         self.take_name = path.stem
@@ -307,7 +314,14 @@ class Service:
                 "selection": self.arbiter.selection,
                 "active": self.arbiter.active,
                 "producers": [
-                    {"id": p.id, "name": p.name, "priority": p.priority, "accepted": p.accepted, "rejected": p.rejected}
+                    {
+                        "id": p.id,
+                        "name": p.name,
+                        "kind": p.spec.what,
+                        "priority": p.priority,
+                        "accepted": p.accepted,
+                        "rejected": p.rejected,
+                    }
                     for p in self.arbiter.producers.values()
                 ],
             },

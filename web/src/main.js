@@ -5,6 +5,7 @@ import { bindEstop, Controls, controlToken } from "./controls.js";
 import { RiderLink } from "./link.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
+import { SaddlePanel } from "./saddle.js";
 import { chainPoints, placed, View } from "./scene.js";
 
 const $ = (id) => document.getElementById(id);
@@ -45,6 +46,7 @@ async function start() {
   const view = new View($("scene"), horseRig, riderRig);
   const plots = new Plots($("plot"));
   const controls = new Controls(page);
+  const saddle = new SaddlePanel($("panel"), page);
   page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
   page.setView = (name) => view.setView(name);
   page.history = (name, seconds) => plots.recent(name, seconds);
@@ -78,6 +80,7 @@ async function start() {
       page.session = msg.session;
       // The skeletons are in metres; a service with another length_scale speaks other units.
       toMetres = (msg.length_scale || METRE_SCALE) / METRE_SCALE;
+      saddle.hello(toMetres);
       lengthChannels = [...(msg.channels || []), ...(msg.horse_channels || [])]
         .filter((c) => c.unit === "length")
         .map((c) => c.name);
@@ -96,6 +99,7 @@ async function start() {
       page.seq = frame.seq;
       page.driver = frame.driver;
       plots.push(frame.t, frame.values);
+      saddle.frame(frame);
     },
     status(msg) {
       page.status = msg;
@@ -112,6 +116,7 @@ async function start() {
       $("gone-why").textContent = why || "no connection";
     },
   }, 120, controlToken());
+  link.subscription = SaddlePanel.subscription();
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
 
