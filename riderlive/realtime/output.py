@@ -73,14 +73,15 @@ class TickDevices:
 
     # -- the tick ------------------------------------------------------------------------
 
-    def tick(self, frame: Sequence[float], now: float, tick_index: int) -> bool:
-        """Tick each device that is due; True when a state changed (publish now)."""
+    def tick(self, frame: Sequence[float], now: float, tick_index: int, horse: Sequence[float] = ()) -> bool:
+        """Tick each device that is due (``frame`` the rider, ``horse`` the horse frame, for
+        devices driven by it: the platform); True when a state changed (publish now)."""
         changed = False
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
             if tick_index % spec.divider:
                 continue
             before = device.state
-            status = device.tick(frame, now)
+            status = device.tick(horse if spec.input == "horse" else frame, now)
             self.statuses[i] = status
             changed |= status.state is not before or bool(status.transitions)
             if self.board is not None:
@@ -198,8 +199,10 @@ class TickDevices:
             "counters",
         )
         rig = next((s for s in full if s["kind"] == "dynamixel"), None)
+        platform = next((s for s in full if s["kind"] == "platform"), None)
         return {
             "devices": [{k: s[k] for k in summary_keys} for s in full],
             "rig": rig,
+            "platform": platform,
             "guardian": None if self.board is None else {"alive": self.guardian_alive()},
         }

@@ -216,6 +216,7 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": None,
+            "platform": None,
             "devices": [],
             **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
@@ -273,7 +274,7 @@ class TickLoop:
             values[index["state_resets"]] = self.core.resets
             values[index["outputs_clamped"]] = self.core.clamped
             if devices is not None:
-                changed = devices.tick(result.rider, deadline, clock.tick)
+                changed = devices.tick(result.rider, deadline, clock.tick, result.horse)
                 if changed or clock.tick % status_every == 0:
                     self.device_status = devices.status()
                     self._status_dirty = True
