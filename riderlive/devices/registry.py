@@ -91,7 +91,9 @@ def plan(
         message = f"{info.name} is validated for {info.validated_hz:g} ticks/s but the service ticks at {tick_hz:g}/s"
         if policy == "refuse":
             section = "rig" if kind == "dynamixel" else kind
-            raise RateMismatch(f"{message}: set tick.rate <= {info.validated_hz:g} (or {section}.rate_policy = 'divide')")
+            raise RateMismatch(
+                f"{message}: set tick.rate <= {info.validated_hz:g} (or {section}.rate_policy = 'divide')"
+            )
         lines.append(f"{message}: driving it every {divider} ticks ({tick_hz / divider:g} ticks/s)")
     spec = DeviceSpec(kind, file, port, info.name, divider, divider / tick_hz, info.input, dict(options or {}))
     return spec, "\n".join(lines)

@@ -67,7 +67,9 @@ def plan_devices(config: ServiceConfig) -> tuple[DeviceSpec, ...]:
     if platform.file:
         options: dict[str, Any] = {"device": platform.device, "heartbeat_ms": platform.heartbeat_ms}
         options["metres_per_unit"] = config.tick.length_scale / DEFAULT_SCALE
-        spec, text = plan("platform", platform.file, platform.port, config.tick.rate, platform.rate_policy, options=options)
+        spec, text = plan(
+            "platform", platform.file, platform.port, config.tick.rate, platform.rate_policy, options=options
+        )
         print(f"riderlive serve: platform {text}", file=sys.stderr, flush=True)
         specs.append(spec)
     return tuple(specs)
