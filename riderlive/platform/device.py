@@ -121,7 +121,11 @@ class PlatformPlug:
         """The firmware's estop is ours (we sent ESTOP): not a fault of its own."""
         self._reported_faults = 0
         self._silence_reported = False
+        self._silent_since: float | None = None
         self.faults_at_connect: list[str] = []
+        # compile (or load) the kernels now, where the plug is made (before the tick's first
+        # deadline, or the guardian's watch), never in a tick: a compile outlasts the dead-man
+        pipeline.step(model, pipeline.initial(model), [0.0] * 6, period_s)
 
     # -- the Plug interface -------------------------------------------------------------
 
@@ -150,8 +154,6 @@ class PlatformPlug:
         yield
         detail("checking the device")
         self._check_hello(hello)
-        pipeline.step(self.model, pipeline.initial(self.model), [0.0] * 6, self.period_s)  # compile now, not armed
-        yield
         status = self._call(lambda: self.link.command(link.Disarm(), check=False))
         deadline = time.monotonic() + SETUP_PARK_WAIT_S
         while LinkState(status.state) in _MOVING:  # the HELLO parks a moving device: let it finish
@@ -407,12 +409,17 @@ class PlatformPlug:
                 raise HardwareFault(
                     0, tuple(_fault_names(t.faults)) or ("estop",), t.faults, what=f"{self.name} firmware"
                 )
-        if self.link.health is Health.SILENT:
-            if not self._silence_reported:
-                self._silence_reported = True
-                raise NoReply(None, f"{self.port}: no valid frame from the device for {self.link.silence_s} s")
-        else:
-            self._silence_reported = False
+        if self.link.health is not Health.SILENT:
+            self._silent_since, self._silence_reported = None, False
+            return
+        # Silent for silence_s while we kept sending: a device that stopped answering. (After a
+        # stall of our own the device stops its telemetry until our next frame: not its fault.)
+        now = time.monotonic()
+        if self._silent_since is None:
+            self._silent_since = now
+        if not self._silence_reported and now - self._silent_since >= self.link.silence_s:
+            self._silence_reported = True
+            raise NoReply(None, f"{self.port}: no valid frame from the device for {2 * self.link.silence_s:g} s")
 
     def _park(self, motion: Motion, fw: LinkState) -> bool:
         """PARK once, then the firmware eases to its park pose; done when it reports its outputs off."""

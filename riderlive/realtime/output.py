@@ -110,6 +110,8 @@ class TickDevices:
             device = self._named(command.device)
             self._arm(device, command.by)
             return f"{device.name} armed by {command.by}: {device.state.value}"
+        if isinstance(command, cmd.Tune):
+            return self._tune(self._named(command.device), command)
         targets = self.devices if command.device is None else [self._named(command.device)]
         if isinstance(command, cmd.Disarm):
             for device in targets:
@@ -146,6 +148,17 @@ class TickDevices:
                     raise
         self.latch.clear()
         return f"reset: {', '.join(done) or 'nothing latched'}"
+
+    def _tune(self, device: Device, command: cmd.Tune) -> str:
+        tune = getattr(device.plug, "tune", None)
+        if tune is None:
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name} has no live parameters")
+        try:
+            tune(**command.changes)
+        except ValueError as exc:  # pydantic's ValidationError: out of range, or against another value
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name}: {exc}") from None
+        log.info("%s: cueing tuned by %s: %s", device.name, command.by, command.changes)
+        return f"{device.name} tuned: {', '.join(f'{k}={v}' for k, v in command.changes.items())}"
 
     def _reload(self, device: Device, by: str) -> str:
         if device.state.moving:

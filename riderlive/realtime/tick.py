@@ -165,7 +165,7 @@ class TickLoop:
         elif isinstance(command, cmd.EStop):
             if self.devices is not None:
                 self.devices.act_on_stop(time.perf_counter())
-        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload):
+        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload | cmd.Tune):
             self._request(command)
         elif isinstance(command, cmd.Stop):
             self._begin_stop(now)

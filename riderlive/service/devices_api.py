@@ -147,6 +147,7 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
         status = service.link.status()
         return {
             "devices": status.get("devices", []),
+            "platform": status.get("platform"),
             "estop": service.link.latch.latched,
             "supervision": service.supervisor.snapshot(),
         }
