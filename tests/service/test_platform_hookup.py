@@ -19,8 +19,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from riderlive.platform import link
 from riderlive.platform.firmware_host import FirmwareHost
+from tests.platform.test_device import accepted_targets as targets
 from tests.service.live_server import LiveServer
 
 TOKEN = "platform-token-1"
@@ -44,10 +44,6 @@ def platform(live: LiveServer) -> dict:
 
 def wait_state(live: LiveServer, wanted: str, timeout: float = 20.0) -> None:
     wait_for(lambda: platform(live).get("state") == wanted, timeout, lambda: (wanted, platform(live)))
-
-
-def targets(firmware: FirmwareHost, start: int = 0) -> list[list[int]]:
-    return [e["positions"] for e in firmware.events[start:] if e["event"] == "rx" and e["type"] == link.FrameType.TARGET]
 
 
 @pytest.fixture
