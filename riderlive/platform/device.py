@@ -45,6 +45,7 @@ from riderlive.devices.plug import Motion, Move, Steps
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
 from riderlive.platform import limits, link, pipeline
 from riderlive.platform.config import load_platform
+from riderlive.platform.geometry import rotation
 from riderlive.platform.link import ConfigKey, Flag, LinkState
 from riderlive.platform.pipeline import PlatformModel, PlatformState
 from riderlive.platform.serial_link import (
@@ -310,6 +311,7 @@ class PlatformPlug:
                     "preset": self.model.cueing.params.preset,
                 },
                 "faults_at_connect": self.faults_at_connect,
+                "joints": self._joints(),
             }
         }
 
@@ -434,6 +436,14 @@ class PlatformPlug:
 
     def _fresh_off(self, t: link.Telemetry) -> bool:
         return LinkState(t.state) in _AT_REST and not t.flags & Flag.OUTPUTS_ON
+
+    def _joints(self) -> dict[str, list[list[float]]]:
+        """Base joints and platform joints at the last aimed pose (the park pose before one), base frame, m."""
+        g = self.model.geometry
+        pose = g.park if self.aim is None else self.aim.pose
+        r = rotation(pose[3], pose[4], pose[5])
+        top = [[pose[k] + sum(r[k][j] * p[j] for j in range(3)) for k in range(3)] for p in g.platform]
+        return {"base": [list(b) for b in g.base], "top": top}
 
     def _closeness(self, i: int, q: float) -> float:
         """0 in the middle of actuator ``i``'s soft range, 1 at (or past) a soft limit."""

@@ -3,6 +3,7 @@
 
 import { bindEstop, Controls, controlToken } from "./controls.js";
 import { RiderLink } from "./link.js";
+import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
 import { chainPoints, placed, View } from "./scene.js";
@@ -45,6 +46,8 @@ async function start() {
   const view = new View($("scene"), horseRig, riderRig);
   const plots = new Plots($("plot"));
   const controls = new Controls(page);
+  const platform = new PlatformView(view.scene, $("panel"), controlToken());
+  page.platform = platform;
   page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
   page.setView = (name) => view.setView(name);
   page.history = (name, seconds) => plots.recent(name, seconds);
@@ -100,6 +103,7 @@ async function start() {
     status(msg) {
       page.status = msg;
       controls.status(msg);
+      platform.status(msg);
     },
     state(state, why) {
       page.state = state;
