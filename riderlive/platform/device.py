@@ -215,14 +215,9 @@ class PlatformPlug:
         if motion.first:
             self._ramp_from = list(self.positions)
         saddle = self._saddle(frame)
-        cue_state, aim = pipeline.aim(self.model, self.state.cueing, saddle, motion.dt)
-        targets: Sequence[float] = aim.targets
-        if motion.move is Move.SOFT_START:
-            targets = limits.eased(self._ramp_from, aim.targets, motion.elapsed, self.model.soft_start_s)
-        safety, out = limits.step(self.model.safety, self.state.safety, targets, motion.dt)
-        scaled = self.state.scaled_back + (1 if aim.scale < 1.0 else 0)
-        self.state, self.aim = PlatformState(cue_state, safety, scaled), aim
-        counts = link.to_counts([q * self.units for q in out])
+        ease = (self._ramp_from, motion.elapsed) if motion.move is Move.SOFT_START else None
+        self.state, self.aim, out = commands(self.model, self.state, saddle, motion.dt, ease)
+        counts = target_counts(out, self.units)
         with self._gate():
             self._call(lambda: self.link.send_targets(counts))
         self.positions = [float(q) for q in out]
@@ -450,6 +445,30 @@ class PlatformPlug:
         half = 0.5 * (self.upper[i] - self.lower[i])
         mid = self.lower[i] + half
         return min(1.0, abs(q - mid) / half) if half > 0 else 1.0
+
+
+def commands(
+    model: PlatformModel,
+    state: PlatformState,
+    saddle: Sequence[float],
+    dt: float,
+    ease: tuple[Sequence[float], float] | None = None,
+) -> tuple[PlatformState, pipeline.Aim, Any]:
+    """One tick's actuator commands (pure): cue the saddle pose, solve the IK with the workspace
+    scale-back, ease from ``ease = (start positions, elapsed s)`` during the soft start, then the
+    safety follower. Returns the new state, the aim and the commands (actuator units)."""
+    cue_state, aim = pipeline.aim(model, state.cueing, saddle, dt)
+    targets: Sequence[float] = aim.targets
+    if ease is not None:
+        targets = limits.eased(ease[0], aim.targets, ease[1], model.soft_start_s)
+    safety, out = limits.step(model.safety, state.safety, targets, dt)
+    scaled = state.scaled_back + (1 if aim.scale < 1.0 else 0)
+    return PlatformState(cue_state, safety, scaled), aim, out
+
+
+def target_counts(positions: Sequence[float], units: float) -> tuple[int, ...]:
+    """Actuator positions (m of stroke or deg) -> the link's counts (0.01 mm or 0.01 deg)."""
+    return link.to_counts([q * units for q in positions])
 
 
 def _fault_names(bits: int) -> list[str]:
