@@ -220,7 +220,7 @@ class PlatformPlug:
         counts = target_counts(out, self.units)
         with self._gate():
             self._call(lambda: self.link.send_targets(counts))
-        self.positions = [float(q) for q in out]
+        self.positions = out.tolist()
         self.counters["targets_sent"] += 1
         if motion.move is Move.SOFT_START:
             return fw is LinkState.RUNNING and motion.elapsed >= self.model.soft_start_s
@@ -468,7 +468,8 @@ def commands(
 
 def target_counts(positions: Sequence[float], units: float) -> tuple[int, ...]:
     """Actuator positions (m of stroke or deg) -> the link's counts (0.01 mm or 0.01 deg)."""
-    return link.to_counts([q * units for q in positions])
+    values = positions.tolist() if hasattr(positions, "tolist") else positions  # NumPy scalars are slow here
+    return link.to_counts([q * units for q in values])
 
 
 def _fault_names(bits: int) -> list[str]:
