@@ -117,7 +117,7 @@ def test_nothing_moves_until_armed_then_it_follows_a_trot_and_stops_as_asked() -
         assert fw["state"] == "disarmed" and fw["outputs_on"] == 0 and not accepted_targets(firmware)
         configs = [e for e in firmware.events if e["event"] == "rx" and e["type"] == link.FrameType.CONFIG]
         soft_max = [e["value"] for e in configs if e["key"] == link.ConfigKey.SOFT_MAX]
-        assert soft_max == [14500] * 6  # the platform file's 145 mm, in counts from retracted
+        assert soft_max == [8000] * 6  # the platform file's 80 mm, in counts from retracted
         assert [e["value"] for e in configs if e["key"] == link.ConfigKey.VELOCITY_LIMIT] == [24000] * 6
 
         # arm: homing (the firmware's first arm), the soft start, running
