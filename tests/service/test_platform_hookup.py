@@ -43,7 +43,11 @@ def platform(live: LiveServer) -> dict:
 
 
 def wait_state(live: LiveServer, wanted: str, timeout: float = 20.0) -> None:
-    wait_for(lambda: platform(live).get("state") == wanted, timeout, lambda: (wanted, platform(live).get("state"), live.log[-30:]))
+    wait_for(
+        lambda: platform(live).get("state") == wanted,
+        timeout,
+        lambda: (wanted, platform(live).get("state"), live.log[-30:]),
+    )
 
 
 @pytest.fixture
