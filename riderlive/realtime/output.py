@@ -73,14 +73,15 @@ class TickDevices:
 
     # -- the tick ------------------------------------------------------------------------
 
-    def tick(self, frame: Sequence[float], now: float, tick_index: int) -> bool:
-        """Tick each device that is due; True when a state changed (publish now)."""
+    def tick(self, frame: Sequence[float], now: float, tick_index: int, horse: Sequence[float] = ()) -> bool:
+        """Tick each device that is due (``frame`` the rider, ``horse`` the horse frame, for
+        devices driven by it: the platform); True when a state changed (publish now)."""
         changed = False
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
             if tick_index % spec.divider:
                 continue
             before = device.state
-            status = device.tick(frame, now)
+            status = device.tick(horse if spec.input == "horse" else frame, now)
             self.statuses[i] = status
             changed |= status.state is not before or bool(status.transitions)
             if self.board is not None:
@@ -109,6 +110,8 @@ class TickDevices:
             device = self._named(command.device)
             self._arm(device, command.by)
             return f"{device.name} armed by {command.by}: {device.state.value}"
+        if isinstance(command, cmd.Tune):
+            return self._tune(self._named(command.device), command)
         targets = self.devices if command.device is None else [self._named(command.device)]
         if isinstance(command, cmd.Disarm):
             for device in targets:
@@ -145,6 +148,17 @@ class TickDevices:
                     raise
         self.latch.clear()
         return f"reset: {', '.join(done) or 'nothing latched'}"
+
+    def _tune(self, device: Device, command: cmd.Tune) -> str:
+        tune = getattr(device.plug, "tune", None)
+        if tune is None:
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name} has no live parameters")
+        try:
+            tune(**command.changes)
+        except ValueError as exc:  # pydantic's ValidationError: out of range, or against another value
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name}: {exc}") from None
+        log.info("%s: cueing tuned by %s: %s", device.name, command.by, command.changes)
+        return f"{device.name} tuned: {', '.join(f'{k}={v}' for k, v in command.changes.items())}"
 
     def _reload(self, device: Device, by: str) -> str:
         if device.state.moving:
@@ -198,8 +212,10 @@ class TickDevices:
             "counters",
         )
         rig = next((s for s in full if s["kind"] == "dynamixel"), None)
+        platform = next((s for s in full if s["kind"] == "platform"), None)
         return {
             "devices": [{k: s[k] for k in summary_keys} for s in full],
             "rig": rig,
+            "platform": platform,
             "guardian": None if self.board is None else {"alive": self.guardian_alive()},
         }

@@ -173,7 +173,7 @@ class TickLoop:
         elif isinstance(command, cmd.EStop):
             if self.devices is not None:
                 self.devices.act_on_stop(time.perf_counter())
-        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload):
+        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload | cmd.Tune):
             self._request(command)
         elif isinstance(command, cmd.Stop):
             self._begin_stop(now)
@@ -224,6 +224,7 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": None,
+            "platform": None,
             "devices": [],
             **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
@@ -292,7 +293,7 @@ class TickLoop:
             values[index["outputs_clamped"]] = self.core.clamped
             self._count_saddle(result, values, index)
             if devices is not None:
-                changed = devices.tick(result.rider, deadline, clock.tick)
+                changed = devices.tick(result.rider, deadline, clock.tick, result.horse)
                 if changed or clock.tick % status_every == 0:
                     self.device_status = devices.status()
                     self._status_dirty = True

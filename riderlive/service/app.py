@@ -32,6 +32,7 @@ from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
 from riderlive.service.ingest import SADDLE_INPUT
 from riderlive.service.metrics import render
+from riderlive.service.platform_api import add_platform_routes, render_platform_metrics
 from riderlive.service.rest import (
     AnimatorBody,
     PerformRequest,
@@ -182,6 +183,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         return {"takes": list_takes(config.takes.directory)}
 
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
+    add_platform_routes(app, service, obs)  # GET and PATCH /api/platform
 
     @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
     async def metrics() -> PlainTextResponse:
@@ -190,6 +192,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         counters = service.link.counters.snapshot()
         text = render(service.metrics, counters, service.hub.snapshot(), len(producers), saddles)
         text += render_device_metrics(service)
+        text += render_platform_metrics(service)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 
     if STATIC_DIR.is_dir():

@@ -164,6 +164,27 @@ class RigSection(StrictModel):
     or refuse to start."""
 
 
+class PlatformSection(StrictModel):
+    """``[platform]`` of the service configuration (docs/configuration.md)."""
+
+    file: str | None = None
+    """A platform file, or a shipped platform's name (``config/platforms``); unset: no platform."""
+    port: str | None = None
+    """The firmware's serial port (``riderlive firmware-emu`` prints its pty)."""
+    device: str | None = pydantic.Field(default=None, min_length=1, max_length=16, pattern=r"^[!-~]+$")
+    """The firmware's own name, checked at connect and sent with ARM (default: what it says)."""
+    heartbeat_ms: int = pydantic.Field(default=200, ge=20, le=1000)
+    """The firmware's dead-man timeout (CONFIG): it parks by itself after this much silence."""
+    rate_policy: Literal["divide", "refuse"] = "divide"
+    """A service ticking faster than the firmware's control rate: drive it every n-th tick, or refuse."""
+
+    @pydantic.model_validator(mode="after")
+    def _port_with_file(self) -> PlatformSection:
+        if self.file and not self.port:
+            raise ValueError("platform.port is required with platform.file (the firmware's serial port)")
+        return self
+
+
 class GuardianSection(StrictModel):
     """The dead-man process that parks the devices when the tick or the web process dies."""
 
@@ -219,6 +240,7 @@ class ServiceConfig(StrictModel):
     publish: PublishSection = PublishSection()
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
+    platform: PlatformSection = PlatformSection()
     physics: PhysicsSection = PhysicsSection()
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()

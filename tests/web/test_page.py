@@ -298,3 +298,40 @@ def test_arm_and_disarm_sit_by_the_estop_and_name_the_rig(live_page: PageUnderTe
         }"""
     )
     assert running == [True, False]
+
+
+def test_the_platform_is_drawn_with_its_actuators_coloured_by_closeness(live_page: PageUnderTest) -> None:
+    """A status with the platform's real ``status()`` (one actuator at its soft limit) fills the
+    platform panel and draws base, top and actuators in the 3D view."""
+    from riderlive.platform.device import PlatformPlug
+    from riderlive.platform.pipeline import PlatformModel
+
+    assert live_page.page.locator("#platform").is_hidden()  # no platform attached to this service
+    plug = PlatformPlug(PlatformModel.load("stewart_compact"), "/dev/null")
+    plug.positions = [plug.lower[0], *plug.model.home_positions[1:]]
+    platform = {"name": plug.name, "state": "running", "detail": "", "fault": None, **plug.status()}
+    shown = live_page.page.evaluate(
+        """(platform) => {
+            riderlive.link.handle({type: "status", estop: false, platform});
+            const rows = [...document.querySelectorAll("#platform-actuators tbody tr")];
+            const g = riderlive.platform.geometry;
+            return {
+                visible: !document.getElementById("platform").hidden,
+                closeness: rows.map((r) => Number(r.dataset.closeness)),
+                target: rows.map((r) => r.cells[1].textContent),
+                state: document.getElementById("platform-state").textContent,
+                drawn: riderlive.platform.group.visible,
+                points: g.getAttribute("position").count,
+                firstLeg: Array.from(g.getAttribute("color").array.slice(12, 15)),
+            };
+        }""",
+        platform,
+    )
+    assert shown["visible"] and shown["drawn"]
+    home = plug.status()["platform"]["actuators"][1]["closeness"]  # home is 40.4 mm, mid-range 42.5
+    assert shown["closeness"][0] == 1.0 and shown["closeness"][1:] == [pytest.approx(home, abs=1e-3)] * 5
+    assert shown["target"][0] == "5.0"  # mm of stroke at the soft minimum
+    assert shown["state"].startswith("stewart_compact: running")
+    assert shown["points"] == 6 * 3 * 2  # per actuator: a base edge, a top edge, the actuator
+    red, green, _ = shown["firstLeg"]
+    assert red > 0.8 and green < 0.2  # at its limit: red

@@ -3,6 +3,7 @@
 
 import { bindEstop, Controls, controlToken } from "./controls.js";
 import { RiderLink } from "./link.js";
+import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
 import { SaddlePanel } from "./saddle.js";
@@ -47,6 +48,8 @@ async function start() {
   const plots = new Plots($("plot"));
   const controls = new Controls(page);
   const saddle = new SaddlePanel($("panel"), page);
+  const platform = new PlatformView(view.scene, $("panel"), controlToken());
+  page.platform = platform;
   page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
   page.setView = (name) => view.setView(name);
   page.history = (name, seconds) => plots.recent(name, seconds);
@@ -104,6 +107,7 @@ async function start() {
     status(msg) {
       page.status = msg;
       controls.status(msg);
+      platform.status(msg);
     },
     state(state, why) {
       page.state = state;
