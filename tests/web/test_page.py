@@ -235,8 +235,8 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
     token = "page-test-token-0123"
     config = f'[security]\ntoken = "{token}"\nrequire_token = true\n\n[tick]\nlength_scale = 1.0\n'
     s = Server(free_port(), tmp_path, extra_config=config)
-    s.start()
     try:
+        s.start()
         without = open_page(browser, s.url)
         without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
         without.page.locator("#estop").click()
