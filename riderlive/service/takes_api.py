@@ -75,7 +75,7 @@ def _bake(source: Path, target: Path, params: RuleParams, service: Service, use_
     model = RiderModel(params=params, scale=scale, animator=service.animator if use_animator else AnimatorLayer())
     result = bake_table(table, model)
     target.parent.mkdir(parents=True, exist_ok=True)
-    partial = target.with_name(f".{target.name}.partial")
+    partial = target.with_name(f".partial-{target.name}")  # keeps the suffix that names the format
     write_frames(str(partial), result)
     partial.replace(target)
     return {"rows": len(result), "channels": list(result.names), "bytes": target.stat().st_size, "length_scale": scale}
