@@ -282,6 +282,18 @@ async function start() {
     page.tack = view.tackUsed;
   }
 
+  // The 3D view as drawn, with the pose it shows (tests): taken right after the next render.
+  const snapshots = [];
+  page.snapshot = () => new Promise((resolve) => snapshots.push(resolve));
+  function takeSnapshots() {
+    if (!snapshots.length || !view) return;
+    const shot = { image: view.canvas.toDataURL("image/png"), width: view.canvas.width, scale: view.canvas.width / view.canvas.clientWidth };
+    shot.riderWorld = page.pose.riderWorld;
+    shot.horseWorld = page.pose.horseWorld;
+    shot.values = page.values;
+    for (const resolve of snapshots.splice(0)) resolve(shot);
+  }
+
   let rafCount = 0;
   let lastSecond = performance.now();
   let lastLatest = null;
@@ -303,6 +315,7 @@ async function start() {
         lastLatest = latest;
         page.values = latest.values;
         drawFrame(latest.values);
+        takeSnapshots();
       } else if (!latest) drawFrame({});
     } catch (err) {
       page.errors.push(String(err));
