@@ -117,6 +117,12 @@ def test_hands_hold_the_reins_and_feet_are_in_the_stirrups(live_page: PageUnderT
         assert bar[1] > iron[1] + 0.3  # the leather hangs from the saddle
 
 
+VISIBLE_WEIGHTS = (
+    "[...document.querySelectorAll('#params label[data-key]')]"
+    ".filter((l) => l.offsetParent !== null).map((l) => l.dataset.key)"
+)
+
+
 def test_weights_are_grouped_by_equation_with_full_names_and_filter(live_page: PageUnderTest, server: Server) -> None:
     p = live_page
     p.wait_for("document.querySelectorAll('#params label[data-key]').length > 50")
@@ -132,15 +138,11 @@ def test_weights_are_grouped_by_equation_with_full_names_and_filter(live_page: P
     )
     assert cut == 0
     p.page.locator("#param-filter").fill("lift_gain")
-    visible = p.state(
-        "[...document.querySelectorAll('#params label[data-key]')].filter((l) => l.offsetParent !== null).map((l) => l.dataset.key)"
-    )
+    visible = p.state(VISIBLE_WEIGHTS)
     assert visible and all("lift_gain" in k for k in visible), visible
     assert p.page.locator("#params label[data-key='waist.gain']").is_hidden()
     p.page.locator("#param-filter").fill("12")  # an equation number: the wrists (Eq. 12-13)
-    visible = p.state(
-        "[...document.querySelectorAll('#params label[data-key]')].filter((l) => l.offsetParent !== null).map((l) => l.dataset.key)"
-    )
+    visible = p.state(VISIBLE_WEIGHTS)
     assert visible and all(k.startswith("wrists.") for k in visible), visible
     p.page.locator("#param-filter").fill("")
     assert p.page.locator("#params label[data-key='waist.gain']").is_visible()
