@@ -105,7 +105,8 @@ def test_pelvis_stays_in_the_saddle_through_a_jump(live_page: PageUnderTest, ser
 
 
 def test_hands_hold_the_reins_and_feet_are_in_the_stirrups(live_page: PageUnderTest) -> None:
-    """Without rein or stirrup bones in the skeleton, the reins end at the hands and the irons at the feet."""
+    """The reins end at the hands and the irons are under the feet (the horse's tack bones when
+    the skeleton has them, else the page's defaults)."""
     tack, rider = live_page.state("[riderlive.tack, riderlive.pose.riderWorld]")
     for side in ("lf", "rt"):
         mouth, grip = tack[f"{side}_rein"]
@@ -113,7 +114,7 @@ def test_hands_hold_the_reins_and_feet_are_in_the_stirrups(live_page: PageUnderT
         assert mouth[0] > grip[0] + 0.3  # the bit is well in front of the hands
         bar, iron = tack[f"{side}_stirrup"]
         ball = np.add(rider[f"{side}_foot"], rider[f"{side}_toes"]) / 2
-        assert np.linalg.norm(np.subtract(iron, ball)) < 0.05
+        assert np.linalg.norm(np.subtract(iron, ball)) < 0.12
         assert bar[1] > iron[1] + 0.3  # the leather hangs from the saddle
 
 

@@ -48,7 +48,7 @@ function groupChain(names, prefix) {
 /** The 3D view, or null with a message saying why (no WebGL 2: the plots and controls still work). */
 function makeView(skeletons) {
   try {
-    const view = new View($("scene"), compileRig(skeletons.horse), compileRig(skeletons.rider), { render: RENDER });
+    const view = new View($("scene"), compileRig(skeletons.horse), compileRig(skeletons.rider), { render: RENDER });  // the bodies need only the bones
     page.view3d = true;
     return view;
   } catch (err) {
@@ -80,14 +80,23 @@ async function start() {
 
   // Skeletons: the hello's (the service poses with them); /skeletons.json until it comes.
   let skeletons = await (await fetch("skeletons.json")).json();
+  // The rider parts (hands on the reins, feet in the stirrups) pose with the `rider_tack`
+  // rig when the service publishes them; without them the rider rig is Appendix B's limbs.
+  let withParts = false;
+  const riderOf = (sk) => compileRig(withParts && sk.rider_tack ? sk.rider_tack : sk.rider);
   let horseRig = compileRig(skeletons.horse);
-  let riderRig = compileRig(skeletons.rider);
+  let riderRig = riderOf(skeletons);
   let view = makeView(skeletons);
-  const useSkeletons = (sk) => {
-    if (!sk || !sk.rider || !sk.horse || JSON.stringify(sk) === JSON.stringify(skeletons)) return;
+  const useSkeletons = (sk, parts) => {
+    if (!sk || !sk.rider || !sk.horse) return;
+    if (parts !== withParts) {
+      withParts = parts;
+      riderRig = riderOf(JSON.stringify(sk) === JSON.stringify(skeletons) ? skeletons : sk);
+    }
+    if (JSON.stringify(sk) === JSON.stringify(skeletons)) return;
     skeletons = sk;
     horseRig = compileRig(sk.horse);
-    riderRig = compileRig(sk.rider);
+    riderRig = riderOf(sk);
     if (view) view.renderer.dispose();
     const canvas = $("scene").cloneNode(false);
     $("scene").replaceWith(canvas);
@@ -95,6 +104,7 @@ async function start() {
     if (view) view.setView(page.viewName || DEFAULT_VIEW);
   };
   page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
+  Object.defineProperty(page, "riderRigName", { get: () => (withParts && skeletons.rider_tack ? "rider_tack" : "rider") });
 
   // View controls.
   for (const [name, v] of Object.entries(VIEWS)) {
@@ -154,16 +164,16 @@ async function start() {
   const link = new RiderLink(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws/rider`, {
     hello(msg) {
       page.session = msg.session;
-      useSkeletons(msg.skeletons);
+      useSkeletons(msg.skeletons, (msg.rider_part_channels || []).length > 0);
       // The skeletons are in metres; a service with another length_scale speaks other units.
       toMetres = (msg.length_scale || METRE_SCALE) / METRE_SCALE;
-      const channels = [...(msg.channels || []), ...(msg.horse_channels || [])];
+      const channels = [...(msg.channels || []), ...(msg.rider_part_channels || []), ...(msg.horse_channels || [])];
       lengthChannels = channels.filter((c) => c.unit === "length").map((c) => c.name);
       const unitOf = { length: msg.length_unit || "m", deg: "°" };
       for (const c of channels) plots.units[c.name] = unitOf[c.unit] ?? (c.unit === "unitless" ? "" : c.unit || "");
-      riderNames = (msg.channels || []).map((c) => c.name);
+      riderNames = [...(msg.channels || []), ...(msg.rider_part_channels || [])].map((c) => c.name);
       page.tickRate = msg.tick_rate;
-      const all = channels.map((c) => c.name);
+      const all = [...new Set(channels.map((c) => c.name))];
       chains = { tail: groupChain(all, "tail"), braid: groupChain(all, "braid") };
       $("plot-add").innerHTML = `<option value="">add a channel…</option>${all.map((n) => `<option>${n}</option>`).join("")}`;
       if (plots.chosen.length === 0) plots.chosen = DEFAULT_PLOTS.filter((n) => all.includes(n));

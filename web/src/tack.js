@@ -1,8 +1,9 @@
 // Reins and stirrups, drawn between the two skeletons each frame (one instanced draw of
-// thin cylinders). They use the skeletons' own rein and stirrup bones when a skeleton
-// has them (a bone named like `lf_rein`, `lfRein`, `bit`, `lf_stirrup`, `lfStirrup`);
-// without them, the reins run from the bit (between the horse's head and muzzle joints)
-// to the rider's hands, and each stirrup hangs from the saddle to the ball of the foot.
+// thin cylinders). They use the horse skeleton's tack bones when it has them (the bit
+// rings `leftRein` / `rightRein`, the irons `leftStirrup` / `rightStirrup` hung from
+// `leftStirrupBar` / `rightStirrupBar`; docs/skeleton.md); without them, the reins run
+// from the corners of the mouth (between the head and muzzle joints) to the rider's
+// hands, and each stirrup hangs from the saddle to the ball of the foot.
 
 import { CylinderGeometry, InstancedMesh, Matrix4, MeshLambertMaterial, Quaternion, Vector3 } from "three";
 import { rotate } from "./rig.js";
@@ -27,26 +28,24 @@ export class Tack {
     this.mesh = new InstancedMesh(geom, new MeshLambertMaterial({ color: 0x3a2210 }), SEGMENTS);
     this.mesh.frustumCulled = false;
     scene.add(this.mesh);
-    const side = (s) => ({
-      rein: findBone(riderRig, [`${s}_rein`, `${s}Rein`]),
-      hand: findBone(riderRig, [`${s}_hand`]),
-      forearm: findBone(riderRig, [`${s}_forearm`]),
-      stirrup: findBone(horseRig, [`${s}_stirrup`, `${s}Stirrup`, `${s[0]}fStirrup`]),
-      riderStirrup: findBone(riderRig, [`${s}_stirrup`]),
-      foot: findBone(riderRig, [`${s}_foot`]),
-      toes: findBone(riderRig, [`${s}_toes`]),
-    });
+    const side = (s) => {
+      const long = s === "lf" ? "left" : "right";
+      return {
+        ring: findBone(horseRig, [`${long}Rein`]),
+        hand: findBone(riderRig, [`${s}_hand`]),
+        stirrup: findBone(horseRig, [`${long}Stirrup`]),
+        bar: findBone(horseRig, [`${long}StirrupBar`]),
+        foot: findBone(riderRig, [`${s}_foot`]),
+        toes: findBone(riderRig, [`${s}_toes`]),
+      };
+    };
     this.sides = { lf: side("lf"), rt: side("rt") };
     this.h = {
-      bit: findBone(horseRig, ["bit", "mouth"]),
       head: findBone(horseRig, ["head"]),
       muzzle: findBone(horseRig, ["muzzle"]),
       saddle: findBone(horseRig, ["saddle"]),
     };
-    this.uses = {
-      reinBones: this.sides.lf.rein >= 0,
-      stirrupBones: this.sides.lf.stirrup >= 0 || this.sides.lf.riderStirrup >= 0,
-    };
+    this.uses = { reinBones: this.sides.lf.ring >= 0, stirrupBones: this.sides.lf.stirrup >= 0 };
     this.m = new Matrix4();
     this.q = new Quaternion();
     this.a = new Vector3();
@@ -72,7 +71,7 @@ export class Tack {
     this.k = 0;
     const hp = horse.positions;
     const used = {};
-    const { bit, head, muzzle, saddle } = this.h;
+    const { head, muzzle, saddle } = this.h;
     for (const [s, z] of [
       ["lf", -1],
       ["rt", 1],
@@ -80,11 +79,9 @@ export class Tack {
       const b = this.sides[s];
       // Rein: bit -> (sagging) -> the hand's grip.
       let mouth = null;
-      if (bit >= 0) mouth = hp[bit];
+      if (b.ring >= 0) mouth = hp[b.ring];
       else if (head >= 0 && muzzle >= 0) mouth = plus(mix(hp[head], hp[muzzle], 0.8), rotate(horse.rotations[head], [0, 0, 0.06 * z]));
-      let grip = null;
-      if (b.rein >= 0) grip = rider.positions[b.rein];
-      else if (b.hand >= 0) grip = plus(rider.positions[b.hand], rotate(rider.rotations[b.hand], [0.05, 0, 0]));
+      const grip = b.hand >= 0 ? plus(rider.positions[b.hand], rotate(rider.rotations[b.hand], [0.05, 0, 0])) : null;
       if (mouth && grip) {
         const mid = mix(mouth, grip, 0.5);
         const sag = [mid[0], mid[1] - 0.04, mid[2]];
@@ -94,10 +91,9 @@ export class Tack {
       }
       // Stirrup: the leather from the saddle's bar to the iron, the iron under the foot.
       if (saddle < 0 || b.foot < 0) continue;
-      const bar = plus(hp[saddle], rotate(horse.rotations[saddle], [0.1, -0.02, 0.17 * z]));
+      const bar = b.bar >= 0 ? hp[b.bar] : plus(hp[saddle], rotate(horse.rotations[saddle], [0.1, -0.02, 0.17 * z]));
       let iron;
-      if (b.riderStirrup >= 0) iron = rider.positions[b.riderStirrup];
-      else if (b.stirrup >= 0) iron = hp[b.stirrup];
+      if (b.stirrup >= 0) iron = hp[b.stirrup];
       else iron = b.toes >= 0 ? mix(rider.positions[b.foot], rider.positions[b.toes], 0.55) : rider.positions[b.foot];
       const tread = [iron[0], iron[1] - 0.035, iron[2]];
       this.segment(bar, tread, 0.012);
