@@ -73,7 +73,7 @@ def test_pelvis_stays_in_the_saddle_through_a_jump(live_page: PageUnderTest, ser
         p.state("riderlive.setRenderScale(1)")
         p.page.locator("[data-view=side]").click()
         p.state("riderlive.setIdColors(true)")
-        p.wait_for("riderlive.driverText.startsWith('procedural canter')", timeout=5)
+        p.wait_for("riderlive.driverText.startsWith('procedural canter')", timeout=15)
         server.request("POST", "/api/horse/perform", {"move": "jump"})
         seen = []
         for cond in (
