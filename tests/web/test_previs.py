@@ -105,17 +105,26 @@ def test_pelvis_stays_in_the_saddle_through_a_jump(live_page: PageUnderTest, ser
 
 
 def test_hands_hold_the_reins_and_feet_are_in_the_stirrups(live_page: PageUnderTest) -> None:
-    """The reins end at the hands and the irons are under the feet (the horse's tack bones when
-    the skeleton has them, else the page's defaults)."""
-    tack, rider = live_page.state("[riderlive.tack, riderlive.pose.riderWorld]")
-    for side in ("lf", "rt"):
+    """The reins run from the bit to the hands and the leathers from the saddle to the irons:
+    the horse's tack bones when its skeleton has them, else the page's own (the corners of
+    the mouth, an iron under the ball of each foot)."""
+    tack, rider, horse, bones = live_page.state(
+        "[riderlive.tack, riderlive.pose.riderWorld, riderlive.pose.horseWorld, riderlive.tackBones]"
+    )
+    for side, long in (("lf", "left"), ("rt", "right")):
         mouth, grip = tack[f"{side}_rein"]
         assert np.linalg.norm(np.subtract(grip, rider[f"{side}_hand"])) < 0.1
         assert mouth[0] > grip[0] + 0.3  # the bit is well in front of the hands
         bar, iron = tack[f"{side}_stirrup"]
-        ball = np.add(rider[f"{side}_foot"], rider[f"{side}_toes"]) / 2
-        assert np.linalg.norm(np.subtract(iron, ball)) < 0.12
         assert bar[1] > iron[1] + 0.3  # the leather hangs from the saddle
+        if bones["reinBones"]:
+            assert np.allclose(mouth, horse[f"{long}Rein"], atol=1e-9)
+        if bones["stirrupBones"]:
+            assert np.allclose(iron, horse[f"{long}Stirrup"], atol=1e-9)
+            assert np.allclose(bar, horse[f"{long}StirrupBar"], atol=1e-9)
+        else:
+            ball = np.add(rider[f"{side}_foot"], rider[f"{side}_toes"]) / 2
+            assert np.linalg.norm(np.subtract(iron, ball)) < 0.05
 
 
 VISIBLE_WEIGHTS = (

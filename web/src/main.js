@@ -290,6 +290,7 @@ async function start() {
       travel: follow ? tx : 0,
     });
     page.tack = view.tackUsed;
+    page.tackBones = view.tack ? view.tack.uses : null;
   }
 
   // The 3D view as drawn, with the pose it shows (tests): taken right after the next render.
