@@ -43,6 +43,7 @@ from riderlive.service.rest import (
     invalid_request,
 )
 from riderlive.service.runtime import Service
+from riderlive.service.takes_api import add_take_routes
 from riderlive.takes.recorder import TakeExists, list_takes
 
 log = logging.getLogger(__name__)
@@ -181,6 +182,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     @app.get("/api/takes", dependencies=obs, summary="Recorded takes, newest first")
     async def takes() -> dict[str, Any]:
         return {"takes": list_takes(config.takes.directory)}
+
+    add_take_routes(app, service, ctl, obs)  # take download and bake, parameter groups (the page)
 
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
     add_platform_routes(app, service, obs)  # GET and PATCH /api/platform

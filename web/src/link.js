@@ -78,7 +78,11 @@ export class RiderLink {
         this.tickRate = msg.tick_rate;
         this.on.hello(msg);
         const rate = Math.min(this.rate, msg.tick_rate || this.rate);
-        this.send({ type: "subscribe", horse_channels: horse, rate, ...this.subscription });
+        // The rider parts (reins, stirrups) come by subscription only, listed apart.
+        this.parts = (msg.rider_part_channels || []).map((c) => c.name);
+        const sub = { type: "subscribe", horse_channels: horse, rate, ...this.subscription };
+        if (this.parts.length) sub.channels = [...new Set([...this.riderNames, ...this.parts])];
+        this.send(sub);
         this.setState("live");
         break;
       }
