@@ -34,7 +34,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +43,7 @@ from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.realtime.resample import Resampler
 from riderlive.rules.animator import DamperState, damper_start, damper_step
 from riderlive.rules.engine import RiderModel
+from riderlive.rules.parts import PART_OUTPUTS, RiderParts
 
 
 class Driver(enum.IntEnum):
@@ -83,6 +84,8 @@ class TickResult:
     producer: int
     horse: list[float]
     rider: list[float]
+    parts: list[float] = field(default_factory=list)
+    """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
 
 
 _TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
@@ -140,6 +143,9 @@ class TickCore:
         self._last_reset = -math.inf
         self.faults: list[str] = []
         """Reports of resets not yet taken by the caller (one per reset)."""
+        self.full_reach = 0
+        """Ticks whose hands were at full reach, the reins outrunning them (``reins.slip`` > 0)."""
+        self._no_parts = [0.0] * len(PART_OUTPUTS)
         self.set_model(model)
 
     def set_model(self, model: RiderModel) -> None:
@@ -155,6 +161,7 @@ class TickCore:
         self.neutral_rider = model.evaluate(self.neutral_horse)
         # The procedural horse speaks metres; inputs are in the model's length unit.
         self._procedural_gain = DEFAULT_SCALE / model.scale
+        self.parts = RiderParts(model.params, model.scale / DEFAULT_SCALE)
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
@@ -243,7 +250,16 @@ class TickCore:
             rider = list(self.neutral_rider)
         rider = self._bound(rider)
         self.last_rider = rider
-        return TickResult(driver, source_time, producer, list(horse), rider)
+        return TickResult(driver, source_time, producer, list(horse), rider, self._parts(horse, rider))
+
+    def _parts(self, horse: Sequence[float], rider: list[float]) -> list[float]:
+        """The rider parts of the published rider (finite: a non-finite part falls back to Appendix B's limbs)."""
+        parts = self.parts.evaluate(horse, rider)
+        if not _finite(parts):
+            return list(self._no_parts)
+        if parts[-1] > 0.0:
+            self.full_reach += 1
+        return parts
 
     def _rules(self, driver: Driver, horse: Sequence[float], now: float) -> list[float]:
         """The model's rider for ``horse``, plus what is left of a parameter change's difference."""

@@ -58,6 +58,7 @@ COUNTERS: tuple[str, ...] = (
     "physics_skipped_steps",
     "state_resets",
     "outputs_clamped",
+    "hands_full_reach",
     "realtime",
     "alive",
     *(f"lateness_bucket_{i}" for i in range(len(LATENESS_BUCKETS) + 1)),

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
+from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.registry import DeviceSpec
@@ -50,6 +51,8 @@ if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
 
 log = logging.getLogger(__name__)
+_PARTS_AT_REST = (0.0,) * len(PART_NAMES)
+"""The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,8 @@ class TickSetup:
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
     extra_channels: tuple[str, ...] = ()
-    """Channels appended to each output record after the rider's (the tail's, when on)."""
+    """Channels appended to each output record after the rider's: the rider parts
+    (``channels.RIDER_PARTS``), then the tail's (when on)."""
     shm_names: dict[str, str] = field(default_factory=dict)
     rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
@@ -137,7 +141,7 @@ class TickLoop:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
             self.physics = TickPhysics(setup.physics_file, setup.length_scale)
-            if self.physics.names != setup.extra_channels:
+            if (*PART_NAMES, *self.physics.names) != setup.extra_channels:
                 raise ValueError("the tick's physics channels differ from the web process's")
 
     def warm(self) -> None:
@@ -272,6 +276,7 @@ class TickLoop:
                 self._status_dirty = True
             values[index["state_resets"]] = self.core.resets
             values[index["outputs_clamped"]] = self.core.clamped
+            values[index["hands_full_reach"]] = self.core.full_reach
             if devices is not None:
                 changed = devices.tick(result.rider, deadline, clock.tick)
                 if changed or clock.tick % status_every == 0:
@@ -298,6 +303,7 @@ class TickLoop:
                 lateness,
                 *result.horse,
                 *result.rider,
+                *(result.parts or _PARTS_AT_REST),
                 *extra,
             ]
             self.outputs.write(record_out)

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
@@ -82,12 +82,12 @@ class Service:
     def __init__(self, config: ServiceConfig) -> None:
         self.config = config
         self.session = uuid.uuid4().hex
-        self.extra_channels: tuple[str, ...] = ()
-        """Channels published after the rider's: the tail and braid when ``physics.tail``."""
+        self.extra_channels: tuple[str, ...] = RIDER_PART_NAMES
+        """Channels published after the rider's: the rider parts, then the tail and braid when ``physics.tail``."""
         if config.physics.tail:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
-            self.extra_channels = physics_channels(config.physics.file)
+            self.extra_channels += physics_channels(config.physics.file)
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params = load_preset(config.tick.preset)

@@ -13,7 +13,10 @@ twists to the left (counter-clockwise seen from above); the foot twist ``*.rx`` 
 rolls the sole outward (mirrored). Wrist targets (``*_wrist.tz`` forward, ``*.ty`` up)
 move with the seat (``cog.tx``, ``cog.ty``); foot targets (``*_foot.tx`` forward,
 ``*_foot.tz`` away from the belly) and knee poles (``*_knee.tz`` away from the belly,
-``*_knee.ty`` up) stay with the saddle.
+``*_knee.ty`` up) stay with the saddle. The rider parts (``riderlive.rules.parts``) add on
+top: ``*_rein.t*`` to the wrist targets (the hands on the reins), ``*_arm.tz`` to the arm
+poles (elbows out, +), ``*_stirrup.t*`` to the foot targets (the leathers); all in the
+seat frame, ``tz`` + to the right. A client that ignores them gets Appendix B's limbs.
 """
 
 from __future__ import annotations
@@ -114,14 +117,16 @@ def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
             Drive(f"{p}_foot.rz", f"{p}_foot", Z),
         ]
         seat = (Offset("cog.tx", X), Offset("cog.ty", Y))
+        rein = (Offset(f"{p}_rein.tx", X), Offset(f"{p}_rein.ty", Y), Offset(f"{p}_rein.tz", Z))
+        stirrup = (Offset(f"{p}_stirrup.tx", X), Offset(f"{p}_stirrup.ty", Y), Offset(f"{p}_stirrup.tz", Z))
         chains.append(
             Chain(
                 f"{p}_upperarm",
                 f"{p}_forearm",
                 f"{p}_hand",
                 frame=None,
-                target=(Offset(f"{p}_wrist.tz", X), Offset(f"{p}_wrist.ty", Y), *seat),
-                pole=seat,
+                target=(Offset(f"{p}_wrist.tz", X), Offset(f"{p}_wrist.ty", Y), *seat, *rein),
+                pole=(*seat, Offset(f"{p}_arm.tz", Z, out)),
             )
         )
         chains.append(
@@ -130,7 +135,7 @@ def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
                 f"{p}_shin",
                 f"{p}_foot",
                 frame=None,
-                target=(Offset(f"{p}_foot.tx", X), Offset(f"{p}_foot.tz", Z, out)),
+                target=(Offset(f"{p}_foot.tx", X), Offset(f"{p}_foot.tz", Z, out), *stirrup),
                 pole=(Offset(f"{p}_knee.tz", Z, out), Offset(f"{p}_knee.ty", Y)),
             )
         )
