@@ -64,8 +64,10 @@ class GaitLayer:
             (spec.offset[leg], spec.duty[leg], spec.lift[0 if leg.is_front else 1], leg.side * PADDLE, 7919 * (leg + 1))
             for leg in Leg
         )
-        order = (spec.surge, spec.heave, spec.sway, spec.roll, spec.yaw, spec.pitch, spec.bend)
-        order += (spec.neck, spec.neck_side, spec.head)
+        order = (
+            *(spec.surge, spec.heave, spec.sway, spec.roll, spec.yaw, spec.pitch, spec.bend),
+            *(spec.neck, spec.neck_side, spec.head),
+        )
         varied = (False, True, False, False, False, True, False, False, False, False)
         trunk = tuple((h.amplitude, TAU * h.k, h.at, v) for h, v in zip(order, varied, strict=True))
         object.__setattr__(self, "legs", legs)

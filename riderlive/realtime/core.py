@@ -41,7 +41,7 @@ import numpy as np
 from riderlive.channels import HORSE, HORSE_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.realtime.resample import Resampler
-from riderlive.rules.animator import DamperState, damper_start, damper_step
+from riderlive.rules.animator import DamperState, SpringState, damper_start, damper_step, spring_step
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.parts import PART_OUTPUTS, RiderParts
 
@@ -127,6 +127,7 @@ class TickCore:
         self._blend_start = 0.0
         self._blend_duration = 0.0
         self._damper: DamperState | None = None
+        self._spring: SpringState | None = None
         self._last_now: float | None = None
         self.last_rider: list[float] | None = None
         """The last output (always finite)."""
@@ -301,12 +302,35 @@ class TickCore:
             self.faults.append(f"{stage} went non-finite: reset, easing from neutral")
         self._last_reset = now
         self._damper = None
+        self._spring = None
         self._param_delta = None
         self._blend_from = list(self.neutral_rider)
         self._blend_start = now
         self._blend_duration = self.timing.ease_time
 
     def _smooth(self, rider: list[float], now: float) -> list[float]:
+        last = self._last_now
+        return self._follow(self._damp(rider, now), now, last)
+
+    def _follow(self, rider: list[float], now: float, last: float | None) -> list[float]:
+        """The follow-through spring (``[follow_through]``; 0 Hz: off, no state kept)."""
+        follow = self.model.params.follow_through
+        if follow.frequency <= 0.0:
+            self._spring = None
+            return rider
+        target = np.asarray(rider, dtype=np.float64)
+        if self._spring is None or last is None:
+            self._spring = SpringState(target, np.zeros_like(target))
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._spring = spring_step(self._spring, target, now - last, follow.frequency, follow.damping_ratio)
+            if not (np.isfinite(self._spring.value).all() and np.isfinite(self._spring.velocity).all()):
+                self._recover(now, "the follow-through spring")
+                self._spring = SpringState(target, np.zeros_like(target))
+        out: list[float] = self._spring.value.tolist()
+        return out
+
+    def _damp(self, rider: list[float], now: float) -> list[float]:
         tau = self.model.params.smoothing.time_constant
         last, self._last_now = self._last_now, now
         if tau <= 0.0:

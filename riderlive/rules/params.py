@@ -184,6 +184,17 @@ class Stirrups(StrictModel):
     leather_scale: float = pydantic.Field(default=1.0, ge=0.5, le=1.5)  # leather / the skeletons' rest length
 
 
+class FollowThrough(StrictModel):
+    """Section 9.3's loosening: an underdamped spring per rider channel, after the smoothing.
+
+    ``frequency``: natural frequency, Hz (0 = off, the thesis); ``damping_ratio`` below 1:
+    a step overshoots by ``exp(-pi z / sqrt(1 - z^2))`` (0.4: 25 %).
+    """
+
+    frequency: float = pydantic.Field(default=0.0, ge=0.0, le=20.0)
+    damping_ratio: float = pydantic.Field(default=0.4, ge=0.05, le=0.95)
+
+
 class Errata(StrictModel):
     """Where Appendix B contradicts itself: numbers that select a reading.
 
@@ -222,6 +233,7 @@ class RuleParams(StrictModel):
     reins: Reins = Reins()
     arms: Arms = Arms()
     stirrups: Stirrups = Stirrups()
+    follow_through: FollowThrough = FollowThrough()
 
     def with_values(self, changes: dict[str, float]) -> RuleParams:
         """Return a copy with dotted keys (``"head.lift_gain"``) changed, validated."""
