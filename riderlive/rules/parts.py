@@ -7,7 +7,7 @@ and act as offsets on top:
 
 - **reins** (section 5.1: "her hands ... mostly stay in position" near the neck, close to
   it without resting on it): each hand keeps its rest distance to its bit ring (the
-  horse skeleton's ``lfRein`` / ``rtRein``, at the corners of the mouth, moved by
+  horse skeleton's ``leftRein`` / ``rightRein``, at the corners of the mouth, moved by
   ``horseNeck.*`` and ``horseHead.rz``) along the line from the ring to where the seat
   (``cog.*``) carries the hand. ``*_rein.t*`` is that grip minus the seat-carried hand.
   A grip beyond the arm's reach (``reins.reach`` of the arm's length from the shoulder,
@@ -18,8 +18,8 @@ and act as offsets on top:
   elbow (the arm IK's pole) in by ``arms.in_gain`` times the lift (Eq. 7), out as the
   lift falls.
 - **stirrups**: the ball of each foot stands in its iron, which hangs from its bar on a
-  leather of fixed length (the horse skeleton's ``lfStirrup`` offset from
-  ``lfStirrupBar``, times ``stirrups.leather_scale``). Where Eq. 14 and 17 move the
+  leather of fixed length (the horse skeleton's ``leftStirrup`` offset from
+  ``leftStirrupBar``, times ``stirrups.leather_scale``). Where Eq. 14 and 17 move the
   foot further from the bar than that, ``*_stirrup.t*`` brings it back onto the
   leather's sphere (the iron swings up as the foot swings out), in the seat frame
   (``tz`` + to the rider's right). The foot's own rotations (Eq. 15-16) are left out of
@@ -135,21 +135,25 @@ class PartsGeometry:
             return cls(notes=(f"horse skeleton has no {attach!r} bone: reins and stirrups off",))
         seat = h_rest[attach]
         fields: dict[str, Any] = {}
-        rein_bones = ("neck", "head", "lfRein", "rtRein")
+        rein_bones = ("neck", "head", "leftRein", "rightRein")
         arm_bones = tuple(f"{p}_{b}" for p in ("lf", "rt") for b in ("upperarm", "forearm", "hand"))
         lacking = missing(horse, rein_bones) + missing(rider, (*arm_bones, "lower_back"))
         if lacking:
             notes.append(f"no rein bones ({', '.join(lacking)}): the hands follow the seat (Appendix B)")
-        elif not _chain_ok(h_bones, ("neck", "head", "lfRein")) or not _chain_ok(h_bones, ("neck", "head", "rtRein")):
-            notes.append("the rein bones are not neck -> head -> lfRein/rtRein: the hands follow the seat")
+        elif not _chain_ok(h_bones, ("neck", "head", "leftRein")) or not _chain_ok(
+            h_bones, ("neck", "head", "rightRein")
+        ):
+            notes.append("the rein bones are not neck -> head -> leftRein/rightRein: the hands follow the seat")
         else:
             hands = (r_rest["lf_hand"], r_rest["rt_hand"])
             shoulders = (r_rest["lf_upperarm"], r_rest["rt_upperarm"])
             arm = norm(sub(r_rest["lf_forearm"], r_rest["lf_upperarm"])) + norm(
                 sub(r_rest["lf_hand"], r_rest["lf_forearm"])
             )
-            rings = (h_bones["lfRein"].offset, h_bones["rtRein"].offset)
-            reins = [norm(sub(hand, sub(h_rest[n], seat))) for hand, n in zip(hands, ("lfRein", "rtRein"), strict=True)]
+            rings = (h_bones["leftRein"].offset, h_bones["rightRein"].offset)
+            reins = [
+                norm(sub(hand, sub(h_rest[n], seat))) for hand, n in zip(hands, ("leftRein", "rightRein"), strict=True)
+            ]
             if not _within(arm, ARM_LENGTH_RANGE) or not all(_within(r, REIN_LENGTH_RANGE) for r in reins):
                 notes.append(
                     f"absurd rein or arm length (reins {reins[0]:.3g}, {reins[1]:.3g} m, arm {arm:.3g} m): "
@@ -165,14 +169,14 @@ class PartsGeometry:
                     lean_pivot=r_rest["lower_back"],
                     arm_length=arm,
                 )
-        stirrup_bones = ("lfStirrupBar", "lfStirrup", "rtStirrupBar", "rtStirrup")
+        stirrup_bones = ("leftStirrupBar", "leftStirrup", "rightStirrupBar", "rightStirrup")
         leg_bones = tuple(f"{p}_{b}" for p in ("lf", "rt") for b in ("foot", "toes"))
         lacking = missing(horse, stirrup_bones) + missing(rider, leg_bones)
         if lacking:
             notes.append(f"no stirrup bones ({', '.join(lacking)}): the feet follow Eq. 14-17 alone")
         else:
-            bars = (sub(h_rest["lfStirrupBar"], seat), sub(h_rest["rtStirrupBar"], seat))
-            leathers = (norm(h_bones["lfStirrup"].offset), norm(h_bones["rtStirrup"].offset))
+            bars = (sub(h_rest["leftStirrupBar"], seat), sub(h_rest["rightStirrupBar"], seat))
+            leathers = (norm(h_bones["leftStirrup"].offset), norm(h_bones["rightStirrup"].offset))
             if not all(_within(v, LEATHER_LENGTH_RANGE) for v in leathers):
                 notes.append(
                     f"absurd stirrup leathers ({leathers[0]:.3g}, {leathers[1]:.3g} m): the feet follow Eq. 14-17 alone"

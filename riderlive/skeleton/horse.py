@@ -60,12 +60,12 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
     # at the corners of the mouth; each stirrup iron hangs from its bar on the saddle
     # tree, its leather (the iron's offset) long enough for the rider's rest pose, whose
     # ball of the foot (``lf_toes``) sits in the iron.
-    ("lfRein", "head", (0.15, -0.34, -0.06)),
-    ("rtRein", "head", (0.15, -0.34, 0.06)),
-    ("lfStirrupBar", "saddle", (0.25, -0.05, -0.17)),
-    ("lfStirrup", "lfStirrupBar", (0.06, -0.59, -0.13)),
-    ("rtStirrupBar", "saddle", (0.25, -0.05, 0.17)),
-    ("rtStirrup", "rtStirrupBar", (0.06, -0.59, 0.13)),
+    ("leftRein", "head", (0.15, -0.34, -0.06)),
+    ("rightRein", "head", (0.15, -0.34, 0.06)),
+    ("leftStirrupBar", "saddle", (0.25, -0.05, -0.17)),
+    ("leftStirrup", "leftStirrupBar", (0.06, -0.59, -0.13)),
+    ("rightStirrupBar", "saddle", (0.25, -0.05, 0.17)),
+    ("rightStirrup", "rightStirrupBar", (0.06, -0.59, 0.13)),
 ]
 
 
