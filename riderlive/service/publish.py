@@ -30,7 +30,7 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, lookup
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, RIDER_PART_NAMES, lookup
 from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
@@ -153,9 +153,10 @@ class Hub:
         self.clients: dict[str, Subscriber] = {}
         self._seen_input_rx = -1.0
         self.names: tuple[str, ...] = (*RIDER_NAMES, *service.extra_channels)
-        """Published channels: the rider's, then the simulated tail and braid (when on)."""
+        """Published channels: the rider's, the rider parts, then the simulated tail and braid (when on)."""
         self.index = {name: i for i, name in enumerate(self.names)}
-        self.default = Subscription(rider=tuple(range(len(self.names))))
+        parts = set(RIDER_PART_NAMES)  # by subscription only: a client of the rules' channels sees what it saw
+        self.default = Subscription(rider=tuple(i for i, n in enumerate(self.names) if n not in parts))
 
     def hello(self) -> dict[str, Any]:
         service = self.service
