@@ -93,8 +93,8 @@ class TickSetup:
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
     extra_channels: tuple[str, ...] = ()
-    """Channels appended to each output record after the rider's: the rider parts
-    (``channels.RIDER_PARTS``), then the tail's (when on)."""
+    """Channels appended to each output record after the rider's: the tail's (when on),
+    then the rider parts (``channels.RIDER_PARTS``)."""
     shm_names: dict[str, str] = field(default_factory=dict)
     rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
@@ -141,7 +141,7 @@ class TickLoop:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
             self.physics = TickPhysics(setup.physics_file, setup.length_scale)
-            if (*PART_NAMES, *self.physics.names) != setup.extra_channels:
+            if (*self.physics.names, *PART_NAMES) != setup.extra_channels:
                 raise ValueError("the tick's physics channels differ from the web process's")
 
     def warm(self) -> None:
@@ -303,8 +303,8 @@ class TickLoop:
                 lateness,
                 *result.horse,
                 *result.rider,
-                *(result.parts or _PARTS_AT_REST),
                 *extra,
+                *(result.parts or _PARTS_AT_REST),
             ]
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):

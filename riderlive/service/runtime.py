@@ -82,12 +82,14 @@ class Service:
     def __init__(self, config: ServiceConfig) -> None:
         self.config = config
         self.session = uuid.uuid4().hex
-        self.extra_channels: tuple[str, ...] = RIDER_PART_NAMES
-        """Channels published after the rider's: the rider parts, then the tail and braid when ``physics.tail``."""
+        self.physics_channels: tuple[str, ...] = ()
+        """The tail and braid when ``physics.tail`` (recorded in takes)."""
         if config.physics.tail:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
-            self.extra_channels += physics_channels(config.physics.file)
+            self.physics_channels = physics_channels(config.physics.file)
+        self.extra_channels: tuple[str, ...] = (*self.physics_channels, *RIDER_PART_NAMES)
+        """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params = load_preset(config.tick.preset)
@@ -151,7 +153,8 @@ class Service:
             start = link.start
             for record in records:
                 engine_t = float(record[L.OUT_ENGINE_T])
-                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :], engine_t + start)
+                recorded = record[L.OUT_RIDER : L.OUTPUT_WIDTH + len(self.physics_channels)]  # not the rider parts
+                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], recorded, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)
             self.hub.publish(records)
@@ -280,7 +283,7 @@ class Service:
             "preset": self.params.name,
             "length_scale": self.config.tick.length_scale,
         }
-        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels, overwrite)
+        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.physics_channels, overwrite)
         self.stop_recording()
         self.recorder = recorder
         self.take_name = path.stem
