@@ -255,7 +255,10 @@ class TickCore:
 
     def _parts(self, horse: Sequence[float], rider: list[float]) -> list[float]:
         """The rider parts of the published rider (finite: a non-finite part falls back to Appendix B's limbs)."""
-        parts = self.parts.evaluate(horse, rider)
+        try:
+            parts = self.parts.evaluate(horse, rider)
+        except (ArithmeticError, ValueError):  # math.sin(inf) of a neck channel nobody range-checked
+            return list(self._no_parts)
         if not _finite(parts):
             return list(self._no_parts)
         if parts[-1] > 0.0:

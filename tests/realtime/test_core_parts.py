@@ -53,3 +53,14 @@ def test_reins_beyond_reach_are_counted_each_tick() -> None:
     outs = [c.step(t) for t in (0.01, 0.02, 0.03)]
     assert all(o.parts[SLIP] > 0.05 for o in outs)
     assert c.full_reach == 3
+
+
+def test_a_non_finite_neck_falls_back_to_appendix_b_limbs() -> None:
+    c = core()
+    for k, bad in enumerate((float("nan"), float("inf"))):
+        frame = [0.0] * len(HORSE_NAMES)
+        frame[HORSE_INDEX["horseNeck.rz"]] = bad
+        c.push_input(3, k * 0.1, k * 0.1, frame)
+        out = c.step(k * 0.1 + 0.01)
+        assert out.parts == [0.0] * len(RIDER_PART_NAMES)
+        assert all(np.isfinite(out.rider))
