@@ -49,8 +49,9 @@ from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.realtime.layout import InputKind
 from riderlive.realtime.resample import Resampler
 from riderlive.realtime.saddle_input import NO_ESTIMATE, make_saddle_input, saddle_pose
-from riderlive.rules.animator import DamperState, damper_start, damper_step
+from riderlive.rules.animator import DamperState, SpringState, damper_start, damper_step, spring_step
 from riderlive.rules.engine import RiderModel
+from riderlive.rules.parts import PART_OUTPUTS, RiderParts
 from riderlive.saddle.pose import SaddlePoint
 
 
@@ -96,6 +97,8 @@ class TickResult:
     """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
     estimate: tuple[float, ...] = NO_ESTIMATE
     """The saddle estimate (``layout.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
+    parts: list[float] = field(default_factory=list)
+    """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
 
 
 _TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
@@ -143,6 +146,7 @@ class TickCore:
         self._blend_start = 0.0
         self._blend_duration = 0.0
         self._damper: DamperState | None = None
+        self._spring: SpringState | None = None
         self._last_now: float | None = None
         self.last_rider: list[float] | None = None
         """The last output (always finite)."""
@@ -159,6 +163,9 @@ class TickCore:
         self._last_reset = -math.inf
         self.faults: list[str] = []
         """Reports of resets not yet taken by the caller (one per reset)."""
+        self.full_reach = 0
+        """Ticks whose hands were at full reach, the reins outrunning them (``reins.slip`` > 0)."""
+        self._no_parts = [0.0] * len(PART_OUTPUTS)
         self.set_model(model)
 
     def set_model(self, model: RiderModel) -> None:
@@ -175,6 +182,7 @@ class TickCore:
         # The procedural horse speaks metres; inputs are in the model's length unit.
         self._procedural_gain = DEFAULT_SCALE / model.scale
         self._to_metres = model.scale / DEFAULT_SCALE
+        self.parts = RiderParts(model.params, model.scale / DEFAULT_SCALE)
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
@@ -275,7 +283,21 @@ class TickCore:
             rider = list(self.neutral_rider)
         rider = self._bound(rider)
         self.last_rider = rider
-        return TickResult(driver, source_time, producer, list(horse), rider, saddle, estimate)
+        return TickResult(
+            driver, source_time, producer, list(horse), rider, saddle, estimate, self._parts(horse, rider)
+        )
+
+    def _parts(self, horse: Sequence[float], rider: list[float]) -> list[float]:
+        """The rider parts of the published rider (finite: a non-finite part falls back to Appendix B's limbs)."""
+        try:
+            parts = self.parts.evaluate(horse, rider)
+        except (ArithmeticError, ValueError):  # math.sin(inf) of a neck channel nobody range-checked
+            return list(self._no_parts)
+        if not _finite(parts):
+            return list(self._no_parts)
+        if parts[-1] > 0.0:
+            self.full_reach += 1
+        return parts
 
     def _rules(self, driver: Driver, horse: Sequence[float], now: float) -> list[float]:
         """The model's rider for ``horse``, plus what is left of a parameter change's difference."""
@@ -317,12 +339,35 @@ class TickCore:
             self.faults.append(f"{stage} went non-finite: reset, easing from neutral")
         self._last_reset = now
         self._damper = None
+        self._spring = None
         self._param_delta = None
         self._blend_from = list(self.neutral_rider)
         self._blend_start = now
         self._blend_duration = self.timing.ease_time
 
     def _smooth(self, rider: list[float], now: float) -> list[float]:
+        last = self._last_now
+        return self._follow(self._damp(rider, now), now, last)
+
+    def _follow(self, rider: list[float], now: float, last: float | None) -> list[float]:
+        """The follow-through spring (``[follow_through]``; 0 Hz: off, no state kept)."""
+        follow = self.model.params.follow_through
+        if follow.frequency <= 0.0:
+            self._spring = None
+            return rider
+        target = np.asarray(rider, dtype=np.float64)
+        if self._spring is None or last is None:
+            self._spring = SpringState(target, np.zeros_like(target))
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._spring = spring_step(self._spring, target, now - last, follow.frequency, follow.damping_ratio)
+            if not (np.isfinite(self._spring.value).all() and np.isfinite(self._spring.velocity).all()):
+                self._recover(now, "the follow-through spring")
+                self._spring = SpringState(target, np.zeros_like(target))
+        out: list[float] = self._spring.value.tolist()
+        return out
+
+    def _damp(self, rider: list[float], now: float) -> list[float]:
         tau = self.model.params.smoothing.time_constant
         last, self._last_now = self._last_now, now
         if tau <= 0.0:

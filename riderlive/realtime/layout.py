@@ -79,6 +79,7 @@ COUNTERS: tuple[str, ...] = (
     "physics_skipped_steps",
     "state_resets",
     "outputs_clamped",
+    "hands_full_reach",
     "realtime",
     "alive",
     "saddle_samples",

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
+from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.registry import DeviceSpec
@@ -52,6 +53,8 @@ if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
 
 log = logging.getLogger(__name__)
+_PARTS_AT_REST = (0.0,) * len(PART_NAMES)
+"""The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +95,8 @@ class TickSetup:
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
     extra_channels: tuple[str, ...] = ()
-    """Channels appended to each output record after the rider's (the tail's, when on)."""
+    """Channels appended to each output record after the rider's: the tail's (when on),
+    then the rider parts (``channels.RIDER_PARTS``)."""
     shm_names: dict[str, str] = field(default_factory=dict)
     rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
@@ -145,7 +149,7 @@ class TickLoop:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
             self.physics = TickPhysics(setup.physics_file, setup.length_scale)
-            if self.physics.names != setup.extra_channels:
+            if (*self.physics.names, *PART_NAMES) != setup.extra_channels:
                 raise ValueError("the tick's physics channels differ from the web process's")
 
     def warm(self) -> None:
@@ -292,6 +296,7 @@ class TickLoop:
             values[index["state_resets"]] = self.core.resets
             values[index["outputs_clamped"]] = self.core.clamped
             self._count_saddle(result, values, index)
+            values[index["hands_full_reach"]] = self.core.full_reach
             if devices is not None:
                 changed = devices.tick(result.rider, deadline, clock.tick, result.horse)
                 if changed or clock.tick % status_every == 0:
@@ -321,6 +326,7 @@ class TickLoop:
                 *result.horse,
                 *result.rider,
                 *extra,
+                *(result.parts or _PARTS_AT_REST),
             ]
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):

@@ -152,6 +152,7 @@ def render(
         ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
         ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
         ("outputs_clamped", "Rider values clamped to their plausible range."),
+        ("hands_full_reach", "Ticks whose hands were at full reach, the reins outrunning them (reins.slip > 0)."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]

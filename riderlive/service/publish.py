@@ -30,7 +30,7 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, SADDLE, lookup
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, RIDER_PART_NAMES, RIDER_PARTS, SADDLE, lookup
 from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
@@ -154,9 +154,10 @@ class Hub:
         self.clients: dict[str, Subscriber] = {}
         self._seen_input_rx = -1.0
         self.names: tuple[str, ...] = (*RIDER_NAMES, *service.extra_channels)
-        """Published channels: the rider's, then the simulated tail and braid (when on)."""
+        """Published channels: the rider's, the simulated tail and braid (when on), then the rider parts."""
         self.index = {name: i for i, name in enumerate(self.names)}
-        self.default = Subscription(rider=tuple(range(len(self.names))))
+        parts = set(RIDER_PART_NAMES)  # by subscription only: a client of the rules' channels sees what it saw
+        self.default = Subscription(rider=tuple(i for i, n in enumerate(self.names) if n not in parts))
 
     def hello(self) -> dict[str, Any]:
         service = self.service
@@ -170,6 +171,7 @@ class Hub:
             "tick_rate": config.tick.rate,
             "engine_time": service.link.engine_time(),
             "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in self._channels()],
+            "rider_part_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER_PARTS],
             "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
             "axis_convention": AXIS_CONVENTION,
             "length_scale": config.tick.length_scale,
@@ -203,7 +205,9 @@ class Hub:
         }
 
     def _channels(self) -> list[Any]:
-        return [*RIDER, *(lookup(name) for name in self.service.extra_channels)]
+        """The default subscription's channels (the rider parts are listed apart, by subscription only)."""
+        parts = set(RIDER_PART_NAMES)
+        return [*RIDER, *(lookup(name) for name in self.service.extra_channels if name not in parts)]
 
     def publish(self, records: list[np.ndarray]) -> None:
         """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.

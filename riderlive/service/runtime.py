@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDLE_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
@@ -85,12 +85,14 @@ class Service:
     def __init__(self, config: ServiceConfig) -> None:
         self.config = config
         self.session = uuid.uuid4().hex
-        self.extra_channels: tuple[str, ...] = ()
-        """Channels published after the rider's: the tail and braid when ``physics.tail``."""
+        self.physics_channels: tuple[str, ...] = ()
+        """The tail and braid when ``physics.tail`` (recorded in takes)."""
         if config.physics.tail:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
-            self.extra_channels = physics_channels(config.physics.file)
+            self.physics_channels = physics_channels(config.physics.file)
+        self.extra_channels: tuple[str, ...] = (*self.physics_channels, *RIDER_PART_NAMES)
+        """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params = load_preset(config.tick.preset)
@@ -156,7 +158,12 @@ class Service:
             start = link.start
             for record in records:
                 engine_t = float(record[L.OUT_ENGINE_T])
-                rider = np.concatenate((record[L.OUT_RIDER :], record[L.OUT_SADDLE : L.OUT_ESTIMATE]))
+                rider = np.concatenate(  # the rider and the physics (not the rider parts), then the saddle
+                    (
+                        record[L.OUT_RIDER : L.OUTPUT_WIDTH + len(self.physics_channels)],
+                        record[L.OUT_SADDLE : L.OUT_ESTIMATE],
+                    )
+                )
                 self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], rider, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)
@@ -286,7 +293,7 @@ class Service:
             "preset": self.params.name,
             "length_scale": self.config.tick.length_scale,
         }
-        extra = (*self.extra_channels, *SADDLE_NAMES)  # the saddle of every tick's horse, after the rider's
+        extra = (*self.physics_channels, *SADDLE_NAMES)  # the saddle of every tick's horse, after the rider's
         recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, extra, overwrite)
         self.stop_recording()
         self.recorder = recorder
