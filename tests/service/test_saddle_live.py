@@ -46,6 +46,14 @@ def _driven(follower: Follower, since: float) -> list[dict[str, Any]]:
     return [f for f in follower.frames if f["at"] >= since and f["driver"] == "input" and f.get("estimate")]
 
 
+def _until(condition: Any, timeout: float = 3.0) -> None:
+    """Wait for ``condition()`` (a control message travels after the frames that decided it)."""
+    deadline = time.perf_counter() + timeout
+    while not condition():
+        assert time.perf_counter() < deadline, "not within the timeout"
+        time.sleep(0.01)
+
+
 def _saddle_drives(frame: dict[str, Any]) -> bool:
     return frame["driver"] == "input" and frame.get("estimate") is not None
 
@@ -70,7 +78,8 @@ def test_a_saddle_recording_rides_like_the_full_horse(
     finally:
         stream.close()
     frames = [f for f in _driven(follower, stream.started) if times[0] <= f["source_t"] <= times[-1]]
-    assert stream.messages == [{"type": "control", "driving": True}], "no error, driving from the first frame"
+    assert not [m for m in stream.messages if m["type"] == "error"], stream.messages
+    assert stream.messages[0] == {"type": "control", "driving": True}, "driving from the first frame"
     source = np.array([f["source_t"] for f in frames])
     locked = np.array([f["estimate"]["lock"] == "locked" and f["estimate"]["gait"] == gait for f in frames])
     assert locked[-1], frames[-1]["estimate"]
@@ -117,7 +126,7 @@ def test_saddle_and_horse_producers_share_one_arbiter(server: LiveServer, follow
         assert not any(_saddle_drives(f) for f in follower.frames[-20:])
         loud = Producer(server.ws, _trot_saddle, hello={"name": "arb-loud", "priority": 5}, path="/ws/saddle")
         follower.wait_for(_saddle_drives, timeout=2)
-        assert loud.driving() is True and horse.driving() is False
+        _until(lambda: loud.driving() is True and horse.driving() is False)
         state = server.get("/api/state").json()
         assert set(state["tick"]["saddle"]) >= {"lock", "gait", "stride_hz", "phase", "age", "counters"}
         kinds = {p["name"]: p["kind"] for p in state["arbitration"]["producers"]}
@@ -130,7 +139,7 @@ def test_saddle_and_horse_producers_share_one_arbiter(server: LiveServer, follow
         saddle_won = _saddle_drives(follower.frames[-1])
         (quiet if saddle_won else horse).sending.clear()
         follower.wait_for(lambda f: f["driver"] == "input" and _saddle_drives(f) is not saddle_won, timeout=3)
-        assert (horse if saddle_won else quiet).driving() is True
+        _until(lambda: (horse if saddle_won else quiet).driving() is True)
     finally:
         for p in (horse, quiet, loud):
             if p is not None:
@@ -221,6 +230,10 @@ def test_the_saddle_subscription_json_and_binary(server: LiveServer) -> None:
         errors = [r for r in replies if r["type"] == "error"]
         assert errors and errors[0]["reason"] == "wrong_type" and "'saddle'" in errors[0]["message"]
         assert all("saddle" not in r for r in replies if r["type"] == "frame"), "the subscription stays as it was"
+        for _ in range(2000):  # a test before may have left the rider easing to neutral
+            message = json.loads(ws.recv(timeout=5))
+            if message.get("driver") == "procedural":
+                break
         ws.send(json.dumps({"type": "subscribe", "saddle": True, "horse_channels": list(HORSE_NAMES)}))
         ack = next(m for m in (json.loads(ws.recv(timeout=5)) for _ in range(100)) if m["type"] == "subscribed")
         assert ack["saddle"] is True
