@@ -12,6 +12,7 @@ from typing import Literal
 
 import pydantic
 
+from riderlive.bus.config import NatsSection
 from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS
@@ -219,6 +220,8 @@ class ServiceConfig(StrictModel):
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
     guardian: GuardianSection = GuardianSection()
+    nats: NatsSection = NatsSection()
+    """Join a stage over NATS (docs/deployment.md); unset ``url``: brokerless."""
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:
