@@ -51,6 +51,20 @@ def dumps(message: dict[str, Any]) -> bytes:
     return orjson.dumps(message)
 
 
+def parse_payload(data: bytes, max_bytes: int) -> dict[str, Any]:
+    """A NATS payload (always bytes) as ``/ws/horse`` reads a message: JSON text when it
+    starts with ``{`` (after blanks), else msgpack; :class:`BadFrame` otherwise."""
+    if data.lstrip()[:1] == b"{":
+        if len(data) > max_bytes:
+            raise BadFrame("oversize", f"message of {len(data)}+ bytes exceeds {max_bytes} bytes")
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise BadFrame("malformed", f"cannot decode message: {exc}") from None
+        return parse_message(text, max_bytes)
+    return parse_message(data, max_bytes)
+
+
 class HorseInput:
     """NATS producers feeding the service's arbiter (see the module docstring)."""
 
@@ -83,7 +97,7 @@ class HorseInput:
             await self._answer(msg, self.welcome(producer))
         now = time.perf_counter()
         try:
-            obj = parse_message(msg.data, service.config.input.max_message_bytes)
+            obj = parse_payload(msg.data, service.config.input.max_message_bytes)
             if self.needs_token and key not in self.authorized:
                 if not auth.token_matches(service.config.security.token, obj.get("token")):
                     raise BadFrame(
@@ -192,7 +206,7 @@ class Control:
             service.metrics.bad_frames["unknown_version"] += 1
             return {"ok": False, "refusal": "unknown_version", "message": f"this rig speaks {msg.subject[:200]!r} v1"}
         try:
-            obj = parse_message(msg.data, service.config.input.max_message_bytes)
+            obj = parse_payload(msg.data, service.config.input.max_message_bytes)
         except BadFrame as exc:
             service.metrics.bad_frames[exc.reason] += 1
             return {"ok": False, "refusal": exc.reason, "message": str(exc)}

@@ -288,7 +288,9 @@ class RigNode:
         if lost != self.heartbeat_lost:
             self.heartbeat_lost = lost
             self.counts["heartbeat_lost" if lost else "heartbeat_back"] += 1
-            log.warning("stage heartbeat %s", "lost: armed devices park" if lost else "back (nothing re-arms)")
+            log.warning(
+                "stage heartbeat %s", "lost: armed devices park, arming refused" if lost else "back (nothing re-arms)"
+            )
         if not lost or not armed(self.service.link.status()):
             return
         self.counts["heartbeat_stops"] += 1

@@ -145,7 +145,7 @@ async def replay(
     """Publish a take's horse frames into ``rig`` at their timing; frames sent."""
     recorded = await frames(transport, stage, take)
     subject = stage.rig(rig).horse(f"replay-{take}")
-    hello: dict[str, Any] = {"type": "hello", "name": f"replay:{take}", "priority": priority}
+    hello: dict[str, Any] = {"type": "hello", "priority": priority}
     if token is not None:
         hello["token"] = token
     await transport.publish(subject, orjson.dumps(hello))
