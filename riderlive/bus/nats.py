@@ -135,9 +135,18 @@ async def connect(
     servers = [s.strip() for s in url.split(",") if s.strip()]
     options = credentials.options()
     # one attempt, no retries: a clear error at start
+
+    async def quiet(exc: Exception) -> None:
+        """The probe's errors are raised to us; nats-py would also print them."""
+
     try:
         probe = await nats.connect(
-            servers=servers, name=name, allow_reconnect=False, connect_timeout=connect_timeout, **options
+            servers=servers,
+            name=name,
+            allow_reconnect=False,
+            connect_timeout=connect_timeout,
+            error_cb=quiet,
+            **options,
         )
     except Exception as exc:
         if _refusal(exc):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 import time
 from collections.abc import Callable, Coroutine
@@ -29,11 +30,11 @@ producer_timeout = 0.3
 class NatsProbe:
     """A NATS connection on an event loop in a thread; ``call`` runs a coroutine there."""
 
-    def __init__(self, url: str, credentials: Credentials = Credentials()) -> None:
+    def __init__(self, url: str, credentials: Credentials | None = None) -> None:
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
-        self.transport: NatsTransport = self.call(connect(url, credentials, "test probe"))
+        self.transport: NatsTransport = self.call(connect(url, credentials or Credentials(), "test probe"))
         self.received: dict[str, list[tuple[float, Message]]] = {}
         self._tasks: list[asyncio.Task[Any]] = []
 
@@ -76,10 +77,8 @@ class NatsProbe:
     def close(self) -> None:
         for task in self._tasks:
             self.loop.call_soon_threadsafe(task.cancel)
-        try:
+        with contextlib.suppress(Exception):
             self.call(self.transport.close(), 5.0)
-        except Exception:
-            pass
         self.loop.call_soon_threadsafe(self.loop.stop)
         self.thread.join(5.0)
 

@@ -177,8 +177,8 @@ def test_bad_messages_are_refused_answered_and_counted(rig: LiveServer, probe: N
         "unauthorized",
         "unknown_version",
     ]
-    for reason in before:
-        assert _metric(rig, reason) == before[reason] + 1, reason
+    for reason, count in before.items():
+        assert _metric(rig, reason) == count + 1, reason
     control = probe.request(RIG.subject(Kind.CONTROL, "v2"), orjson.dumps({"action": "state"}))
     assert orjson.loads(control)["refusal"] == "unknown_version"
     assert _metric(rig, "unknown_version") == before["unknown_version"] + 2
