@@ -196,6 +196,7 @@ class RigNode:
             "rates": dict(self._rates),
             "heartbeat": {"timeout": self.config.heartbeat_timeout, "age": age, "ok": not self.heartbeat_lost},
             "perf_origin": service.link.start,
+            "channels": list(service.hub.names),
             "counts": dict(self.counts),
             "transport": dict(self.transport.stats.events),
         }

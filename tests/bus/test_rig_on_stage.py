@@ -261,3 +261,34 @@ def _metric_in(live: LiveServer, name: str) -> float:
         if line.startswith(f'riderlive_frames_in_total{{producer="{name}"}} '):
             return float(line.rsplit(" ", 1)[1])
     return 0.0
+
+
+def test_the_python_client_follows_a_rig_over_nats(rig: LiveServer, broker: Broker) -> None:
+    import asyncio
+
+    from riderlive.client import NatsRiderSubscriber
+
+    async def take(n: int) -> list:
+        subscriber = NatsRiderSubscriber(broker.url, stage="A", rig="r1")
+        got = []
+        async for frame in subscriber.frames():
+            got.append(frame)
+            if len(got) == n:
+                subscriber.close()
+        return got
+
+    frames = asyncio.run(asyncio.wait_for(take(10), 20.0))
+    assert [f.seq for f in frames] == sorted(f.seq for f in frames) and len({f.seq for f in frames}) == 10
+    assert list(frames[0].values) == list(RIDER_NAMES) and list(frames[0].horse) == list(HORSE_NAMES)
+
+
+def test_the_stage_command_lists_the_rigs(rig: LiveServer, broker: Broker) -> None:
+    command = [sys.executable, "-m", "riderlive", "stage", "--nats", broker.url, "--stage", "A", "list", "--json"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=60, env={"PYTHONPATH": str(ROOT)})
+    assert done.returncode == 0, done.stderr
+    rigs = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [r["rig"] for r in rigs] == ["r1"] and rigs[0]["tick_up"] is True
+    empty = subprocess.run(
+        [*command[:7], "B", "list"], capture_output=True, text=True, timeout=60, env={"PYTHONPATH": str(ROOT)}
+    )
+    assert empty.returncode == 1 and "no rig answers on stage 'B'" in empty.stdout
