@@ -17,6 +17,8 @@ core busy (``--idle`` to leave it). Measured:
 2. **Stage e-stop**: every rig armed and running, a random 50-150 ms, then one message on
    ``riderlive.v1.<stage>.estop``; per trial the time until the torque-off packet has
    arrived on *every* emulated bus (max over rigs), p50 / p99 / max over ``--trials``.
+3. **Stage heartbeat lost**: every rig running, the heartbeat stops; the time until the
+   torque-off packet (after parking) has arrived on every bus.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from tests.service.live_server import LiveServer
 TOKEN = "bench-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 STAGE = Stage("bench")
+HEARTBEAT_TIMEOUT = 0.5
 
 
 async def _subscribe(kind: str, targets: list[tuple[str, str, float]], seconds: float) -> list[dict[str, Any]]:
@@ -186,10 +189,37 @@ def estop_trials(
                 raise SystemExit(f"trial {n}: no torque-off reached a bus")
             offs.append(after[0] - sent)
         worst.append(max(offs))
-        for live in lives:
-            post(live, "/api/reset")
-        wait_all(lives, "disarmed")
+        reset_all(lives)
     return worst, faults
+
+
+def reset_all(lives: list[LiveServer], timeout: float = 20.0) -> None:
+    """Reset until every rig is disarmed (a tick restarted by a loaded machine may need another)."""
+    deadline = time.perf_counter() + timeout
+    while any(rig_state(live) != "disarmed" for live in lives):
+        if time.perf_counter() > deadline:
+            raise SystemExit(f"rigs stay {[rig_state(x) for x in lives]} after reset")
+        for live in lives:
+            if rig_state(live) in ("estop", "fault"):
+                post(live, "/api/reset")
+        time.sleep(0.05)
+
+
+def heartbeat_loss(lives: list[LiveServer], emus: list[Emulator], probe: NatsProbe, stop: asyncio.Event) -> float:
+    """Stop the stage heartbeat with every rig running: seconds until torque off on every bus."""
+    arm_all(lives, [])
+    for emu in emus:
+        emu.ask("arrivals")
+    stopped = time.perf_counter()
+    probe.loop.call_soon_threadsafe(stop.set)
+    wait_all(lives, "parked", 30.0)
+    offs = []
+    for emu in emus:
+        after = [t for t in torque_offs(emu.ask("arrivals")) if t > stopped]
+        if not after:
+            raise SystemExit("heartbeat loss: no torque-off reached a bus")
+        offs.append(after[0] - stopped)
+    return max(offs)
 
 
 def main() -> int:
@@ -221,7 +251,8 @@ def main() -> int:
                     f'[tick]\nrate = {args.rate}\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
                     f'[rig]\nfile = "{root / "bench3.toml"}"\nport = "{emu.port}"\n'
                 )
-                lives.append(start_rig(root / f"r{i}", broker.url, STAGE.name, f"r{i}", config, token=TOKEN))
+                extra = f"heartbeat_timeout = {HEARTBEAT_TIMEOUT}"
+                lives.append(start_rig(root / f"r{i}", broker.url, STAGE.name, f"r{i}", config, extra, token=TOKEN))
             probe = NatsProbe(broker.url)
             stop = asyncio.Event()
             probe.start(lambda: beat(probe.transport, STAGE, 0.05, stop))  # type: ignore[union-attr]
@@ -232,6 +263,7 @@ def main() -> int:
                 nats = fan_out("nats", [(n, broker.url, origin[n]) for n in names], args.seconds)
                 ws = fan_out("ws", [(n, lives[int(n[1:])].ws, origin[n]) for n in names], args.seconds)
                 delays, faults = estop_trials(lives, emus, probe, args.trials) if args.trials else ([], [])
+                lost = heartbeat_loss(lives, emus, probe, stop) if args.trials else float("nan")
             busy = not args.idle
             print(f"\n{args.rigs} rigs at {args.rate:g} Hz, {args.subscribers} subscribers, other core busy: {busy}")
             for label, results in (("NATS  ", nats), ("ws/rider", ws)):
@@ -245,6 +277,10 @@ def main() -> int:
             p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
             print(f"  stage e-stop -> torque off on every bus ({args.trials} trials, max over the rigs):")
             print(f"    p50 {statistics.median(ms):.2f}  p99 {p99:.2f}  max {ms[-1]:.2f} ms")
+            print(
+                f"  stage heartbeat stopped -> torque off on every bus: {lost * 1000:.0f} ms "
+                f"(heartbeat_timeout {HEARTBEAT_TIMEOUT:g} s + park_s 0.2 s + the checks)"
+            )
             print(f"  rig faults while arming (reset and armed again): {len(faults)} {sorted(set(faults))[:3]}")
         finally:
             if probe is not None:
