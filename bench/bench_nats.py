@@ -129,6 +129,16 @@ def summarize(results: list[dict[str, Any]]) -> tuple[float, float, float]:
     return received / max(expected, 1), statistics.median(lat), lat[min(len(lat) - 1, int(0.99 * len(lat)))]
 
 
+def report(label: str, results: list[dict[str, Any]]) -> None:
+    errors = sorted({str(r["error"])[:120] for r in results if r["error"]})
+    if errors:
+        print(f"  {label:8s} subscribers that failed: {sum(1 for r in results if r['error'])}: {errors}")
+    delivery, p50, p99 = summarize(results)
+    print(
+        f"  {label:8s} delivery {100 * delivery:6.2f} %   tick->receive p50 {p50:6.2f}  p99 {p99:7.2f} ms", flush=True
+    )
+
+
 def rig_state(live: LiveServer) -> str:
     devices = live.get("/api/devices", headers=AUTH).json()["devices"]
     return str(devices[0]["state"]) if devices else "none"
@@ -156,7 +166,8 @@ def arm_all(lives: list[LiveServer], faults: list[str]) -> None:
             return
         for live, s in zip(lives, states, strict=True):
             if s == "fault":
-                faults.append(str(live.get("/api/devices", headers=AUTH).json()["devices"][0]["fault"]["message"]))
+                device = live.get("/api/devices", headers=AUTH).json()["devices"][0]
+                faults.append(str((device.get("fault") or {}).get("message")))
                 post(live, "/api/reset")
             elif s in ("disarmed", "parked"):
                 post(live, "/api/arm", {"device": "bench3"})
@@ -259,29 +270,26 @@ def main() -> int:
             rigs = {r["rig"]: r for r in probe.call(discover(probe.transport, STAGE, 1.0))}
             names = [f"r{i % args.rigs}" for i in range(args.subscribers)]
             origin = {name: float(rigs[name]["perf_origin"]) for name in rigs}
+            busy = not args.idle
+            print(f"\n{args.rigs} rigs at {args.rate:g} Hz, {args.subscribers} subscribers, other core busy: {busy}")
             with other_core_busy(3600, not args.idle):
                 nats = fan_out("nats", [(n, broker.url, origin[n]) for n in names], args.seconds)
                 ws = fan_out("ws", [(n, lives[int(n[1:])].ws, origin[n]) for n in names], args.seconds)
-                delays, faults = estop_trials(lives, emus, probe, args.trials) if args.trials else ([], [])
-                lost = heartbeat_loss(lives, emus, probe, stop) if args.trials else float("nan")
-            busy = not args.idle
-            print(f"\n{args.rigs} rigs at {args.rate:g} Hz, {args.subscribers} subscribers, other core busy: {busy}")
-            for label, results in (("NATS  ", nats), ("ws/rider", ws)):
-                delivery, p50, p99 = summarize(results)
-                print(
-                    f"  {label:8s} delivery {100 * delivery:6.2f} %   tick->receive p50 {p50:6.2f}  p99 {p99:7.2f} ms"
-                )
-            n50, w50 = summarize(nats)[1], summarize(ws)[1]
-            print(f"  p50 ratio NATS / ws/rider: {n50 / w50:.2f}")
-            ms = sorted(d * 1000 for d in delays) or [float("nan")]
-            p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
-            print(f"  stage e-stop -> torque off on every bus ({args.trials} trials, max over the rigs):")
-            print(f"    p50 {statistics.median(ms):.2f}  p99 {p99:.2f}  max {ms[-1]:.2f} ms")
-            print(
-                f"  stage heartbeat stopped -> torque off on every bus: {lost * 1000:.0f} ms "
-                f"(heartbeat_timeout {HEARTBEAT_TIMEOUT:g} s + park_s 0.2 s + the checks)"
-            )
-            print(f"  rig faults while arming (reset and armed again): {len(faults)} {sorted(set(faults))[:3]}")
+                for label, results in (("NATS", nats), ("ws/rider", ws)):
+                    report(label, results)
+                print(f"  p50 ratio NATS / ws/rider: {summarize(nats)[1] / summarize(ws)[1]:.2f}", flush=True)
+                if args.trials:
+                    delays, faults = estop_trials(lives, emus, probe, args.trials)
+                    ms = sorted(d * 1000 for d in delays)
+                    p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
+                    print(f"  stage e-stop -> torque off on every bus ({args.trials} trials, max over the rigs):")
+                    print(f"    p50 {statistics.median(ms):.2f}  p99 {p99:.2f}  max {ms[-1]:.2f} ms", flush=True)
+                    lost = heartbeat_loss(lives, emus, probe, stop)
+                    print(
+                        f"  stage heartbeat stopped -> torque off on every bus: {lost * 1000:.0f} ms "
+                        f"(heartbeat_timeout {HEARTBEAT_TIMEOUT:g} s + park_s 0.2 s + the checks)"
+                    )
+                    print(f"  rig faults while arming (reset and armed again): {len(faults)} {sorted(set(faults))[:3]}")
         finally:
             if probe is not None:
                 probe.close()
