@@ -54,7 +54,8 @@ HEARTBEAT_TIMEOUT = 0.5
 async def _subscribe(kind: str, targets: list[tuple[str, str, float]], seconds: float) -> list[dict[str, Any]]:
     """``targets``: (rig, url, perf_origin) per subscriber; per subscriber: latencies and seqs."""
     results: list[dict[str, Any]] = [{"rig": rig, "lat": [], "seq": [], "error": None} for rig, _, _ in targets]
-    stop_at = time.perf_counter() + seconds
+    # each subscriber counts ``seconds`` from the moment it is subscribed (a first hello
+    # can take seconds on a loaded machine)
 
     def note(i: int, data: bytes) -> None:
         now = time.perf_counter()
@@ -73,7 +74,8 @@ async def _subscribe(kind: str, targets: list[tuple[str, str, float]], seconds: 
             note(i, msg.data)
 
         await transport.subscribe(STAGE.rig(rig).subject(Kind.FRAME), on, 1 << 16)
-        await asyncio.sleep(stop_at - time.perf_counter())
+        await transport.flush()
+        await asyncio.sleep(seconds)
         await transport.close()
 
     async def ws_sub(i: int) -> None:
@@ -82,7 +84,9 @@ async def _subscribe(kind: str, targets: list[tuple[str, str, float]], seconds: 
         _, url, _ = targets[i]
         async with connect(url + "/ws/rider", max_size=1 << 22) as ws:
             await ws.send(json.dumps({"type": "subscribe", "encoding": "binary", "horse_channels": list(HORSE_NAMES)}))
-            await ws.recv()
+            while isinstance(message := await ws.recv(), str) and '"subscribed"' not in message:
+                pass
+            stop_at = time.perf_counter() + seconds
             while (left := stop_at - time.perf_counter()) > 0:
                 try:
                     message = await asyncio.wait_for(ws.recv(), left)

@@ -6,7 +6,8 @@ one producer of the service's one arbiter, exactly as a ``/ws/horse`` connection
 JSON or msgpack forms (``hello``, ``frame``, and ``bye``). When the service needs a
 token for ingest, a producer sends it in its hello (``"token"``) before its frames count.
 Answers (``welcome``, ``control``, ``segment``, ``error``) go to the message's reply
-subject when it has one. A producer silent for ``nats.producer_forget`` s is forgotten.
+subject when it has one. A producer silent for ``nats.producer_forget`` s is forgotten;
+at most ``publish.max_clients`` producer names at once (more: ``too_many_producers``).
 
 **Control** (``riderlive.v1.<stage>.<rig>.control``, request/reply): ``{"action": A,
 "device": ..., "by": ..., "token": ...}`` with A one of ``state``, ``arm``, ``disarm``,
@@ -90,6 +91,11 @@ class HorseInput:
             return
         key = parsed.producer
         producer = self.producers.get(key)
+        if producer is None and len(self.producers) >= service.config.publish.max_clients:
+            service.metrics.bad_frames["too_many_producers"] += 1
+            message = f"more than {service.config.publish.max_clients} NATS producers (publish.max_clients)"
+            await self._answer(msg, {"type": "error", "reason": "too_many_producers", "message": message})
+            return
         if producer is None:
             producer = Producer(id=next_producer_id(), name=f"nats:{key}")
             self.producers[key] = producer
