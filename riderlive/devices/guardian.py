@@ -20,7 +20,7 @@ and repeat outputs-off until every unit reports off, or the port is gone. An e-s
 requested meanwhile cuts the park short (outputs off at once). Then it releases the
 transports and marks the generation stopped, so the web process may start a new tick
 (which connects and stays disarmed). With the web process gone there is nothing to
-hand back to: it keeps repeating outputs-off until confirmed, then exits.
+hand back to: it repeats outputs-off until confirmed or for ``GIVE_UP_AFTER_S``, then exits.
 
 What it cannot do is in docs/hardware.md (the guardian dying too, a pulled USB cable,
 power loss): a hardware e-stop that cuts servo power is required near people.
@@ -55,6 +55,12 @@ POLL_S = 0.005
 HANDBACK_AFTER_S = 2.0
 """With the web process alive, stop repeating an unconfirmed outputs-off after this and
 hand the bus back (the new tick repeats it while it connects)."""
+GIVE_UP_AFTER_S = 10.0
+"""With no web process to hand back to, stop repeating an unconfirmed outputs-off after
+this and exit: a bus that has not confirmed in 10 s is silent (emulator gone, servo
+power cut, a port now owned by someone else); the servos' Bus Watchdog and the hardware
+e-stop are all that is left, and an orphan guardian writing to a reused port forever
+would be a hazard of its own."""
 KILL_WAIT_S = 2.0
 
 
@@ -68,8 +74,11 @@ class Guardian:
         specs: Sequence[DeviceSpec],
         tick_timeout_s: float,
         web_timeout_s: float,
+        *,
+        give_up_s: float = GIVE_UP_AFTER_S,
     ) -> None:
         self.board = board
+        self.give_up_s = give_up_s
         self.latch = latch
         self.specs = list(specs)
         self.tick_timeout_s = tick_timeout_s
@@ -194,8 +203,13 @@ class Guardian:
                         log.warning("%s: stopped, outputs off (read back)", spec.name)
                         return
                     web = int(self.board["web_pid"])
-                    if web and pid_alive(web) and time.perf_counter() - started > HANDBACK_AFTER_S:
-                        log.error("%s: outputs-off not confirmed; handing the bus back", spec.name)
+                    handback = bool(web and pid_alive(web))
+                    if time.perf_counter() - started > (HANDBACK_AFTER_S if handback else self.give_up_s):
+                        log.error(
+                            "%s: outputs-off not confirmed; %s",
+                            spec.name,
+                            "handing the bus back" if handback else "giving up (the servos' watchdog holds them)",
+                        )
                         return
                 next_tick += spec.period_s
                 time.sleep(max(0.0, next_tick - time.perf_counter()))
@@ -204,11 +218,18 @@ class Guardian:
 
 
 def launch(
-    board: str, latch: str, specs: Sequence[DeviceSpec], tick_timeout_s: float, web_timeout_s: float
+    board: str,
+    latch: str,
+    specs: Sequence[DeviceSpec],
+    tick_timeout_s: float,
+    web_timeout_s: float,
+    *,
+    give_up_s: float = GIVE_UP_AFTER_S,
 ) -> subprocess.Popen[bytes]:
     """Start the guardian in its own session (signals to the terminal's group skip it)."""
     args = [sys.executable, "-m", "riderlive.devices.guardian", "--board", board, "--latch", latch]
     args += ["--tick-timeout", repr(tick_timeout_s), "--web-timeout", repr(web_timeout_s)]
+    args += ["--give-up", repr(give_up_s)]
     for spec in specs:
         args += ["--device", spec.to_json()]
     return subprocess.Popen(args, start_new_session=True, stdin=subprocess.DEVNULL)
@@ -221,12 +242,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--device", action="append", default=[], help="a DeviceSpec as JSON")
     parser.add_argument("--tick-timeout", type=float, default=0.1)
     parser.add_argument("--web-timeout", type=float, default=1.0)
+    parser.add_argument("--give-up", type=float, default=GIVE_UP_AFTER_S, help="see GIVE_UP_AFTER_S")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     board, latch = SafetyBoard(args.board), StopLatch(args.latch)
     guardian = Guardian(
-        board, latch, [DeviceSpec.from_json(d) for d in args.device], args.tick_timeout, args.web_timeout
+        board,
+        latch,
+        [DeviceSpec.from_json(d) for d in args.device],
+        args.tick_timeout,
+        args.web_timeout,
+        give_up_s=args.give_up,
     )
 
     def on_term(signum: int, frame: object) -> None:

@@ -40,6 +40,7 @@ from riderlive.dynamixel.tables import (
     ModelSpec,
     model_spec,
 )
+from riderlive.names import NAME_PATTERN
 
 RIG_DIR = CONFIG_DIR / "rigs"
 """The shipped rig maps (the repository's ``config/rigs``)."""
@@ -165,7 +166,8 @@ class RigProblem(ValueError):
 class RigConfig(StrictModel):
     """A whole rig: the bus and the servos (in the order the status lists them)."""
 
-    name: str = "rig"
+    name: str = Field(default="rig", pattern=NAME_PATTERN)
+    """The rig's name: REST and the page arm it by this name (riderlive/names.py)."""
     description: str = ""
     bus: BusConfig = Field(default_factory=BusConfig)
     servos: dict[str, ServoConfig]

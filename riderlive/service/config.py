@@ -174,6 +174,9 @@ class GuardianSection(StrictModel):
     ``tick.hang_ticks``, and the guardian sees that death at once)."""
     web_timeout: float = pydantic.Field(default=2.0, ge=0.1, le=60.0)
     """Seconds without a web-process heartbeat before the guardian stops everything."""
+    give_up: float = pydantic.Field(default=10.0, ge=1.0, le=600.0)
+    """With the web process gone, seconds the guardian repeats an unconfirmed outputs-off
+    (a silent bus) before it exits, leaving the servos to their Bus Watchdog."""
 
 
 class PhysicsSection(StrictModel):

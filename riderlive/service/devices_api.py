@@ -31,6 +31,7 @@ from fastapi.responses import JSONResponse
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import REFUSAL_STATUS, DeviceState, Refusal
 from riderlive.devices.registry import DeviceSpec, plan
+from riderlive.names import NAME_PATTERN
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
@@ -38,7 +39,8 @@ from riderlive.service.config import ServiceConfig
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
 
-NAME = pydantic.Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+NAME = pydantic.Field(pattern=NAME_PATTERN)
+"""A device name: a name like every user-given name (riderlive/names.py)."""
 BY = pydantic.Field(default=None, max_length=32, pattern=r"^[A-Za-z0-9 _.-]+$")
 
 
@@ -51,7 +53,7 @@ class DeviceRequest(pydantic.BaseModel):
 
 class AnyDeviceRequest(pydantic.BaseModel):
     model_config = pydantic.ConfigDict(extra="forbid")
-    device: str | None = pydantic.Field(default=None, min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+    device: str | None = pydantic.Field(default=None, pattern=NAME_PATTERN)
     by: str | None = BY
 
 

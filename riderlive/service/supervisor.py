@@ -237,7 +237,12 @@ class TickSupervisor:
     def _launch_guardian(self) -> None:
         link, guardian = self.link, self.config.guardian
         self.guardian = launch(
-            link.board.name, link.latch.name, link.setup.devices, guardian.tick_timeout, guardian.web_timeout
+            link.board.name,
+            link.latch.name,
+            link.setup.devices,
+            guardian.tick_timeout,
+            guardian.web_timeout,
+            give_up_s=guardian.give_up,
         )
         self._guardian_launched_at = time.perf_counter()
 

@@ -129,3 +129,42 @@ def test_a_killed_driver_is_parked_by_its_guardian(bus_factory: Callable[..., Em
     head = rig.servos["head"]
     assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+
+
+def test_an_orphan_guardian_gives_up_on_a_silent_bus(
+    bus_factory: Callable[..., EmulatedBus], tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """The tick and the web process are gone and no servo answers: the guardian repeats
+    torque-off for ``give_up`` seconds, then exits (it never lingers as an orphan)."""
+    from riderlive.devices.board import SafetyBoard
+    from riderlive.devices.guardian import launch
+    from riderlive.devices.latch import StopLatch
+    from riderlive.devices.lifecycle import DeviceState
+    from riderlive.devices.registry import DeviceSpec
+    from riderlive.dynamixel.emulator_faults import parse_fault
+
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    latch, board = StopLatch(), SafetyBoard()
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    board["tick_pid"], board["tick_generation"] = float(dead.pid), 1.0
+    board.publish(0, DeviceState.DISARMED, [0.0] * len(rig.servos))
+    for servo_id in (1, 2, 3):
+        emu.apply(parse_fault(f"vanish:{servo_id}"))
+    spec = DeviceSpec("dynamixel", str(path), emu.port, rig.name, 1, rig.bus.tick_s)
+    started = time.perf_counter()
+    guardian = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0, give_up_s=1.0)
+    try:
+        code = guardian.wait(timeout=30)
+    finally:
+        if guardian.poll() is None:
+            guardian.kill()
+        board.close()
+        latch.close()
+    elapsed = time.perf_counter() - started
+    err = capfd.readouterr().err
+    assert code == 0
+    assert "outputs-off not confirmed; giving up" in err, err
+    assert 1.0 <= elapsed < 20.0
