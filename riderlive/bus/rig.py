@@ -198,6 +198,7 @@ class RigNode:
             "perf_origin": service.link.start,
             "channels": list(service.hub.names),
             "counts": dict(self.counts),
+            "output_lapped": int(service.link.outputs.lapped),  # records read too late: never published
             "transport": dict(self.transport.stats.events),
         }
 

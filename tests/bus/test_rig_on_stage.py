@@ -89,7 +89,10 @@ def test_every_tick_reaches_nats_identical_to_ws_rider(rig: LiveServer, probe: N
     wait_for(lambda: len(frames) > 50, say=lambda: len(frames))
     nats = {f["seq"]: f for f in (decode_binary_frame(m.data) for _, m in list(frames))}
     seqs = sorted(nats)
-    assert seqs == list(range(seqs[0], seqs[-1] + 1)), "a tick is missing on NATS"
+    missing = (seqs[-1] - seqs[0] + 1) - len(seqs)
+    if missing:  # only ticks the rig counted as dropped (a starved web process) may be missing
+        status = orjson.loads(probe.request(RIG.subject(Kind.CONTROL), orjson.dumps({"action": "state"})))
+        assert missing <= status["counts"].get("frames_dropped", 0) + status["output_lapped"], (missing, status)
     common = sorted(set(nats) & set(ws_frames))
     assert len(common) > 20
     for seq in common:  # the same record, the same codec: bit-identical values
