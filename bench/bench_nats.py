@@ -169,7 +169,10 @@ def arm_all(lives: list[LiveServer], faults: list[str]) -> None:
         if all(s == "running" for s in states):
             return
         for live, s in zip(lives, states, strict=True):
-            if s == "fault":
+            if s == "estop":  # e.g. a guardian that lost a starved web process: counted with the faults
+                faults.append("estop latched while not armed")
+                post(live, "/api/reset")
+            elif s == "fault":
                 device = live.get("/api/devices", headers=AUTH).json()["devices"][0]
                 faults.append(str((device.get("fault") or {}).get("message")))
                 post(live, "/api/reset")
