@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 
 NAME = pydantic.Field(pattern=NAME_PATTERN)
 """A device name: a name like every user-given name (riderlive/names.py)."""
-BY = pydantic.Field(default=None, max_length=32, pattern=r"^[A-Za-z0-9 _.-]+$")
+BY = pydantic.Field(default=None, pattern=r"^[A-Za-z0-9][A-Za-z0-9 _-]{0,31}$")
 
 
 class DeviceRequest(pydantic.BaseModel):
