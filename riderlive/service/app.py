@@ -196,6 +196,10 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         text = render(service.metrics, counters, service.hub.snapshot(), len(producers), saddles)
         text += render_device_metrics(service)
         text += render_platform_metrics(service)
+        if service.stage is not None:
+            from riderlive.bus.rig import render_metrics as render_stage_metrics
+
+            text += render_stage_metrics(service.stage)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 
     if STATIC_DIR.is_dir():

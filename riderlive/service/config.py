@@ -12,6 +12,7 @@ from typing import Literal
 
 import pydantic
 
+from riderlive.bus.config import NatsSection
 from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS
@@ -248,6 +249,8 @@ class ServiceConfig(StrictModel):
     saddle: SaddlePoint = SaddlePoint()
     """Where the saddle point sits on the horse's back (docs/saddle.md): the published
     saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""
+    nats: NatsSection = NatsSection()
+    """Join a stage over NATS (docs/deployment.md); unset ``url``: brokerless."""
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:

@@ -116,6 +116,9 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
     @app.post("/api/arm", summary="Arm a device by name (token whenever one is configured): it soft-starts")
     async def arm(request: Request, body: DeviceRequest) -> dict[str, Any]:
         by = who(operator(request, "arm", arming=True), body)
+        for check in service.arm_checks:  # e.g. no stage heartbeat (riderlive.bus.rig)
+            if (why := check()) is not None:
+                raise refuse("arm", Refusal.NOT_READY, why)
         return await answer("arm", lambda r: cmd.Arm(body.device, by, r))
 
     @app.post("/api/disarm", summary="Ease a device (all when none named) to park, then outputs off")

@@ -7,9 +7,12 @@ import logging
 import math
 import time
 import uuid
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 import numpy as np
 
@@ -32,6 +35,9 @@ from riderlive.service.publish import Hub
 from riderlive.service.supervisor import TickSupervisor
 from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
+
+if TYPE_CHECKING:
+    from riderlive.bus.rig import RigNode
 
 log = logging.getLogger(__name__)
 
@@ -126,6 +132,11 @@ class Service:
         self.link: TickLink
         self.supervisor: TickSupervisor
         self.device_metrics: DeviceMetrics
+        self.sinks: list[Callable[[list[np.ndarray]], None]] = []
+        """More consumers of the tick's records (the stage link); called on the event loop, never waiting."""
+        self.arm_checks: list[Callable[[], str | None]] = []
+        """Each says why arming must wait (e.g. no stage heartbeat), or None."""
+        self.stage: RigNode | None = None
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
@@ -133,10 +144,16 @@ class Service:
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
         self.supervisor = TickSupervisor(self.link, self.config, self.on_tick, self.hub.publish_status)
         await self.supervisor.start()
+        if self.config.nats.url is not None:
+            from riderlive.bus.rig import join_stage
+
+            self.stage = await join_stage(self)
 
     async def stop(self) -> None:
         """Goodbye to clients, park the devices and stop the tick, the guardian, the take."""
         await self.hub.goodbye("shutdown")
+        if self.stage is not None:
+            await self.stage.stop()
         await self.supervisor.stop()
         if self._replay_task is not None:
             self._replay_task.cancel()
@@ -170,6 +187,8 @@ class Service:
             self.hub.publish(records)
             if self.vmc is not None:
                 self.vmc.publish(records)
+            for sink in self.sinks:
+                sink(records)
         version = link.status_blob.version
         if version != self._status_version:
             self._status_version = version
