@@ -14,8 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-import numpy as np
-
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDLE_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
