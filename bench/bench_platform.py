@@ -9,8 +9,10 @@ ratio to a plain NumPy IK of one frame (rotation matrix, ``B + R p - b`` and nor
 with NumPy arrays: the usual first implementation) measured in the same run. Then the
 bake's throughput for N frames of saddle poses (compiled cueing and limits, chunked
 array IK), warm (best of 3) and cold (the first call in the process, numba's disk
-cache loaded). Pinned to one core. The serial link's encode joins the tick in phase 2.
-Targets (issue 13): tick <= 50 us median; bake >= 1 M frames/s at N = 1e6.
+cache loaded). Pinned to one core. Then the device's whole tick without I/O
+(``riderlive.platform.device``: cueing + IK + safety follower + the TARGET frame encoded
+for the link, COBS and CRC), against the same NumPy IK baseline.
+Targets (issue 13): tick <= 50 us median (with the encode); bake >= 1 M frames/s at N = 1e6.
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ import numpy as np
 from riderlive.horse import generate, load_script
 from riderlive.horse.script import gait_script
 from riderlive.platform import PlatformModel, bake, initial, shipped_platforms, step
+from riderlive.platform.device import commands, position_units, target_counts
 from riderlive.platform.geometry import Geometry
+from riderlive.platform.link import Target, encode
 from riderlive.platform.saddle_input import saddle_pose
 
 RATE = 120.0
@@ -84,6 +88,21 @@ def tick_us(model: PlatformModel, saddle: np.ndarray, repeats: int = 5) -> float
     return statistics.median(samples)
 
 
+def device_tick_us(model: PlatformModel, saddle: np.ndarray, repeats: int = 5) -> float:
+    """Median over ``repeats`` passes of the mean time per frame (us) of the plug's tick without I/O."""
+    frames = saddle.tolist()
+    units = position_units(model)
+    samples = []
+    for _ in range(repeats):
+        state = initial(model)
+        start = time.perf_counter()
+        for seq, frame in enumerate(frames):
+            state, _, out = commands(model, state, frame, 1.0 / RATE)
+            encode(Target(target_counts(out, units)), seq & 0xFFFF)
+        samples.append((time.perf_counter() - start) / len(frames) * 1e6)
+    return statistics.median(samples)
+
+
 def per_frame_us(fn: object, frames: np.ndarray, repeats: int = 5) -> float:
     samples = []
     for _ in range(repeats):
@@ -118,6 +137,11 @@ def main() -> None:
         baseline = per_frame_us(numpy_ik(model.geometry), result.pose[:2000])
         print(f"{name}: tick {ours:.1f} us/frame median on a trot (target <= 50)")
         print(f"  baseline plain NumPy IK of one frame: {baseline:.1f} us; ratio tick/baseline = {ours / baseline:.2f}")
+        whole = device_tick_us(model, trot)
+        print(
+            f"  device tick (cueing + IK + safety + TARGET encode): {whole:.1f} us/frame median (target <= 50); "
+            f"ratio to the NumPy IK baseline = {whole / baseline:.2f}"
+        )
         if len(scaled):
             state = initial(model)
             samples = []

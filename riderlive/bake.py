@@ -16,14 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES
+from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.configfile import ConfigError
 from riderlive.framefile import FORMATS, FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.frameunits import resolve_scale
-from riderlive.rules.animator import AnimatorLayer, damp_series
+from riderlive.rules.animator import AnimatorLayer, damp_series, spring_series
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.rules.params import load_preset
+from riderlive.rules.parts import RiderParts
 
 DEFAULT_RATE = 120.0
 """Frame rate assumed for a take without a ``t`` column (Hz)."""
@@ -51,6 +52,19 @@ def bake_table(
     tau = model.params.smoothing.time_constant
     if tau > 0.0:
         rider = damp_series(np.ascontiguousarray(rider), times, tau)
+    follow = model.params.follow_through
+    if follow.frequency > 0.0:
+        rider = spring_series(np.ascontiguousarray(rider), times, follow.frequency, follow.damping_ratio)
+    if channels and any(name in RIDER_PART_NAMES for name in channels):  # the rider parts, asked for by name
+        horse = np.zeros((len(table), len(HORSE_INDEX)))
+        for name, column in columns.items():
+            horse[:, HORSE_INDEX[name]] = column
+        from riderlive.horse import DEFAULT_SCALE
+
+        parts = RiderParts(model.params, model.scale / DEFAULT_SCALE).evaluate_batch(horse, rider)
+        rider = np.column_stack([rider, parts])
+        index = {**RIDER_INDEX, **{n: len(RIDER_NAMES) + i for i, n in enumerate(RIDER_PART_NAMES)}}
+        return FrameTable(tuple(channels), np.asfortranarray(rider[:, [index[n] for n in channels]]), times)
     names = tuple(channels) if channels else RIDER_NAMES
     picked = rider if names == RIDER_NAMES else np.asfortranarray(rider[:, [RIDER_INDEX[n] for n in names]])
     return FrameTable(names, picked, times)
@@ -101,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
         for name in channels or ():
-            if name not in RIDER_INDEX:
+            if name not in RIDER_INDEX and name not in RIDER_PART_NAMES:
                 raise FrameFileError("--channels", f"unknown rider channel {name!r}")
         animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
         params = load_preset(args.preset)

@@ -85,9 +85,19 @@ HORSE: tuple[Channel, ...] = _table(
         ("root.ty", "world position up"),
         ("root.tz", "world position side"),
         ("root.ry", "world heading"),
+        ("horseNeck.rz", "neck up (+) / down at the withers, relative to the trunk (optional)"),
+        ("horseNeck.ry", "neck to the horse's left (+) / right, relative to the trunk (optional)"),
+        ("horseHead.rz", "head nose up (+) / down at the poll, relative to the neck (optional)"),
     )
 )
-"""Every horse input channel, in the canonical column order of files and arrays."""
+"""Every horse input channel, in the canonical column order of files and arrays.
+
+The last three (neck and head, ``docs/horse.md``) are optional in every input: a
+stream or file without them leaves them 0, the neck and head at rest on the trunk,
+which is how every horse moved before they existed."""
+
+HORSE_NECK_HEAD: tuple[str, ...] = ("horseNeck.rz", "horseNeck.ry", "horseHead.rz")
+"""The optional horse channels (neck and head): absent means 0, at rest on the trunk."""
 
 SADDLE: tuple[Channel, ...] = _table(
     (
@@ -146,13 +156,34 @@ RIDER: tuple[Channel, ...] = _table(
 )
 """Every rider output channel of the rules, in canonical order."""
 
+RIDER_PARTS: tuple[Channel, ...] = _table(
+    (
+        *(
+            (f"{side}_rein.{attr}", f"{label} hand on the rein (5.1): {what} added to the wrist target, seat frame")
+            for side, label in (("lf", "left"), ("rt", "right"))
+            for attr, what in (("tx", "forward"), ("ty", "up"), ("tz", "to the right"))
+        ),
+        ("lf_arm.tz", "left elbow out (+) from / in (-) to the body (5.3)"),
+        ("rt_arm.tz", "right elbow out (+) from / in (-) to the body (5.3)"),
+        *(
+            (f"{side}_stirrup.{attr}", f"{label} foot held by its stirrup leather: {what} added to the foot target")
+            for side, label in (("lf", "left"), ("rt", "right"))
+            for attr, what in (("tx", "forward"), ("ty", "up"), ("tz", "to the right"))
+        ),
+        ("reins.slip", "how far the reins outran the hands at full reach, fraction of the rein (0: in hand)"),
+    )
+)
+"""The rider parts Appendix B leaves out (``riderlive.rules.parts``): published after the
+rider channels (as extra channels of the output), posing the skeleton's arms and legs."""
+
 HORSE_NAMES: tuple[str, ...] = tuple(c.name for c in HORSE)
 RIDER_NAMES: tuple[str, ...] = tuple(c.name for c in RIDER)
 HORSE_INDEX: dict[str, int] = {n: i for i, n in enumerate(HORSE_NAMES)}
 RIDER_INDEX: dict[str, int] = {n: i for i, n in enumerate(RIDER_NAMES)}
 SADDLE_NAMES: tuple[str, ...] = tuple(c.name for c in SADDLE)
 SADDLE_INDEX: dict[str, int] = {n: i for i, n in enumerate(SADDLE_NAMES)}
-BY_NAME: dict[str, Channel] = {c.name: c for c in HORSE + RIDER + SADDLE}
+RIDER_PART_NAMES: tuple[str, ...] = tuple(c.name for c in RIDER_PARTS)
+BY_NAME: dict[str, Channel] = {c.name: c for c in HORSE + RIDER + SADDLE + RIDER_PARTS}
 
 AXIS_CONVENTION: dict[str, str] = {
     "rz": "bend front/back",
@@ -200,5 +231,5 @@ def lookup(name: str) -> Channel:
 
 
 def is_known(name: str) -> bool:
-    """Whether ``name`` is a horse, rider, saddle or simulated-bone channel."""
+    """Whether ``name`` is a horse, rider, rider-part, saddle or simulated-bone channel."""
     return name in BY_NAME or _bone_channel(name) is not None

@@ -10,7 +10,7 @@ plain numbers for unitless attributes, whatever the service's own length unit is
 2. the default of the channel's kind (:data:`KIND_DEFAULTS`), decided by its
    attribute (``tx ty tz``: length, ``rx ry rz``: rotation, anything else: unitless).
 
-So a channel added later (``saddle.rz``, ``neck.rx``) has a range on day one. The
+So a channel added later (``neck.rx``) has a range on day one. The
 defaults are generous (a jumping horse's hooves rise about 1.5 m, a rearing horse
 pitches about 70 degrees); they exist to stop values no horse or rider makes (1e300,
 a length unit mistake of 10^6) before they reach the rules, the filters or a servo.
@@ -43,6 +43,8 @@ CHANNEL_DEFAULTS: dict[str, Range] = {
     "rearPivot.t*": (-2.0, 2.0),
     "rearPivot.r*": (-90.0, 90.0),
     "backMid.rz": (-90.0, 90.0),
+    "saddle.t*": (-1.5, 1.5),
+    "saddle.r*": (-90.0, 90.0),
     "root.t*": (-1e5, 1e5),
     "root.ry": (-1e6, 1e6),
     "tail_*.t*": (-1e5, 1e5),

@@ -27,8 +27,10 @@ def test_lookup_order_name_pattern_kind() -> None:
     assert DEFAULT_RANGES.of("lower_back.rz") == KIND_DEFAULTS[Kind.ROTATION]
     assert DEFAULT_RANGES.of("hair.up") == KIND_DEFAULTS[Kind.ATTRIBUTE]
     # A channel another module adds later gets its kind's range without being listed.
-    assert kind_of_name("saddle.rz") is Kind.ROTATION and DEFAULT_RANGES.of("saddle.rz") == (-360.0, 360.0)
-    assert DEFAULT_RANGES.of("saddle.tx") == KIND_DEFAULTS[Kind.TRANSLATION]
+    assert kind_of_name("neck.rx") is Kind.ROTATION and DEFAULT_RANGES.of("neck.rx") == (-360.0, 360.0)
+    assert DEFAULT_RANGES.of("neck.tx") == KIND_DEFAULTS[Kind.TRANSLATION]
+    # The saddle input's: its point moves under 1.5 m and pitches under 90 deg from standing.
+    assert DEFAULT_RANGES.of("saddle.ty") == (-1.5, 1.5) and DEFAULT_RANGES.of("saddle.rx") == (-90.0, 90.0)
     custom = Ranges(overrides={"lfHoof.ty": (0.0, 1.0), "saddle.*": (-1.0, 1.0)})
     assert custom.of("lfHoof.ty") == (0.0, 1.0) and custom.of("rfHoof.ty") == (-5.0, 5.0)
     assert custom.of("saddle.rz") == (-1.0, 1.0)

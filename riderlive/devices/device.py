@@ -291,6 +291,8 @@ class Device:
             elif state.moving:
                 wrote = self._move(frame, now)
             elif state is not S.DISCONNECTED:
+                if self.plug.is_open:
+                    self.plug.idle(now)
                 self._keep_off(now)
         except StopRequested:
             self._stop(now)

@@ -44,6 +44,8 @@ class StopSource(enum.IntEnum):
     WEBSOCKET = 3
     SIGNAL = 4
     GUARDIAN = 5
+    NATS = 6
+    """The stage e-stop or a control request over NATS (riderlive.bus)."""
 
     @property
     def label(self) -> str:

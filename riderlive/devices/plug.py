@@ -17,6 +17,9 @@ one short piece of bus work, called from the thread that ticks; none sleeps.
   (a broadcast); ``outputs_confirmed_off()``: read back, True when every unit is off.
 - ``on_fault(error)``: first aid for one unit (torque off the servo that reported an
   overload), before the others park.
+- ``idle(now)``: every tick while the transport is open and nothing moves (disarmed,
+  parked, e-stop, fault): keep a link alive that needs it, notice what the device did by
+  itself (raise the lifecycle's errors, once per event). Most plugs do nothing.
 - ``takeover(pose)``: the guardian opens a transport another process was driving,
   outputs assumed on at ``pose``; the next ``drive(PARK)`` eases from there.
 - ``pose``: the last goal sent (device units), published for the guardian;
@@ -97,6 +100,8 @@ class Plug(Protocol):
     def outputs_confirmed_off(self) -> bool: ...
 
     def on_fault(self, error: BaseException) -> None: ...
+
+    def idle(self, now: float) -> None: ...
 
     def takeover(self, pose: Sequence[float]) -> None: ...
 

@@ -17,12 +17,12 @@ from __future__ import annotations
 import importlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from riderlive.devices.plug import Plug
 
-KINDS: dict[str, str] = {"dynamixel": "riderlive.dynamixel.driver"}
+KINDS: dict[str, str] = {"dynamixel": "riderlive.dynamixel.driver", "platform": "riderlive.platform.device"}
 """Device kind -> the module with ``describe`` and ``make_plug``."""
 RatePolicy = Literal["divide", "refuse"]
 
@@ -34,6 +34,8 @@ class DeviceInfo:
     """The highest tick rate the device's configuration was validated for."""
     budget: str
     """A few lines for the start-up log: the wire budget per tick."""
+    input: Literal["rider", "horse"] = "rider"
+    """Which frame of the tick the device is driven from (the rig: the rider; a platform: the horse)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,10 @@ class DeviceSpec:
     """Driven every ``divider``-th tick of the service."""
     period_s: float
     """Seconds between the device's ticks (``divider`` / tick rate)."""
+    input: str = "rider"
+    """``rider`` or ``horse``: the frame the tick passes to the device."""
+    options: dict[str, Any] = field(default_factory=dict)
+    """Kind-specific settings for ``make_plug`` (JSON values), from the service configuration."""
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -69,7 +75,13 @@ def _module(kind: str) -> Any:
 
 
 def plan(
-    kind: str, file: str, port: str | None, tick_hz: float, policy: RatePolicy = "divide"
+    kind: str,
+    file: str,
+    port: str | None,
+    tick_hz: float,
+    policy: RatePolicy = "divide",
+    *,
+    options: dict[str, Any] | None = None,
 ) -> tuple[DeviceSpec, str]:
     """Validate a device and fit it to ``tick_hz``; returns the spec and what to print."""
     info: DeviceInfo = _module(kind).describe(file, port)
@@ -78,9 +90,12 @@ def plan(
     if divider > 1:
         message = f"{info.name} is validated for {info.validated_hz:g} ticks/s but the service ticks at {tick_hz:g}/s"
         if policy == "refuse":
-            raise RateMismatch(f"{message}: set tick.rate <= {info.validated_hz:g} (or rig.rate_policy = 'divide')")
+            section = "rig" if kind == "dynamixel" else kind
+            raise RateMismatch(
+                f"{message}: set tick.rate <= {info.validated_hz:g} (or {section}.rate_policy = 'divide')"
+            )
         lines.append(f"{message}: driving it every {divider} ticks ({tick_hz / divider:g} ticks/s)")
-    spec = DeviceSpec(kind, file, port, info.name, divider, divider / tick_hz)
+    spec = DeviceSpec(kind, file, port, info.name, divider, divider / tick_hz, info.input, dict(options or {}))
     return spec, "\n".join(lines)
 
 

@@ -179,6 +179,9 @@ class RigPlug:
             self.disabled.add(error.unit)
             self.bus.write(error.unit, self._spec.spec(Item.TORQUE_ENABLE), 0)
 
+    def idle(self, now: float) -> None:
+        """Nothing between the lifecycle's read-backs: the bus needs no keep-alive."""
+
     def takeover(self, pose: Sequence[float]) -> None:
         """Open a bus another process drove (it is dead), clear and re-arm the watchdog
         (a tripped one refuses goals), and take ``pose`` as the last goals."""

@@ -84,6 +84,12 @@ class GaitSpec:
     bend: Harmonic
     sway: Harmonic
     surge: Harmonic
+    neck: Harmonic = NO_MOTION
+    """``horseNeck.rz``: the neck's nod at the withers relative to the trunk (deg, + up)."""
+    neck_side: Harmonic = NO_MOTION
+    """``horseNeck.ry``: the neck's swing relative to the trunk (deg, + left)."""
+    head: Harmonic = NO_MOTION
+    """``horseHead.rz``: the head's nod at the poll relative to the neck (deg, + nose up)."""
 
     def frequency_at(self, speed: float) -> float:
         """Stride frequency (Hz) at ``speed`` (m/s): linear across the ranges."""
@@ -122,6 +128,10 @@ GAIT_TABLE: dict[Gait, GaitSpec] = {
         bend=Harmonic(2.5, 2, 0.1),
         sway=Harmonic(0.02, 1, 0.3),
         surge=Harmonic(0.01, 2, 0.0),
+        # the head nods down as each forehoof is placed (LF 0.25, RF 0.75): twice per stride
+        neck=Harmonic(-3.0, 2, 0.3),
+        neck_side=Harmonic(1.5, 1, 0.3),
+        head=Harmonic(-1.5, 2, 0.3),
     ),
     Gait.TROT: GaitSpec(
         gait=Gait.TROT,
@@ -139,6 +149,7 @@ GAIT_TABLE: dict[Gait, GaitSpec] = {
         bend=Harmonic(2.0, 2, 0.1),
         sway=Harmonic(0.009, 1, 0.2),
         surge=Harmonic(0.015, 2, 0.0),
+        neck=Harmonic(-0.5, 2, 0.1),  # steady: a trace against the trunk's pitch
     ),
     Gait.CANTER: GaitSpec(
         gait=Gait.CANTER,
@@ -156,6 +167,9 @@ GAIT_TABLE: dict[Gait, GaitSpec] = {
         bend=Harmonic(4.0, 1, 0.2),
         sway=Harmonic(0.012, 1, 0.3),
         surge=Harmonic(0.03, 1, 0.6),
+        # one nod per stride, down as the forehand rises (against the trunk's pitch)
+        neck=Harmonic(-6.0, 1, 0.1),
+        head=Harmonic(-3.0, 1, 0.1),
     ),
     Gait.GALLOP: GaitSpec(
         gait=Gait.GALLOP,
@@ -173,6 +187,8 @@ GAIT_TABLE: dict[Gait, GaitSpec] = {
         bend=Harmonic(5.0, 1, 0.1),
         sway=Harmonic(0.01, 1, 0.3),
         surge=Harmonic(0.04, 1, 0.6),
+        neck=Harmonic(-5.0, 1, 0.15),
+        head=Harmonic(-2.0, 1, 0.15),
     ),
 }
 """The four gaits; see ``docs/horse.md`` for the sources of every range."""

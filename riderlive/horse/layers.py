@@ -2,7 +2,8 @@
 
 A layer's :meth:`pose` returns the 19 body channels of ``channels.HORSE`` (the four
 hooves' ``tx ty tz``, ``rearPivot.*`` and ``backMid.rz``; ``root.*`` is the
-generator's) for a time ``t`` (s) or an array of times. Frames (see ``docs/horse.md``):
+generator's), then the neck and head (``horseNeck.rz``, ``horseNeck.ry``,
+``horseHead.rz``), for a time ``t`` (s) or an array of times. Frames (``docs/horse.md``):
 hoof ``tx`` is forward (+) / back of the hoof's square-standing spot, ``ty`` its height
 above the ground, ``tz`` its side offset (+ left here; ``model.frame`` turns it into
 the rig's + right); ``rearPivot.t*`` is the hips'
@@ -24,7 +25,9 @@ from riderlive.horse.curves import TAU, Ops, Ramp, smoothstep, stride_noise
 from riderlive.horse.gaits import GaitSpec, Leg
 
 BODY_CHANNELS = 19
-"""Channels a layer produces: everything of ``channels.HORSE`` but ``root.*``."""
+"""The trunk and hooves: ``channels.HORSE`` up to ``root.*``."""
+LAYER_CHANNELS = BODY_CHANNELS + 3
+"""Channels a layer produces: the body, then the neck and head (``channels.HORSE_NECK_HEAD``)."""
 
 PADDLE = 0.02
 """Outward arc of a hoof at mid-transfer (m)."""
@@ -61,8 +64,11 @@ class GaitLayer:
             (spec.offset[leg], spec.duty[leg], spec.lift[0 if leg.is_front else 1], leg.side * PADDLE, 7919 * (leg + 1))
             for leg in Leg
         )
-        order = (spec.surge, spec.heave, spec.sway, spec.roll, spec.yaw, spec.pitch, spec.bend)
-        varied = (False, True, False, False, False, True, False)
+        order = (
+            *(spec.surge, spec.heave, spec.sway, spec.roll, spec.yaw, spec.pitch, spec.bend),
+            *(spec.neck, spec.neck_side, spec.head),
+        )
+        varied = (False, True, False, False, False, True, False, False, False, False)
         trunk = tuple((h.amplitude, TAU * h.k, h.at, v) for h, v in zip(order, varied, strict=True))
         object.__setattr__(self, "legs", legs)
         object.__setattr__(self, "trunk", trunk)
@@ -128,7 +134,7 @@ class HaltLayer:
     """Standing square: every body channel at rest."""
 
     def pose(self, t: Any, ops: Ops) -> list[Any]:
-        return [0.0] * BODY_CHANNELS
+        return [0.0] * LAYER_CHANNELS
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,6 +212,9 @@ class MoveLayer:
 
     spline: Spline
     t0: float
+    head: Spline | None = None
+    """The neck and head; None: at rest."""
 
     def pose(self, t: Any, ops: Ops) -> list[Any]:
-        return self.spline.at(t - self.t0, ops)
+        body = self.spline.at(t - self.t0, ops)
+        return body + (self.head.at(t - self.t0, ops) if self.head is not None else [0.0, 0.0, 0.0])

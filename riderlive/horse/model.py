@@ -161,7 +161,7 @@ def apply(model: Model, state: State, at: float, command: Command) -> State:
     if isinstance(command, Perform):
         spec = MOVE_TABLE[command.move]
         state = _retarget(state, at, spec.speed, spec.omega)
-        state = _blend_to(state, at, MoveLayer(spec.spline, at), model.move_blend)
+        state = _blend_to(state, at, MoveLayer(spec.spline, at, spec.head_spline), model.move_blend)
         state = replace(state, move=command.move, move_started=at)
         return _schedule(state, at + spec.duration - model.resume_blend, _Resume(at))
     return _set_gait(model, replace(state, move=None, move_started=None), at, command)
@@ -243,8 +243,9 @@ _TO_RIG_SIDE = tuple(
 
 
 def to_rig_sides(pose: list[Any]) -> list[Any]:
-    """A layer's body channels (sideways + left) in the rig's convention (+Z right)."""
-    return [v if sign > 0.0 else -v for v, sign in zip(pose, _TO_RIG_SIDE, strict=True)]
+    """A layer's body channels (sideways + left) in the rig's convention (+Z right); the neck and head pass."""
+    body = [v if sign > 0.0 else -v for v, sign in zip(pose[:BODY_CHANNELS], _TO_RIG_SIDE, strict=True)]
+    return body + pose[BODY_CHANNELS:]
 
 
 def frame(state: State, t: Any, ops: Ops) -> list[Any]:
@@ -254,7 +255,8 @@ def frame(state: State, t: Any, ops: Ops) -> list[Any]:
     right, so ``tz`` is + right and ``rearPivot.rx`` is + when the horse rolls right.
     """
     _, _, x = state.ramp.at(t, ops)
-    return [*to_rig_sides(state.layer.pose(t, ops)), state.x0 + x, 0.0, 0.0, 0.0]
+    pose = to_rig_sides(state.layer.pose(t, ops))
+    return [*pose[:BODY_CHANNELS], state.x0 + x, 0.0, 0.0, 0.0, *pose[BODY_CHANNELS:]]
 
 
 def step(model: Model, state: State, t: float) -> tuple[State, list[float]]:

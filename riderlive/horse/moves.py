@@ -62,6 +62,8 @@ class Transfer:
 Plan = tuple[Support | Transfer, ...]
 # (tau, surge, heave, sway, roll, yaw, pitch, bend): rearPivot.tx ty tz rx ry rz, backMid.rz
 Key = tuple[float, float, float, float, float, float, float, float]
+# (tau, neck, neck side, head): horseNeck.rz, horseNeck.ry, horseHead.rz (deg)
+HeadKey = tuple[float, float, float, float]
 
 
 @dataclass(frozen=True)
@@ -75,10 +77,15 @@ class MoveSpec:
     speed: float  # target ground speed while moving (m/s)
     omega: float  # how fast the ground speed settles (1/s)
     resumes_gait: bool  # True: back to the gait it started from; False: halt
+    head: tuple[HeadKey, ...] = ((0.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
     spline: Spline = field(init=False)
+    """The body channels (hooves and trunk)."""
+    head_spline: Spline = field(init=False)
+    """The neck and head (``channels.HORSE_NECK_HEAD``), held after their last key."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "spline", build_spline(self))
+        object.__setattr__(self, "head_spline", _keys_spline([], self.head))
 
     @property
     def duration(self) -> float:
@@ -172,7 +179,12 @@ def build_spline(spec: MoveSpec) -> Spline:
     channels: list[Channel] = []
     for leg in Leg:
         channels.extend(_leg_channels(spec.legs[leg], leg.side))
-    keys = np.array(spec.body, dtype=np.float64)
+    return _keys_spline(channels, spec.body)
+
+
+def _keys_spline(channels: list[Channel], table: tuple[tuple[float, ...], ...]) -> Spline:
+    """``channels`` and the key table's columns (``tau`` first) as one spline on the union of their knots."""
+    keys = np.array(table, dtype=np.float64)
     for c in range(1, keys.shape[1]):
         channels.append((keys[:, 0].tolist(), keys[:, c].tolist(), _pchip_slopes(keys[:, 0], keys[:, c]).tolist()))
     knots = np.unique(np.concatenate([np.asarray(ch[0]) for ch in channels]))
@@ -248,6 +260,9 @@ JUMP = MoveSpec(
     speed=6.0,
     omega=4.0,
     resumes_gait=True,
+    # 5.1: the forehand rises at take-off, the neck reaches forward over the obstacle,
+    # then rises again to prepare the landing
+    head=((0.0, 0, 0, 0), (0.55, 4, 0, 2), (1.1, -14, 0, 6), (1.55, 8, 0, 0), (2.0, -4, 0, 0), (2.6, 0, 0, 0)),
 )
 
 REAR = MoveSpec(
@@ -271,6 +286,8 @@ REAR = MoveSpec(
     speed=0.0,
     omega=3.0,
     resumes_gait=False,
+    # 5.4: the head leans back to put more weight over the hind legs
+    head=((0.0, 0, 0, 0), (0.6, 3, 0, 0), (1.3, 12, 0, 10), (2.1, 12, 0, 10), (2.8, 0, 0, 0), (3.4, 0, 0, 0)),
 )
 
 STOP = MoveSpec(
@@ -313,6 +330,8 @@ STOP = MoveSpec(
     speed=0.0,
     omega=2.6,
     resumes_gait=False,
+    # 5.5: the forehand is pushed up and back: the head comes up
+    head=((0.0, 0, 0, 0), (0.9, 10, 0, 6), (1.6, 8, 0, 4), (2.8, 0, 0, 0)),
 )
 
 
@@ -356,6 +375,18 @@ BUCK = MoveSpec(
     speed=1.0,
     omega=3.0,
     resumes_gait=False,
+    # 5.6: "he puts his head down between his legs", with the side action of each buck
+    head=(
+        (0.0, 0, 0, 0),
+        (0.45, -30, 6, -10),
+        (0.7, -25, 4, -8),
+        (1.0, -8, 0, -2),
+        (1.3, 0, 0, 0),
+        (1.75, -30, -6, -10),
+        (2.0, -25, -4, -8),
+        (2.3, -8, 0, -2),
+        (2.6, 0, 0, 0),
+    ),
 )
 
 MOVE_TABLE: dict[Move, MoveSpec] = {m.move: m for m in (JUMP, REAR, STOP, BUCK)}

@@ -67,6 +67,8 @@ class RiderChannels(NamedTuple):
     lower_back_rz: int
     head_ry: int
     head_rz: int
+    hair_up: int
+    hair_side: int
 
 
 def _resolve(fields: tuple[str, ...], index: dict[str, int]) -> tuple[int, ...]:
@@ -81,7 +83,8 @@ UPRIGHT = np.zeros(len(RIDER_INDEX))
 
 # Frames the posing kernel returns, and rows of its table of body points (metres, in the frame named).
 HINDQUARTERS, DOCK, HEAD, BRAID = range(4)
-PIVOT, DOCK_AT, CENTRE, HIP_L, HIP_R, HOOF_L, HOOF_R, SEAT, HEAD_AT, BACK_LO, BACK_HI, BRAID_AT = range(12)
+PIVOT, DOCK_AT, CENTRE, HIP_L, HIP_R, HOOF_L, HOOF_R, SEAT, HEAD_AT, BACK_LO, BACK_HI, BRAID_AT, HAIR = range(13)
+"""``HAIR`` is no point: its row holds the braid's gains per unit of ``hair.up`` and ``hair.side`` (deg)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +142,7 @@ class Body:
             BACK_LO: rider.back_bottom,
             BACK_HI: rider.back_top,
             BRAID_AT: rider.braid_offset,
+            HAIR: (rider.hair_up_gain, rider.hair_side_gain, 0.0),
         }
         self.points = np.ascontiguousarray([rows[i] for i in range(len(rows))], dtype=np.float64)
         self.dock_rest = aim(horse.dock_direction)
@@ -235,5 +239,10 @@ def pose(  # noqa: PLR0917
     place(origins[HEAD], seat, spine, points[HEAD_AT, 0], points[HEAD_AT, 1], points[HEAD_AT, 2])
     rotations[HEAD] = head_rot
     place(origins[BRAID], origins[HEAD], head_rot, points[BRAID_AT, 0], points[BRAID_AT, 1], points[BRAID_AT, 2])
-    rotations[BRAID] = matmul(head_rot, braid_rest)
+    # Section 8.9's attributes tilt the braid's tie like the thesis' set-driven keys: up and back
+    # (about the head's z) with hair.up, to the rider's right (about its x) with hair.side.
+    tilt = matmul(
+        rotation(2, -points[HAIR, 0] * rider[RIDER.hair_up]), rotation(0, -points[HAIR, 1] * rider[RIDER.hair_side])
+    )
+    rotations[BRAID] = matmul(matmul(head_rot, tilt), braid_rest)
     return origins, rotations, cap_a, cap_b

@@ -97,6 +97,10 @@ class RiderBody(StrictModel):
     braid_offset: Vec3 = (-0.1, 0.02, 0.0)
     """Root of the braid in the head frame (the back of the head)."""
     braid_direction: Vec3 = (-0.3, -1.0, 0.0)
+    hair_up_gain: float = 2.0
+    """The braid's tie tilts up and back by this many degrees per unit of ``hair.up`` (section 8.9)."""
+    hair_side_gain: float = 20.0
+    """... and to the rider's right by this many degrees per unit of ``hair.side``."""
     braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.5, iterations=1)
 
 

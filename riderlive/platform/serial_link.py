@@ -61,6 +61,10 @@ class PortLost(PlatformLinkError):
     """The serial port could not be opened, or vanished while in use."""
 
 
+class PortBusy(PlatformLinkError):
+    """Another process holds the port (the port is opened exclusively: one writer at a time)."""
+
+
 class NoAnswer(PlatformLinkError):
     """The device did not answer the handshake or a command in time."""
 
@@ -137,9 +141,11 @@ class SerialPlatformLink:
 
         Also how to reconnect: a HELLO parks a device that was moving (docs/platform-link.md)."""
         try:
-            self._serial = serial.Serial(self.port, self.baud, timeout=0, write_timeout=0.5)
+            self._serial = serial.Serial(self.port, self.baud, timeout=0, write_timeout=0.5, exclusive=True)
             self._serial.reset_input_buffer()
         except (serial.SerialException, OSError) as exc:
+            if "exclusively lock" in str(exc):
+                raise PortBusy(f"{self.port} is held by another process") from exc
             self._lost()
             raise PortLost(f"{self.port}: {exc}") from exc
         self.health = Health.OK

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from riderlive.realtime.core import Mode
 from riderlive.rules.animator import AnimatorLayer
@@ -90,6 +91,17 @@ class Reload:
 
 
 @dataclass(frozen=True)
+class Tune:
+    """Live cueing parameters of the platform ``device`` (intensity, cut-offs; validated by the
+    tick against the whole set); the running cue blends toward them. Replied to."""
+
+    device: str
+    changes: dict[str, Any]
+    by: str = "operator"
+    request: int = 0
+
+
+@dataclass(frozen=True)
 class Stop:
     """Park the devices, then end the tick process."""
 
@@ -107,5 +119,5 @@ class Reply:
     message: str = ""
 
 
-Command = SetMode | SetGait | Perform | SetModel | ProducerGone | EStop | Arm | Disarm | Reset | Reload | Stop
-Request = Arm | Disarm | Reset | Reload
+Command = SetMode | SetGait | Perform | SetModel | ProducerGone | EStop | Arm | Disarm | Reset | Reload | Tune | Stop
+Request = Arm | Disarm | Reset | Reload | Tune

@@ -4,7 +4,9 @@ The tick asks, at engine time ``now`` (seconds), which *driver* makes the horse:
 
 - ``PROCEDURAL``: the procedural horse, sampled at ``now``;
 - ``INPUT``: the active producer's stream (a live engine or a replayed take),
-  resampled by :class:`~riderlive.realtime.resample.Resampler`;
+  resampled by :class:`~riderlive.realtime.resample.Resampler`; or a saddle stream
+  (``/ws/saddle``), stepped sample by sample through the saddle estimator and read as
+  the horse it rebuilds (:class:`~riderlive.realtime.saddle_input.SaddleInput`);
 - ``NEUTRAL``: the neutral pose, the rules' answer to a horse standing still (every
   channel zero), with the animator layer applied.
 
@@ -21,6 +23,10 @@ blends too, over ``Timing.param_blend``: at the next tick the difference between
 old and the new model on the current horse is added to the new model's output and
 fades out with a smoothstep, so the rider keeps moving while it changes.
 
+Whatever drives, each tick's result carries the saddle pose of its horse
+(:func:`~riderlive.realtime.saddle_input.saddle_pose`, computed once per tick for
+``/ws/rider``, takes and devices) and, while a saddle input drives, its estimate.
+
 Outputs are finite and bounded: every rider value is clamped to its plausible range
 (:mod:`riderlive.ranges`, counted in ``clamped``) before and after the stateful
 stages; a stateful stage (smoothing, the blends) that goes non-finite anyway is reset
@@ -34,15 +40,19 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from riderlive.channels import HORSE, HORSE_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
+from riderlive.realtime.layout import InputKind
 from riderlive.realtime.resample import Resampler
-from riderlive.rules.animator import DamperState, damper_start, damper_step
+from riderlive.realtime.saddle_input import NO_ESTIMATE, make_saddle_input, saddle_pose
+from riderlive.rules.animator import DamperState, SpringState, damper_start, damper_step, spring_step
 from riderlive.rules.engine import RiderModel
+from riderlive.rules.parts import PART_OUTPUTS, RiderParts
+from riderlive.saddle.pose import SaddlePoint
 
 
 class Driver(enum.IntEnum):
@@ -83,6 +93,12 @@ class TickResult:
     producer: int
     horse: list[float]
     rider: list[float]
+    saddle: list[float] = field(default_factory=lambda: [0.0] * 6)
+    """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
+    estimate: tuple[float, ...] = NO_ESTIMATE
+    """The saddle estimate (``layout.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
+    parts: list[float] = field(default_factory=list)
+    """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
 
 
 _TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
@@ -111,11 +127,17 @@ class TickCore:
         horse: ProceduralHorse,
         mode: Mode = Mode.INPUT,
         bounds: Bounds | None = None,
+        *,
+        saddle_point: SaddlePoint | None = None,
     ) -> None:
         self.timing = timing
         self.horse = horse
         self.mode = mode
         self.resampler = Resampler(delay=timing.delay, hold=timing.hold)
+        self.saddle_point = saddle_point or SaddlePoint()
+        self.saddle = make_saddle_input(model.scale, self.saddle_point)
+        """The saddle producer's stream, while the producer is one (``input_kind``)."""
+        self.input_kind = InputKind.HORSE
         self.producer = -1
         self._gone: set[int] = set()
         self.driver = Driver.PROCEDURAL if timing.fallback_procedural or mode is Mode.PROCEDURAL else Driver.NEUTRAL
@@ -124,6 +146,7 @@ class TickCore:
         self._blend_start = 0.0
         self._blend_duration = 0.0
         self._damper: DamperState | None = None
+        self._spring: SpringState | None = None
         self._last_now: float | None = None
         self.last_rider: list[float] | None = None
         """The last output (always finite)."""
@@ -140,6 +163,9 @@ class TickCore:
         self._last_reset = -math.inf
         self.faults: list[str] = []
         """Reports of resets not yet taken by the caller (one per reset)."""
+        self.full_reach = 0
+        """Ticks whose hands were at full reach, the reins outrunning them (``reins.slip`` > 0)."""
+        self._no_parts = [0.0] * len(PART_OUTPUTS)
         self.set_model(model)
 
     def set_model(self, model: RiderModel) -> None:
@@ -155,12 +181,17 @@ class TickCore:
         self.neutral_rider = model.evaluate(self.neutral_horse)
         # The procedural horse speaks metres; inputs are in the model's length unit.
         self._procedural_gain = DEFAULT_SCALE / model.scale
+        self._to_metres = model.scale / DEFAULT_SCALE
+        self.parts = RiderParts(model.params, model.scale / DEFAULT_SCALE)
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
 
-    def push_input(self, producer: int, t: float, received: float, values: list[float]) -> bool:
-        """Buffer one input frame; a new producer replaces the old one's buffer.
+    def push_input(
+        self, producer: int, t: float, received: float, values: list[float], kind: InputKind = InputKind.HORSE
+    ) -> bool:
+        """Buffer one input frame (or step the estimator with one saddle sample); a new
+        producer replaces the old one's buffer and estimator.
 
         Frames of a producer that has gone are ignored: its last frames may still be
         in the ring when the tick learns that it left.
@@ -169,9 +200,13 @@ class TickCore:
             return False
         if producer != self.producer:
             self.resampler.clear()
+            self.saddle.clear()
             if self.driver is Driver.INPUT and self.last_rider is not None:
                 self._start_blend(received, self.timing.blend_time)
             self.producer = producer
+            self.input_kind = kind
+        if kind is InputKind.SADDLE:
+            return self.saddle.push(t, received, values)
         return self.resampler.push(t, received, values)
 
     def producer_gone(self, producer: int) -> None:
@@ -181,6 +216,7 @@ class TickCore:
             self._gone = set(sorted(self._gone)[-1024:])
         if producer == self.producer:
             self.resampler.clear()
+            self.saddle.clear()
 
     def procedural_frame(self, now: float) -> list[float]:
         frame = self.horse.sample(now)
@@ -198,7 +234,8 @@ class TickCore:
     def _choose(self, now: float) -> tuple[Driver, tuple[float, list[float]] | None]:
         if self.mode is Mode.PROCEDURAL:
             return Driver.PROCEDURAL, None
-        sample = self.resampler.sample(now)
+        saddle = self.input_kind is InputKind.SADDLE
+        sample = self.saddle.sample(now) if saddle else self.resampler.sample(now)
         if sample is not None:
             return Driver.INPUT, sample
         if self.driver is Driver.PROCEDURAL:
@@ -228,9 +265,12 @@ class TickCore:
         else:
             source_time, horse = now, self.neutral_horse
         producer = self.producer if driver is Driver.INPUT else -1
+        saddle = saddle_pose(horse, self._to_metres, self.saddle_point)
+        by_saddle = driver is Driver.INPUT and self.input_kind is InputKind.SADDLE
+        estimate = self.saddle.estimate_row(now) if by_saddle else NO_ESTIMATE
         rider = self._rules(driver, horse, now)
         if not _finite(rider):  # stateless so far: no state is touched, the caller repeats its last frame
-            return TickResult(driver, source_time, producer, list(horse), rider)
+            return TickResult(driver, source_time, producer, list(horse), rider, saddle, estimate)
         rider = self._smooth(self._bound(rider), now)
         if self._blend_from is not None:
             w = _smoothstep((now - self._blend_start) / self._blend_duration) if self._blend_duration > 0 else 1.0
@@ -243,7 +283,21 @@ class TickCore:
             rider = list(self.neutral_rider)
         rider = self._bound(rider)
         self.last_rider = rider
-        return TickResult(driver, source_time, producer, list(horse), rider)
+        return TickResult(
+            driver, source_time, producer, list(horse), rider, saddle, estimate, self._parts(horse, rider)
+        )
+
+    def _parts(self, horse: Sequence[float], rider: list[float]) -> list[float]:
+        """The rider parts of the published rider (finite: a non-finite part falls back to Appendix B's limbs)."""
+        try:
+            parts = self.parts.evaluate(horse, rider)
+        except (ArithmeticError, ValueError):  # math.sin(inf) of a neck channel nobody range-checked
+            return list(self._no_parts)
+        if not _finite(parts):
+            return list(self._no_parts)
+        if parts[-1] > 0.0:
+            self.full_reach += 1
+        return parts
 
     def _rules(self, driver: Driver, horse: Sequence[float], now: float) -> list[float]:
         """The model's rider for ``horse``, plus what is left of a parameter change's difference."""
@@ -285,12 +339,35 @@ class TickCore:
             self.faults.append(f"{stage} went non-finite: reset, easing from neutral")
         self._last_reset = now
         self._damper = None
+        self._spring = None
         self._param_delta = None
         self._blend_from = list(self.neutral_rider)
         self._blend_start = now
         self._blend_duration = self.timing.ease_time
 
     def _smooth(self, rider: list[float], now: float) -> list[float]:
+        last = self._last_now
+        return self._follow(self._damp(rider, now), now, last)
+
+    def _follow(self, rider: list[float], now: float, last: float | None) -> list[float]:
+        """The follow-through spring (``[follow_through]``; 0 Hz: off, no state kept)."""
+        follow = self.model.params.follow_through
+        if follow.frequency <= 0.0:
+            self._spring = None
+            return rider
+        target = np.asarray(rider, dtype=np.float64)
+        if self._spring is None or last is None:
+            self._spring = SpringState(target, np.zeros_like(target))
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._spring = spring_step(self._spring, target, now - last, follow.frequency, follow.damping_ratio)
+            if not (np.isfinite(self._spring.value).all() and np.isfinite(self._spring.velocity).all()):
+                self._recover(now, "the follow-through spring")
+                self._spring = SpringState(target, np.zeros_like(target))
+        out: list[float] = self._spring.value.tolist()
+        return out
+
+    def _damp(self, rider: list[float], now: float) -> list[float]:
         tau = self.model.params.smoothing.time_constant
         last, self._last_now = self._last_now, now
         if tau <= 0.0:

@@ -127,13 +127,21 @@ class TickLink:
                     out.append(message)
         return out
 
-    def push_input(self, producer: int, t: float, received: float, values: list[float] | np.ndarray) -> None:
-        """Hand one validated horse frame (service length units) to the tick."""
-        record = np.empty(L.INPUT_WIDTH)
+    def push_input(
+        self,
+        producer: int,
+        t: float,
+        received: float,
+        values: list[float] | np.ndarray,
+        kind: L.InputKind = L.InputKind.HORSE,
+    ) -> None:
+        """Hand one validated horse frame, or saddle sample (six values), in service length units to the tick."""
+        record = np.full(L.INPUT_WIDTH, np.nan)
         record[L.IN_PRODUCER] = producer
         record[L.IN_T] = t
         record[L.IN_RECEIVED] = received
-        record[L.IN_VALUES :] = values
+        record[L.IN_KIND] = kind
+        record[L.IN_VALUES : L.IN_VALUES + len(values)] = values
         self.inputs.write(record)
 
     def drain_notify(self) -> None:

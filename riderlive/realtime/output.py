@@ -75,15 +75,16 @@ class TickDevices:
 
     # -- the tick ------------------------------------------------------------------------
 
-    def tick(self, frame: Sequence[float], now: float, tick_index: int) -> bool:
-        """Tick each device that is due; True when a state changed (publish now)."""
+    def tick(self, frame: Sequence[float], now: float, tick_index: int, horse: Sequence[float] = ()) -> bool:
+        """Tick each device that is due (``frame`` the rider, ``horse`` the horse frame, for
+        devices driven by it: the platform); True when a state changed (publish now)."""
         changed = False
         self.goal_written_at = None
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
             if tick_index % spec.divider:
                 continue
             before = device.state
-            status = device.tick(frame, now)
+            status = device.tick(horse if spec.input == "horse" else frame, now)
             if status.wrote:
                 self.goal_written_at = getattr(device.plug, "goal_written_at", None) or time.perf_counter()
             self.statuses[i] = status
@@ -114,6 +115,8 @@ class TickDevices:
             device = self._named(command.device)
             self._arm(device, command.by)
             return f"{device.name} armed by {command.by}: {device.state.value}"
+        if isinstance(command, cmd.Tune):
+            return self._tune(self._named(command.device), command)
         targets = self.devices if command.device is None else [self._named(command.device)]
         if isinstance(command, cmd.Disarm):
             for device in targets:
@@ -150,6 +153,17 @@ class TickDevices:
                     raise
         self.latch.clear()
         return f"reset: {', '.join(done) or 'nothing latched'}"
+
+    def _tune(self, device: Device, command: cmd.Tune) -> str:
+        tune = getattr(device.plug, "tune", None)
+        if tune is None:
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name} has no live parameters")
+        try:
+            tune(**command.changes)
+        except ValueError as exc:  # pydantic's ValidationError: out of range, or against another value
+            raise Refused(Refusal.BAD_CONFIG, f"{device.name}: {exc}") from None
+        log.info("%s: cueing tuned by %s: %s", device.name, command.by, command.changes)
+        return f"{device.name} tuned: {', '.join(f'{k}={v}' for k, v in command.changes.items())}"
 
     def _reload(self, device: Device, by: str) -> str:
         if device.state.moving:
@@ -203,8 +217,10 @@ class TickDevices:
             "counters",
         )
         rig = next((s for s in full if s["kind"] == "dynamixel"), None)
+        platform = next((s for s in full if s["kind"] == "platform"), None)
         return {
             "devices": [{k: s[k] for k in summary_keys} for s in full],
             "rig": rig,
+            "platform": platform,
             "guardian": None if self.board is None else {"alive": self.guardian_alive()},
         }

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
+from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.registry import DeviceSpec
@@ -46,11 +47,15 @@ from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams
+from riderlive.saddle import estimate as saddle_estimate
+from riderlive.saddle.pose import SaddlePoint
 
 if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
 
 log = logging.getLogger(__name__)
+_PARTS_AT_REST = (0.0,) * len(PART_NAMES)
+"""The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
 
 
 @dataclass(frozen=True)
@@ -91,10 +96,13 @@ class TickSetup:
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
     extra_channels: tuple[str, ...] = ()
-    """Channels appended to each output record after the rider's (the tail's, when on)."""
+    """Channels appended to each output record after the rider's: the tail's (when on),
+    then the rider parts (``channels.RIDER_PARTS``)."""
     shm_names: dict[str, str] = field(default_factory=dict)
     rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
+    saddle_point: SaddlePoint = field(default_factory=SaddlePoint)
+    """Where the published saddle pose is taken, and where a saddle input's samples are from."""
 
 
 class TickLoop:
@@ -131,7 +139,11 @@ class TickLoop:
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
-        self.core = TickCore(model, setup.timing, self.horse, setup.mode, setup.rider_bounds)
+        self.core = TickCore(
+            model, setup.timing, self.horse, setup.mode, setup.rider_bounds, saddle_point=setup.saddle_point
+        )
+        self._saddle_seen = (-1, -1)
+        """Lock and gait codes of the last status (a change makes the status dirty)."""
         self.running = True
         self.stopping_since: float | None = None
         self.realtime = "off"
@@ -144,7 +156,7 @@ class TickLoop:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
             self.physics = TickPhysics(setup.physics_file, setup.length_scale)
-            if self.physics.names != setup.extra_channels:
+            if (*self.physics.names, *PART_NAMES) != setup.extra_channels:
                 raise ValueError("the tick's physics channels differ from the web process's")
 
     def warm(self) -> None:
@@ -172,7 +184,7 @@ class TickLoop:
         elif isinstance(command, cmd.EStop):
             if self.devices is not None:
                 self.devices.act_on_stop(time.perf_counter())
-        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload):
+        elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload | cmd.Tune):
             self._request(command)
         elif isinstance(command, cmd.Stop):
             self._begin_stop(now)
@@ -223,11 +235,21 @@ class TickLoop:
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": None,
+            "platform": None,
             "devices": [],
             **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
+            "saddle": self._saddle_status(),
             "events": list(self.events),
         }
+
+    def _saddle_status(self) -> dict[str, Any] | None:
+        """The saddle estimate while a saddle input drives (docs/saddle.md), else None."""
+        core = self.core
+        if core.driver is not Driver.INPUT or core.input_kind is not L.InputKind.SADDLE:
+            return None
+        source_t = core.saddle.source_time(time.perf_counter() - self.setup.start)
+        return saddle_estimate(core.saddle.state, source_t).as_dict()
 
     def _publish_status(self) -> None:
         self.status_blob.write(orjson.dumps(self.status()))
@@ -266,7 +288,8 @@ class TickLoop:
             for record in self.inputs.read_new():
                 values_list = record[L.IN_VALUES :].tolist()
                 rx = float(record[L.IN_RECEIVED])
-                if self.core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), rx, values_list):
+                kind = L.InputKind(int(record[L.IN_KIND]))
+                if self.core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), rx, values_list, kind):
                     values[index["input_frames"]] += 1
                 else:
                     values[index["input_out_of_order"]] += 1
@@ -279,8 +302,10 @@ class TickLoop:
                 self._status_dirty = True
             values[index["state_resets"]] = self.core.resets
             values[index["outputs_clamped"]] = self.core.clamped
+            self._count_saddle(result, values, index)
+            values[index["hands_full_reach"]] = self.core.full_reach
             if devices is not None:
-                changed = devices.tick(result.rider, deadline, clock.tick)
+                changed = devices.tick(result.rider, deadline, clock.tick, result.horse)
                 self._unsent_rx = max(self._unsent_rx, newest_rx)
                 if devices.goal_written_at is not None and self._unsent_rx >= 0.0:
                     wire = devices.goal_written_at - setup.start - self._unsent_rx
@@ -308,9 +333,12 @@ class TickLoop:
                 newest_rx,
                 done,
                 lateness,
+                *result.saddle,
+                *result.estimate,
                 *result.horse,
                 *result.rider,
                 *extra,
+                *(result.parts or _PARTS_AT_REST),
             ]
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):
@@ -336,6 +364,16 @@ class TickLoop:
         if devices is not None:
             self.device_status = devices.status()
         self._publish_status()
+
+    def _count_saddle(self, result: TickResult, values: Any, index: dict[str, int]) -> None:
+        """The saddle estimator's counters into shared memory; a new lock or gait updates the status."""
+        seen = (_code(result.estimate[0]), _code(result.estimate[1]))
+        if seen != self._saddle_seen:
+            self._saddle_seen = seen
+            self._status_dirty = True
+        if self.core.input_kind is L.InputKind.SADDLE:
+            for name, count in self.core.saddle.counters().items():
+                values[index[f"saddle_{name}"]] = count
 
     def _drain_wake_fds(self) -> None:
         for fd in self.wake_fds[1:]:  # the signal pipe (the command pipe is read by _poll_commands)
@@ -379,6 +417,11 @@ class TickLoop:
             shared.close()
         if self._own_latch:
             self.latch.close()
+
+
+def _code(value: float) -> int:
+    """A lock or gait code of a record (-1: none)."""
+    return -1 if math.isnan(value) else int(value)
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:

@@ -3,7 +3,9 @@
 The thesis keys controls on top of its automation; here that is ``value * gain +
 offset`` per rider channel, in output units (after the length scale). An optional
 critically damped filter then smooths each channel; its time constant lives in the
-preset (``[smoothing]``), 0 switches it off.
+preset (``[smoothing]``), 0 switches it off. An optional follow-through (section 9.3's
+"loosened up") follows: an underdamped spring per channel, natural frequency and damping
+ratio in the preset (``[follow_through]``), 0 Hz switches it off (the thesis).
 """
 
 from __future__ import annotations
@@ -107,5 +109,49 @@ def damp_series(values: FloatArray, times: FloatArray, time_constant: float) -> 
     out[0] = state.value
     for i in range(1, len(values)):
         state = damper_step(state, values[i], float(times[i] - times[i - 1]), time_constant)
+        out[i] = state.value
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class SpringState:
+    """Position and velocity of each channel's underdamped follower (the follow-through)."""
+
+    value: FloatArray
+    velocity: FloatArray
+
+
+def spring_step(state: SpringState, target: FloatArray, dt: float, frequency: float, damping: float) -> SpringState:
+    """Advance an underdamped spring by ``dt`` seconds toward ``target`` (held over the step).
+
+    The exact solution of ``x'' = w^2 (target - x) - 2 z w x'`` with ``w = 2 pi frequency``
+    (Hz) and ``z = damping`` in (0, 1): stable at any ``dt``, and a sequence of steps does
+    not depend on how time is cut. A step input overshoots by ``exp(-pi z / sqrt(1 - z^2))``.
+    ``frequency`` or ``dt`` <= 0: the spring sits on the target, at rest.
+    """
+    if frequency <= 0.0 or dt <= 0.0:
+        return SpringState(value=np.array(target, dtype=np.float64), velocity=state.velocity * 0.0)
+    omega = 2.0 * math.pi * frequency
+    decay_rate = damping * omega
+    omega_d = omega * math.sqrt(1.0 - damping * damping)
+    decay = math.exp(-decay_rate * dt)
+    c, s = math.cos(omega_d * dt), math.sin(omega_d * dt)
+    delta = state.value - target
+    b = (state.velocity + decay_rate * delta) / omega_d
+    return SpringState(
+        value=target + decay * (delta * c + b * s),
+        velocity=decay * (state.velocity * c - (decay_rate * state.velocity + omega * omega * delta) / omega_d * s),
+    )
+
+
+def spring_series(values: FloatArray, times: FloatArray, frequency: float, damping: float) -> FloatArray:
+    """Run the follow-through over a whole take: ``values`` is (N, C), ``times`` is (N,)."""
+    out = np.empty_like(values)
+    if len(values) == 0:
+        return out
+    state = SpringState(np.array(values[0], dtype=np.float64), np.zeros(values.shape[1]))
+    out[0] = state.value
+    for i in range(1, len(values)):
+        state = spring_step(state, values[i], float(times[i] - times[i - 1]), frequency, damping)
         out[i] = state.value
     return out

@@ -158,6 +158,43 @@ class Smoothing(StrictModel):
     time_constant: float = pydantic.Field(default=0.0, ge=0.0, le=10.0)  # seconds
 
 
+class Reins(StrictModel):
+    """Section 5.1: the hands hold the reins close to the horse's neck and follow its mouth.
+
+    Each hand keeps its rest distance to its bit ring (times ``length_scale``) along the
+    line from the ring to where the seat carries the hand; Eq. 12-13 (the wrists) add on
+    top. ``weight`` 0 gives the hands of Appendix B alone (offsets from the seat).
+    """
+
+    weight: float = pydantic.Field(default=1.0, ge=0.0, le=1.0)
+    length_scale: float = pydantic.Field(default=1.0, ge=0.5, le=2.0)  # rein length / the skeletons' rest length
+    reach: float = pydantic.Field(default=0.97, ge=0.5, le=1.0)  # longest shoulder-to-hand, fraction of the arm
+
+
+class Arms(StrictModel):
+    """Section 5.3: the arms come in to the body as the rider rises and go out as she comes down."""
+
+    in_gain: float = pydantic.Field(default=0.6, ge=-10.0, le=10.0)  # elbow in per unit of lift (Eq. 7)
+
+
+class Stirrups(StrictModel):
+    """The feet stand in the stirrups: the ball of each foot stays within a leather's length of its bar."""
+
+    weight: float = pydantic.Field(default=1.0, ge=0.0, le=1.0)  # 0: the feet of Appendix B alone
+    leather_scale: float = pydantic.Field(default=1.0, ge=0.5, le=1.5)  # leather / the skeletons' rest length
+
+
+class FollowThrough(StrictModel):
+    """Section 9.3's loosening: an underdamped spring per rider channel, after the smoothing.
+
+    ``frequency``: natural frequency, Hz (0 = off, the thesis); ``damping_ratio`` below 1:
+    a step overshoots by ``exp(-pi z / sqrt(1 - z^2))`` (0.4: 25 %).
+    """
+
+    frequency: float = pydantic.Field(default=0.0, ge=0.0, le=20.0)
+    damping_ratio: float = pydantic.Field(default=0.4, ge=0.05, le=0.95)
+
+
 class Errata(StrictModel):
     """Where Appendix B contradicts itself: numbers that select a reading.
 
@@ -193,6 +230,10 @@ class RuleParams(StrictModel):
     hair_cloth: HairCloth = HairCloth()
     smoothing: Smoothing = Smoothing()
     errata: Errata = Errata()
+    reins: Reins = Reins()
+    arms: Arms = Arms()
+    stirrups: Stirrups = Stirrups()
+    follow_through: FollowThrough = FollowThrough()
 
     def with_values(self, changes: dict[str, float]) -> RuleParams:
         """Return a copy with dotted keys (``"head.lift_gain"``) changed, validated."""

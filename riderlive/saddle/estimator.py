@@ -300,7 +300,7 @@ def _analyse(model: Model, state: State) -> State:
     if fit is None:  # too sparse a stream, or too short a history for the beat found
         return _settle(model, state, tr, Lock.SEARCHING if dense else Lock.NO_SIGNAL, miss=True)
     if fit.gait is None:
-        return _settle(model, state, tr, Lock.STILL, miss=True, force=True)
+        return _settle(model, state, tr, Lock.STILL, force=True)
     template = model.templates[fit.gait]
     measured = fit.phase + fit.stride * (t - fit.t)
     turn = 0.5 if fit.half else 1.0  # without the sideways axes a diagonal pair is a coin toss: keep ours
@@ -340,10 +340,14 @@ def _switch(model: Model, state: State, tr: Tracking, track: Track) -> State:
 
 
 def _settle(model: Model, state: State, tr: Tracking, lock: Lock, *, miss: bool = False, force: bool = False) -> State:
-    """Apply a new lock state (a lock survives ``model.misses`` misses unless ``force``) and the weights."""
+    """Apply a new lock state and the weights. A lock, and a still saddle, survive ``model.misses``
+    analyses without a fit unless ``force`` (a still saddle's beat is noise: some analyses find
+    none, and the state must not flicker between ``still`` and ``searching``)."""
     missed = tr.missed + 1 if miss else 0
     if tr.lock is Lock.LOCKED and lock is not Lock.LOCKED and missed < model.misses and not force:
         lock = Lock.LOCKED  # hold: the oscillator runs on
+    elif tr.lock is Lock.STILL and lock is not Lock.LOCKED and missed < model.misses and not force:
+        lock = Lock.STILL
     counters = tr.counters
     if tr.lock is Lock.LOCKED and lock is not Lock.LOCKED:
         counters = replace(counters, losses=counters.losses + 1)

@@ -36,6 +36,8 @@ from riderlive.saddle.track import Track
 
 FloatArray = npt.NDArray[np.float64]
 BODY = 19
+_NECK_AT_REST = (0.0, 0.0, 0.0)
+"""``channels.HORSE_NECK_HEAD``: a saddle stream says nothing of them, so they stay at rest."""
 HOOVES = 12
 BEND = 18
 DRIFTING = (True, True, True, False, True, False)
@@ -65,7 +67,7 @@ def _distance(model: Model, state: State, t: float) -> float:
 
 def _legs(model: Model, track: Track, t: float) -> list[float]:
     layer = model.templates[track.gait].layer
-    return to_rig_sides(layer.pose_at(track.phase(t), track.speed, HORSE_SCALAR))
+    return to_rig_sides(layer.pose_at(track.phase(t), track.speed, HORSE_SCALAR))[:BODY]  # a saddle knows no neck
 
 
 def _body(model: Model, state: State, t: float, weight: float) -> list[float]:
@@ -109,7 +111,7 @@ def horse_frame(model: Model, state: State, t: float) -> list[float]:
     saddle = measured_saddle(model, state, t, tr.pose.at(t) * fade)
     trunk = trunk_from_saddle(saddle, body[BEND], model.point, SCALAR)
     distance = _distance(model, state, t)
-    frame = [*body[:HOOVES], *trunk, body[BEND], distance, 0.0, 0.0, 0.0]
+    frame = [*body[:HOOVES], *trunk, body[BEND], distance, 0.0, 0.0, 0.0, *_NECK_AT_REST]
     assert len(frame) == len(HORSE)
     return frame
 

@@ -30,8 +30,10 @@ from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
+from riderlive.service.ingest import SADDLE_INPUT
 from riderlive.service.latency_api import add_latency_routes
 from riderlive.service.metrics import render
+from riderlive.service.platform_api import add_platform_routes, render_platform_metrics
 from riderlive.service.rest import (
     AnimatorBody,
     PerformRequest,
@@ -42,6 +44,7 @@ from riderlive.service.rest import (
     invalid_request,
 )
 from riderlive.service.runtime import Service
+from riderlive.service.takes_api import add_take_routes
 from riderlive.takes.recorder import TakeExists, list_takes
 
 log = logging.getLogger(__name__)
@@ -89,6 +92,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     ctl = [Depends(control)]
     obs = [Depends(observe)]
     app.add_api_websocket_route("/ws/horse", service.ingest)
+    app.add_api_websocket_route("/ws/saddle", service.saddle_ingest)
     app.add_api_websocket_route("/ws/rider", service.hub)
 
     @app.get("/api/state", dependencies=obs, summary="Everything about the running service")
@@ -180,19 +184,26 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def takes() -> dict[str, Any]:
         return {"takes": list_takes(config.takes.directory)}
 
+    add_take_routes(app, service, ctl, obs)  # take download and bake, parameter groups (the page)
+
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
+    add_platform_routes(app, service, obs)  # GET and PATCH /api/platform
     add_latency_routes(app, service, obs)  # /api/latency
 
     @app.get("/metrics", dependencies=obs, response_class=PlainTextResponse, summary="Prometheus metrics")
     async def metrics() -> PlainTextResponse:
+        producers = service.arbiter.producers.values()
+        saddles = sum(p.spec is SADDLE_INPUT for p in producers)
+        counters = service.link.counters.snapshot()
         text = render(
-            service.metrics,
-            service.link.counters.snapshot(),
-            service.hub.snapshot(),
-            len(service.arbiter.producers),
-            service.latency(),
+            service.metrics, counters, service.hub.snapshot(), len(producers), saddles, latency=service.latency()
         )
         text += render_device_metrics(service)
+        text += render_platform_metrics(service)
+        if service.stage is not None:
+            from riderlive.bus.rig import render_metrics as render_stage_metrics
+
+            text += render_stage_metrics(service.stage)
         return PlainTextResponse(text, media_type="text/plain; version=0.0.4")
 
     if STATIC_DIR.is_dir():

@@ -20,6 +20,7 @@ import orjson
 
 from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER_NAMES
 from riderlive.realtime import layout as L
+from riderlive.realtime.saddle_input import GAITS, LOCKS
 
 PROTOCOL_VERSION = 1
 
@@ -30,9 +31,14 @@ BONES_HEADER = struct.Struct("<HHI")
 """Appended to the header when flag bit 1 is set: n_bones (floats), reserved, reserved."""
 POSE_HEADER = struct.Struct("<HHI")
 """Appended (after the bones block, if any) when flag bit 2 is set: rider pose floats, horse pose floats, reserved."""
+SADDLE_HEADER = struct.Struct("<HHBBH")
+"""Appended (after the bones and pose blocks, if any) when flag bit 3 is set: saddle floats (6),
+estimate floats (3: stride_hz, phase, age), lock code, gait code (255: none), reserved."""
 FLAG_HORSE = 1
 FLAG_BONES = 2
 FLAG_POSE = 4
+FLAG_SADDLE = 8
+NO_CODE = 255
 SKELETONS = ("rider", "horse")
 """Skeletons a ``pose`` subscription can ask for, in the order frames carry them."""
 POSE_FLOATS_PER_BONE = 7
@@ -90,7 +96,19 @@ class HorseFrame:
 
 
 def decode_horse_frame(obj: dict[str, Any], order: Sequence[int] | None = None) -> HorseFrame:
-    """A frame message: ``t`` plus ``values`` (a map by name) or ``v`` (a list in ``order``)."""
+    """A horse frame message: ``t`` plus ``values`` (a map by name) or ``v`` (a list in ``order``)."""
+    return decode_frame(obj, order)
+
+
+def decode_frame(
+    obj: dict[str, Any],
+    order: Sequence[int] | None = None,
+    index: dict[str, int] = HORSE_INDEX,
+    names: Sequence[str] = HORSE_NAMES,
+    what: str = "horse",
+) -> HorseFrame:
+    """A frame message of the channels ``names`` (``index``: name -> column; ``what`` names
+    them in errors): ``t`` plus ``values`` (a map by name) or ``v`` (a list in ``order``)."""
     if "t" not in obj:
         raise BadFrame("missing_t", "a frame needs its time 't' in seconds")
     t = _number(obj["t"], "t")
@@ -102,31 +120,31 @@ def decode_horse_frame(obj: dict[str, Any], order: Sequence[int] | None = None) 
         if not isinstance(values, dict):
             raise BadFrame("wrong_type", "'values' must be an object of channel: number")
         for name, value in values.items():
-            index = HORSE_INDEX.get(name) if isinstance(name, str) else None
-            if index is None:
-                raise BadFrame("unknown_channel", f"unknown horse channel {name!r}")
-            out[index] = _number(value, name)
+            column = index.get(name) if isinstance(name, str) else None
+            if column is None:
+                raise BadFrame("unknown_channel", f"unknown {what} channel {name!r}")
+            out[column] = _number(value, name)
     elif "v" in obj:
         array = obj["v"]
-        columns = tuple(range(len(HORSE_NAMES))) if order is None else tuple(order)
+        columns = tuple(range(len(names))) if order is None else tuple(order)
         if not isinstance(array, list) or len(array) != len(columns):
             raise BadFrame("wrong_type", f"'v' must be a list of {len(columns)} numbers (the declared channels)")
-        for index, value in zip(columns, array, strict=True):
-            out[index] = _number(value, HORSE_NAMES[index])
+        for column, value in zip(columns, array, strict=True):
+            out[column] = _number(value, names[column])
     else:
         raise BadFrame("missing_values", "a frame needs 'values' (object) or 'v' (list)")
     return HorseFrame(t, out)
 
 
-def channel_order(names: Any) -> tuple[int, ...]:
-    """Validate a declared list of horse channel names (the order of ``v``)."""
+def channel_order(names: Any, index: dict[str, int] = HORSE_INDEX, what: str = "horse") -> tuple[int, ...]:
+    """Validate a declared list of channel names (the order of ``v``); ``index``: name -> column."""
     if not isinstance(names, list) or not names:
-        raise BadFrame("wrong_type", "'channels' must be a non-empty list of horse channel names")
+        raise BadFrame("wrong_type", f"'channels' must be a non-empty list of {what} channel names")
     out = []
     for name in names:
-        if not isinstance(name, str) or name not in HORSE_INDEX:
-            raise BadFrame("unknown_channel", f"unknown horse channel {name!r}")
-        out.append(HORSE_INDEX[name])
+        if not isinstance(name, str) or name not in index:
+            raise BadFrame("unknown_channel", f"unknown {what} channel {name!r}")
+        out.append(index[name])
     if len(set(out)) != len(out):
         raise BadFrame("wrong_type", "'channels' lists a channel twice")
     return tuple(out)
@@ -145,11 +163,13 @@ class Subscription:
     """Add the rider's per-bone quaternions (``riderlive.skeleton.bone_quaternions``)."""
     pose: tuple[str, ...] = ()
     """Skeletons (of :data:`SKELETONS`) whose full local pose, 7 floats per bone, each frame carries."""
+    saddle: bool = False
+    """Add the saddle pose of the tick's horse and, while a saddle input drives, its estimate."""
 
     @property
     def key(self) -> tuple[Any, ...]:
         """Clients with the same key share one encoded frame per tick."""
-        return (self.encoding, self.rider, self.horse, self.bones, self.pose)
+        return (self.encoding, self.rider, self.horse, self.bones, self.pose, self.saddle)
 
     def describe(self, tick_rate: float, names: Sequence[str] = RIDER_NAMES) -> dict[str, Any]:
         return {
@@ -161,6 +181,7 @@ class Subscription:
             "encoding": self.encoding,
             "bones": self.bones,
             "pose": list(self.pose),
+            "saddle": self.saddle,
         }
 
 
@@ -212,7 +233,10 @@ def decode_subscription(
     bones = obj.get("bones", current.bones)
     if not isinstance(bones, bool):
         raise BadFrame("wrong_type", "'bones' must be true or false")
-    return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose))
+    saddle = obj.get("saddle", current.saddle)
+    if not isinstance(saddle, bool):
+        raise BadFrame("wrong_type", "'saddle' must be true or false")
+    return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose), saddle)
 
 
 def decode_ping_id(obj: dict[str, Any]) -> str | int | float | None:
@@ -242,6 +266,24 @@ def _pose(obj: dict[str, Any], current: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(name for name in SKELETONS if name in value)
 
 
+def _code(value: float) -> int:
+    return NO_CODE if math.isnan(value) else int(value)
+
+
+def saddle_estimate(row: np.ndarray) -> dict[str, Any] | None:
+    """The estimate block of a record (``layout.ESTIMATE_FIELDS``) as published (None: no saddle input drives)."""
+    lock, gait, stride_hz, phase, age = (float(x) for x in row)
+    if math.isnan(lock):
+        return None
+    return {
+        "lock": LOCKS[int(lock)],
+        "gait": None if math.isnan(gait) else GAITS[int(gait)],
+        "stride_hz": stride_hz,
+        "phase": phase,
+        "age": None if math.isnan(age) else age,
+    }
+
+
 def encode_frame(
     sub: Subscription,
     record: np.ndarray,
@@ -263,11 +305,13 @@ def encode_frame(
     horse_values = horse[list(sub.horse)] if sub.horse else None
     bone_values = bones if sub.bones else None
     poses = [np.asarray(pose[name], dtype="<f8") if pose else np.zeros(0) for name in sub.pose]
+    saddle = record[L.OUT_SADDLE : L.OUT_ESTIMATE]
+    estimate = record[L.OUT_ESTIMATE : L.OUT_HORSE]
     if sub.encoding == "binary":
         flags = (FLAG_HORSE if horse_values is not None else 0) | (FLAG_BONES if bone_values is not None else 0)
-        flags |= FLAG_POSE if sub.pose else 0
+        flags |= (FLAG_POSE if sub.pose else 0) | (FLAG_SADDLE if sub.saddle else 0)
         size = BINARY_HEADER.size + (BONES_HEADER.size if bone_values is not None else 0)
-        size += POSE_HEADER.size if sub.pose else 0
+        size += (POSE_HEADER.size if sub.pose else 0) + (SADDLE_HEADER.size if sub.saddle else 0)
         header = BINARY_HEADER.pack(
             BINARY_MAGIC,
             size,
@@ -285,12 +329,17 @@ def encode_frame(
         if sub.pose:
             counts = {name: len(p) for name, p in zip(sub.pose, poses, strict=True)}
             header += POSE_HEADER.pack(counts.get("rider", 0), counts.get("horse", 0), 0)
+        if sub.saddle:
+            header += SADDLE_HEADER.pack(len(saddle), 3, _code(estimate[0]), _code(estimate[1]), 0)
         body = rider_values.astype("<f8").tobytes()
         if horse_values is not None:
             body += horse_values.astype("<f8").tobytes()
         if bone_values is not None:
             body += np.asarray(bone_values, dtype="<f8").tobytes()
-        return header + body + b"".join(p.tobytes() for p in poses)
+        body += b"".join(p.tobytes() for p in poses)
+        if sub.saddle:
+            body += saddle.astype("<f8").tobytes() + estimate[2:].astype("<f8").tobytes()
+        return header + body
     message: dict[str, Any] = {
         "type": "frame",
         "seq": seq,
@@ -305,6 +354,9 @@ def encode_frame(
         message["bones"] = np.asarray(bone_values).tolist()
     if sub.pose:
         message["pose"] = {name: p.tolist() for name, p in zip(sub.pose, poses, strict=True)}
+    if sub.saddle:
+        message["saddle"] = saddle.tolist()
+        message["estimate"] = saddle_estimate(estimate)
     return orjson.dumps(message).decode()
 
 
@@ -334,8 +386,17 @@ def decode_binary_frame(data: bytes) -> dict[str, Any]:
     if flags & FLAG_POSE:
         n_rider_pose, n_horse_pose, _ = POSE_HEADER.unpack_from(data, extension)
         out["pose"] = {}
+        extension += POSE_HEADER.size
         for name, count in (("rider", n_rider_pose), ("horse", n_horse_pose)):
             if count:
                 out["pose"][name] = np.frombuffer(data, dtype="<f8", count=count, offset=offset).tolist()
                 offset += 8 * count
+    if flags & FLAG_SADDLE:
+        n_saddle, n_estimate, lock, gait, _ = SADDLE_HEADER.unpack_from(data, extension)
+        out["saddle"] = np.frombuffer(data, dtype="<f8", count=n_saddle, offset=offset).tolist()
+        stride_hz, phase, age = np.frombuffer(data, dtype="<f8", count=n_estimate, offset=offset + 8 * n_saddle)[:3]
+        row = np.array(
+            [np.nan if lock == NO_CODE else lock, np.nan if gait == NO_CODE else gait, stride_hz, phase, age]
+        )
+        out["estimate"] = saddle_estimate(row)
     return out

@@ -12,10 +12,12 @@ from typing import Literal
 
 import pydantic
 
+from riderlive.bus.config import NatsSection
 from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
+from riderlive.saddle.pose import SaddlePoint
 
 
 class ServerSection(StrictModel):
@@ -169,6 +171,27 @@ class RigSection(StrictModel):
     or refuse to start."""
 
 
+class PlatformSection(StrictModel):
+    """``[platform]`` of the service configuration (docs/configuration.md)."""
+
+    file: str | None = None
+    """A platform file, or a shipped platform's name (``config/platforms``); unset: no platform."""
+    port: str | None = None
+    """The firmware's serial port (``riderlive firmware-emu`` prints its pty)."""
+    device: str | None = pydantic.Field(default=None, min_length=1, max_length=16, pattern=r"^[!-~]+$")
+    """The firmware's own name, checked at connect and sent with ARM (default: what it says)."""
+    heartbeat_ms: int = pydantic.Field(default=200, ge=20, le=1000)
+    """The firmware's dead-man timeout (CONFIG): it parks by itself after this much silence."""
+    rate_policy: Literal["divide", "refuse"] = "divide"
+    """A service ticking faster than the firmware's control rate: drive it every n-th tick, or refuse."""
+
+    @pydantic.model_validator(mode="after")
+    def _port_with_file(self) -> PlatformSection:
+        if self.file and not self.port:
+            raise ValueError("platform.port is required with platform.file (the firmware's serial port)")
+        return self
+
+
 class GuardianSection(StrictModel):
     """The dead-man process that parks the devices when the tick or the web process dies."""
 
@@ -224,10 +247,16 @@ class ServiceConfig(StrictModel):
     publish: PublishSection = PublishSection()
     takes: TakesSection = TakesSection()
     rig: RigSection = RigSection()
+    platform: PlatformSection = PlatformSection()
     physics: PhysicsSection = PhysicsSection()
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
     guardian: GuardianSection = GuardianSection()
+    saddle: SaddlePoint = SaddlePoint()
+    """Where the saddle point sits on the horse's back (docs/saddle.md): the published
+    saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""
+    nats: NatsSection = NatsSection()
+    """Join a stage over NATS (docs/deployment.md); unset ``url``: brokerless."""
 
     @pydantic.model_validator(mode="after")
     def _token_when_required(self) -> ServiceConfig:

@@ -31,6 +31,7 @@ from fastapi.responses import JSONResponse
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import REFUSAL_STATUS, DeviceState, Refusal
 from riderlive.devices.registry import DeviceSpec, plan
+from riderlive.horse import DEFAULT_SCALE
 from riderlive.names import NAME_PATTERN
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
@@ -41,7 +42,7 @@ if TYPE_CHECKING:
 
 NAME = pydantic.Field(pattern=NAME_PATTERN)
 """A device name: a name like every user-given name (riderlive/names.py)."""
-BY = pydantic.Field(default=None, max_length=32, pattern=r"^[A-Za-z0-9 _.-]+$")
+BY = pydantic.Field(default=None, pattern=r"^[A-Za-z0-9][A-Za-z0-9 _-]{0,31}$")
 
 
 class DeviceRequest(pydantic.BaseModel):
@@ -59,11 +60,21 @@ class AnyDeviceRequest(pydantic.BaseModel):
 
 def plan_devices(config: ServiceConfig) -> tuple[DeviceSpec, ...]:
     """The configured devices, validated and fitted to the tick rate; prints the wire budget."""
-    if not config.rig.file:
-        return ()
-    spec, text = plan("dynamixel", config.rig.file, config.rig.port, config.tick.rate, config.rig.rate_policy)
-    print(f"riderlive serve: rig {text}", file=sys.stderr, flush=True)
-    return (spec,)
+    specs = []
+    if config.rig.file:
+        spec, text = plan("dynamixel", config.rig.file, config.rig.port, config.tick.rate, config.rig.rate_policy)
+        print(f"riderlive serve: rig {text}", file=sys.stderr, flush=True)
+        specs.append(spec)
+    platform = config.platform
+    if platform.file:
+        options: dict[str, Any] = {"device": platform.device, "heartbeat_ms": platform.heartbeat_ms}
+        options["metres_per_unit"] = config.tick.length_scale / DEFAULT_SCALE
+        spec, text = plan(
+            "platform", platform.file, platform.port, config.tick.rate, platform.rate_policy, options=options
+        )
+        print(f"riderlive serve: platform {text}", file=sys.stderr, flush=True)
+        specs.append(spec)
+    return tuple(specs)
 
 
 class DeviceMetrics:
@@ -105,6 +116,9 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
     @app.post("/api/arm", summary="Arm a device by name (token whenever one is configured): it soft-starts")
     async def arm(request: Request, body: DeviceRequest) -> dict[str, Any]:
         by = who(operator(request, "arm", arming=True), body)
+        for check in service.arm_checks:  # e.g. no stage heartbeat (riderlive.bus.rig)
+            if (why := check()) is not None:
+                raise refuse("arm", Refusal.NOT_READY, why)
         return await answer("arm", lambda r: cmd.Arm(body.device, by, r))
 
     @app.post("/api/disarm", summary="Ease a device (all when none named) to park, then outputs off")
@@ -138,6 +152,7 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
         status = service.link.status()
         return {
             "devices": status.get("devices", []),
+            "platform": status.get("platform"),
             "estop": service.link.latch.latched,
             "supervision": service.supervisor.snapshot(),
         }

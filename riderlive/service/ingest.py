@@ -1,6 +1,13 @@
-"""``/ws/horse``: producers stream horse frames in; the arbiter picks the one that drives.
+"""``/ws/horse`` and ``/ws/saddle``: producers stream horse frames or saddle samples in;
+one arbiter picks the one that drives.
 
-Arbitration (docs/protocol.md, "Several producers"):
+The two endpoints share everything (envelope, validation, auth, limits, error replies,
+counters) but their channels (:class:`InputSpec`): ``channels.HORSE`` or the six
+``channels.SADDLE``. On ``/ws/horse`` a channel a frame omits keeps its last value; on
+``/ws/saddle`` it is *missing* for that sample (NaN to the estimator, which holds it).
+
+Arbitration (docs/protocol.md, "Several producers"), the same for both kinds: a saddle
+producer and a horse producer compete exactly like two horse producers.
 
 - Source ``live``: the driving producer is the one with the highest ``priority``
   (declared in its hello, default 0). Among equals the incumbent keeps control; a
@@ -22,8 +29,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import logging
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -31,17 +40,17 @@ from typing import TYPE_CHECKING, Any
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from riderlive.channels import HORSE, HORSE_NAMES, Kind
+from riderlive.channels import HORSE, HORSE_NAMES, SADDLE, Channel, Kind
 from riderlive.ranges import Ranges
 from riderlive.realtime import commands as cmd
+from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
-from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_horse_frame, parse_message
+from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
 
 log = logging.getLogger(__name__)
-_TRANSLATION = frozenset(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
 _ids = itertools.count(1)
 LENGTH_SCALE_RANGE = (1e-6, 1e6)
 """Accepted ``length_scale`` of a producer's hello (thesis rig units per its length unit)."""
@@ -49,6 +58,38 @@ LENGTH_SCALE_RANGE = (1e-6, 1e6)
 
 def next_producer_id() -> int:
     return next(_ids)
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """What one input endpoint accepts."""
+
+    kind: InputKind
+    channels: tuple[Channel, ...]
+    keep_last: bool
+    """An omitted channel keeps its last value (horse) or is missing for that frame (saddle: NaN)."""
+    prefix: str
+    """Default producer names: ``<prefix>-<id>``."""
+
+    @functools.cached_property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.channels)
+
+    @functools.cached_property
+    def index(self) -> dict[str, int]:
+        return {c.name: i for i, c in enumerate(self.channels)}
+
+    @functools.cached_property
+    def what(self) -> str:
+        return self.kind.name.lower()
+
+    @functools.cached_property
+    def translations(self) -> frozenset[int]:
+        return frozenset(i for i, c in enumerate(self.channels) if c.kind is Kind.TRANSLATION)
+
+
+HORSE_INPUT = InputSpec(InputKind.HORSE, HORSE, keep_last=True, prefix="producer")
+SADDLE_INPUT = InputSpec(InputKind.SADDLE, SADDLE, keep_last=False, prefix="saddle")
 
 
 @dataclass
@@ -61,6 +102,7 @@ class Producer:
     length_gain: float = 1.0
     """Producer length unit -> service length unit."""
     order: tuple[int, ...] | None = None
+    spec: InputSpec = HORSE_INPUT
     last: list[float] = field(default_factory=lambda: [0.0] * len(HORSE_NAMES))
     last_frame_at: float = -1e9
     stream: int = 0
@@ -79,25 +121,35 @@ class Producer:
 
     def __post_init__(self) -> None:
         self.stream = self.stream or self.id
+        self._translations = self.spec.translations
+        if len(self.last) != len(self.spec.channels):
+            self.last = [0.0] * len(self.spec.channels)
 
     def convert(self, values: dict[int, float], low: list[float], high: list[float]) -> dict[int, float]:
         """A frame's values in service units, or :class:`BadFrame` for the first one outside its range."""
         gain = self.length_gain
+        translations = self._translations
         out = {}
         for index, value in values.items():
-            scaled = value * gain if gain != 1.0 and index in _TRANSLATION else value
+            scaled = value * gain if gain != 1.0 and index in translations else value
             if not low[index] <= scaled <= high[index]:
-                unit = gain if index in _TRANSLATION else 1.0
+                unit = gain if index in translations else 1.0
                 raise BadFrame(
                     "out_of_range",
-                    f"{HORSE_NAMES[index]} = {value!r} is outside its plausible range "
+                    f"{self.spec.channels[index].name} = {value!r} is outside its plausible range "
                     f"[{low[index] / unit:g}, {high[index] / unit:g}] (docs/protocol.md, ranges)",
                 )
             out[index] = scaled
         return out
 
     def merge(self, values: dict[int, float]) -> list[float]:
-        """Apply converted values onto the last frame (omitted channels keep their last value)."""
+        """Apply converted values onto the last frame (omitted channels keep their last value),
+        or, for an input whose omitted channels are missing, fill the gaps with NaN."""
+        if not self.spec.keep_last:
+            out = [math.nan] * len(self.spec.channels)
+            for index, value in values.items():
+                out[index] = value
+            return out
         for index, value in values.items():
             self.last[index] = value
         return list(self.last)
@@ -156,12 +208,13 @@ async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: f
 
 
 class IngestEndpoint:
-    """The ``/ws/horse`` handler, bound to the running service."""
+    """The ``/ws/horse`` (or, with ``SADDLE_INPUT``, ``/ws/saddle``) handler, bound to the running service."""
 
-    def __init__(self, service: Service, ranges: Ranges) -> None:
+    def __init__(self, service: Service, ranges: Ranges, spec: InputSpec = HORSE_INPUT) -> None:
         self.service = service
-        self.low, self.high = ranges.limits(HORSE_NAMES, service.config.tick.length_scale)
-        """Plausible range of each horse channel in service units."""
+        self.spec = spec
+        self.low, self.high = ranges.limits(spec.names, service.config.tick.length_scale)
+        """Plausible range of each channel in service units."""
 
     async def authenticate(self, websocket: WebSocket, offered: list[str]) -> dict[str, Any] | None:
         """Check the token (subprotocol or first message); return the first message if read."""
@@ -193,10 +246,9 @@ class IngestEndpoint:
             with contextlib.suppress(Exception):  # it may have left already
                 await websocket.close(code=4401, reason="unauthorized")
             return
-        producer = Producer(
-            id=next_producer_id(), name=f"producer-{len(service.arbiter.producers) + 1}", websocket=websocket
-        )
-        producer.name = f"producer-{producer.id}"
+        spec = self.spec
+        producer_id = next_producer_id()
+        producer = Producer(id=producer_id, name=f"{spec.prefix}-{producer_id}", spec=spec, websocket=websocket)
         service.arbiter.producers[producer.id] = producer
         await websocket.send_json(
             {
@@ -204,7 +256,8 @@ class IngestEndpoint:
                 "protocol": PROTOCOL_VERSION,
                 "session": service.session,
                 "producer": producer.id,
-                "channels": [{"name": c.name, "unit": c.unit} for c in HORSE],
+                "kind": spec.what,
+                "channels": [{"name": c.name, "unit": c.unit} for c in spec.channels],
                 "length_scale": config.tick.length_scale,
                 "max_message_bytes": config.input.max_message_bytes,
                 "max_rate": config.input.max_rate,
@@ -258,7 +311,8 @@ class IngestEndpoint:
         producer.window_frames += 1
         if producer.window_frames > limits.max_rate:
             raise BadFrame("rate", f"more than {limits.max_rate:g} frames per second")
-        frame = decode_horse_frame(obj, producer.order)
+        spec = self.spec
+        frame = decode_frame(obj, producer.order, spec.index, spec.names, spec.what)
         values = producer.merge(producer.convert(frame.values, self.low, self.high))
         jump = clock_jump(producer.last_t, producer.last_frame_at, frame.t, now, limits.clock_jump)
         if jump is not None:
@@ -270,7 +324,7 @@ class IngestEndpoint:
         drives = arbiter.drives(producer, now)
         producer.last_frame_at = now
         if drives:
-            self.service.link.push_input(producer.stream, frame.t, now - self.service.link.start, values)
+            self.service.link.push_input(producer.stream, frame.t, now - self.service.link.start, values, spec.kind)
         return drives
 
     def new_segment(self, producer: Producer, t: float, jump: float) -> None:
@@ -310,7 +364,7 @@ class IngestEndpoint:
                 raise BadFrame("out_of_range", f"'length_scale' = {scale!r} is outside [{low:g}, {high:g}]")
             producer.length_gain = float(scale) / self.service.config.tick.length_scale
         if "channels" in obj:
-            producer.order = channel_order(obj["channels"])
+            producer.order = channel_order(obj["channels"], self.spec.index, self.spec.what)
 
     async def reject(self, producer: Producer, exc: BadFrame, now: float) -> bool:
         """Count and answer a bad message; True when the client keeps abusing (close it)."""

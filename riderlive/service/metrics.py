@@ -62,15 +62,32 @@ def _escape(value: str) -> str:
     return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
 
 
+SADDLE_COUNTERS: tuple[tuple[str, str], ...] = (
+    ("samples", "Saddle samples stepped through the estimator."),
+    ("missing", "Saddle samples with an axis missing (left out of the frame): excluded from the fits, held."),
+    ("empty", "Saddle samples ignored: no usable axis."),
+    ("gaps", "Waits longer than 0.2 s between saddle samples (a 1 Hz stream: every sample)."),
+    ("glitches", "Saddle samples dropped as a jump (tens of cm or degrees off the last)."),
+    ("rebases", "Saddle jumps that stayed (a re-zeroed sensor): absorbed into an offset."),
+    ("locks", "Saddle estimator locks gained (a gait, its frequency and phase)."),
+    ("losses", "Saddle estimator locks let go (the hooves ease to standing)."),
+    ("stale", "Driving saddle streams that stopped: the rider eased to neutral."),
+)
+"""The tick's ``saddle_*`` counters (``riderlive.realtime.saddle_input``), as ``riderlive_saddle_*_total``."""
+
+
 def render(
     metrics: ServiceMetrics,
     tick: dict[str, float],
     clients: list[tuple[str, str, int, int]],
     producers: int,
+    saddle_producers: int = 0,
+    *,
     latency: Mapping[str, LatencySnapshot] | None = None,
 ) -> str:
-    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped); ``latency``:
-    snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (see :func:`latency_snapshots`)."""
+    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped); ``producers``
+    counts every input connection, ``saddle_producers`` those of them on ``/ws/saddle``;
+    ``latency``: snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (``Service.latency``)."""
     latency = latency or {}
     out: list[str] = []
 
@@ -105,6 +122,7 @@ def render(
         ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
         ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
         ("outputs_clamped", "Rider values clamped to their plausible range."),
+        ("hands_full_reach", "Ticks whose hands were at full reach, the reins outrunning them (reins.slip > 0)."),
     ):
         metric(
             f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
@@ -121,9 +139,13 @@ def render(
         "Connected websocket clients.",
         [
             f'riderlive_clients_connected{{path="/ws/rider"}} {len(clients)}',
-            f'riderlive_clients_connected{{path="/ws/horse"}} {producers}',
+            f'riderlive_clients_connected{{path="/ws/horse"}} {producers - saddle_producers}',
+            f'riderlive_clients_connected{{path="/ws/saddle"}} {saddle_producers}',
         ],
     )
+    for key, help_text in SADDLE_COUNTERS:
+        name = f"riderlive_saddle_{key}_total"
+        metric(name, "counter", help_text, [f"{name} {int(tick.get(f'saddle_{key}', 0))}"])
     metric(
         "riderlive_frames_out_total",
         "counter",

@@ -30,10 +30,11 @@ import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, lookup
+from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, RIDER_PART_NAMES, RIDER_PARTS, SADDLE, lookup
 from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime import layout as L
+from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service import auth
 from riderlive.service.codecs import (
     POSE_FLOATS_PER_BONE,
@@ -55,9 +56,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
-HELLO_VERSION = 2
+HELLO_VERSION = 3
 """1: ``length_unit`` was a sentence. 2: it is a unit symbol (``"m"``), with ``metres_per_length_unit``,
-``time_unit`` and ``pose`` (docs/protocol.md, "Hello versions")."""
+``time_unit`` and ``pose``. 3: ``saddle`` (the saddle subscription) (docs/protocol.md, "Hello versions")."""
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
@@ -158,9 +159,10 @@ class Hub:
         self._unsent_rx = -1.0
         """Receive time of the newest input taken by a tick but in no frame sent yet (or -1)."""
         self.names: tuple[str, ...] = (*RIDER_NAMES, *service.extra_channels)
-        """Published channels: the rider's, then the simulated tail and braid (when on)."""
+        """Published channels: the rider's, the simulated tail and braid (when on), then the rider parts."""
         self.index = {name: i for i, name in enumerate(self.names)}
-        self.default = Subscription(rider=tuple(range(len(self.names))))
+        parts = set(RIDER_PART_NAMES)  # by subscription only: a client of the rules' channels sees what it saw
+        self.default = Subscription(rider=tuple(i for i, n in enumerate(self.names) if n not in parts))
 
     def hello(self) -> dict[str, Any]:
         service = self.service
@@ -174,6 +176,7 @@ class Hub:
             "tick_rate": config.tick.rate,
             "engine_time": service.link.engine_time(),
             "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in self._channels()],
+            "rider_part_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER_PARTS],
             "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
             "axis_convention": AXIS_CONVENTION,
             "length_scale": config.tick.length_scale,
@@ -192,10 +195,24 @@ class Hub:
                 "length_unit": "m",
                 "frame": "local: position in the parent's frame, rotation from the rest (identity); skeletons.axes",
             },
+            "saddle": self._saddle_hello(),
+        }
+
+    def _saddle_hello(self) -> dict[str, Any]:
+        """What a ``saddle`` subscription carries (docs/protocol.md, "Saddle")."""
+        point = self.service.config.saddle
+        return {
+            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in SADDLE],
+            "point": {"forward": point.forward, "up": point.up, "unit": "m"},
+            "estimate": ["lock", "gait", "stride_hz", "phase", "age"],
+            "locks": list(LOCKS),
+            "gaits": list(GAITS),
         }
 
     def _channels(self) -> list[Any]:
-        return [*RIDER, *(lookup(name) for name in self.service.extra_channels)]
+        """The default subscription's channels (the rider parts are listed apart, by subscription only)."""
+        parts = set(RIDER_PART_NAMES)
+        return [*RIDER, *(lookup(name) for name in self.service.extra_channels if name not in parts)]
 
     def publish(self, records: list[np.ndarray]) -> None:
         """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.

@@ -7,11 +7,14 @@ import logging
 import math
 import time
 import uuid
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+import numpy as np
+
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDLE_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
@@ -24,13 +27,16 @@ from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import DeviceMetrics, plan_devices
-from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
+from riderlive.service.ingest import SADDLE_INPUT, Arbiter, IngestEndpoint, Producer, next_producer_id
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.service.supervisor import TickSupervisor
 from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
+
+if TYPE_CHECKING:
+    from riderlive.bus.rig import RigNode
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +80,7 @@ def make_setup(
         physics_file=config.physics.file,
         extra_channels=extra_channels,
         rider_bounds=(tuple(low), tuple(high)),
+        saddle_point=config.saddle,
     )
 
 
@@ -83,12 +90,14 @@ class Service:
     def __init__(self, config: ServiceConfig) -> None:
         self.config = config
         self.session = uuid.uuid4().hex
-        self.extra_channels: tuple[str, ...] = ()
-        """Channels published after the rider's: the tail and braid when ``physics.tail``."""
+        self.physics_channels: tuple[str, ...] = ()
+        """The tail and braid when ``physics.tail`` (recorded in takes)."""
         if config.physics.tail:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
-            self.extra_channels = physics_channels(config.physics.file)
+            self.physics_channels = physics_channels(config.physics.file)
+        self.extra_channels: tuple[str, ...] = (*self.physics_channels, *RIDER_PART_NAMES)
+        """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params = load_preset(config.tick.preset)
@@ -105,6 +114,8 @@ class Service:
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
         self.ingest = IngestEndpoint(self, self.ranges)
+        self.saddle_ingest = IngestEndpoint(self, self.ranges, SADDLE_INPUT)
+        """``/ws/saddle``: the same endpoint on the saddle's channels, the same arbiter."""
         low, high = self.ranges.limits(HORSE_NAMES, config.tick.length_scale)
         mixed = [a if i % 2 else b for i, (a, b) in enumerate(zip(low, high, strict=True))]
         self._probes = [[0.0] * len(low), low, high, mixed]
@@ -120,6 +131,11 @@ class Service:
         self.link: TickLink
         self.supervisor: TickSupervisor
         self.device_metrics: DeviceMetrics
+        self.sinks: list[Callable[[list[np.ndarray]], None]] = []
+        """More consumers of the tick's records (the stage link); called on the event loop, never waiting."""
+        self.arm_checks: list[Callable[[], str | None]] = []
+        """Each says why arming must wait (e.g. no stage heartbeat), or None."""
+        self.stage: RigNode | None = None
 
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
@@ -127,10 +143,16 @@ class Service:
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
         self.supervisor = TickSupervisor(self.link, self.config, self.on_tick, self.hub.publish_status)
         await self.supervisor.start()
+        if self.config.nats.url is not None:
+            from riderlive.bus.rig import join_stage
+
+            self.stage = await join_stage(self)
 
     async def stop(self) -> None:
         """Goodbye to clients, park the devices and stop the tick, the guardian, the take."""
         await self.hub.goodbye("shutdown")
+        if self.stage is not None:
+            await self.stage.stop()
         await self.supervisor.stop()
         if self._replay_task is not None:
             self._replay_task.cancel()
@@ -152,12 +174,20 @@ class Service:
             start = link.start
             for record in records:
                 engine_t = float(record[L.OUT_ENGINE_T])
-                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], record[L.OUT_RIDER :], engine_t + start)
+                rider = np.concatenate(  # the rider and the physics (not the rider parts), then the saddle
+                    (
+                        record[L.OUT_RIDER : L.OUTPUT_WIDTH + len(self.physics_channels)],
+                        record[L.OUT_SADDLE : L.OUT_ESTIMATE],
+                    )
+                )
+                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], rider, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)
             self.hub.publish(records)
             if self.vmc is not None:
                 self.vmc.publish(records)
+            for sink in self.sinks:
+                sink(records)
         version = link.status_blob.version
         if version != self._status_version:
             self._status_version = version
@@ -281,7 +311,8 @@ class Service:
             "preset": self.params.name,
             "length_scale": self.config.tick.length_scale,
         }
-        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, self.extra_channels, overwrite)
+        extra = (*self.physics_channels, *SADDLE_NAMES)  # the saddle of every tick's horse, after the rider's
+        recorder = TakeRecorder(path, self.config.takes.flush_interval, meta, extra, overwrite)
         self.stop_recording()
         self.recorder = recorder
         self.take_name = path.stem
@@ -314,7 +345,14 @@ class Service:
                 "selection": self.arbiter.selection,
                 "active": self.arbiter.active,
                 "producers": [
-                    {"id": p.id, "name": p.name, "priority": p.priority, "accepted": p.accepted, "rejected": p.rejected}
+                    {
+                        "id": p.id,
+                        "name": p.name,
+                        "kind": p.spec.what,
+                        "priority": p.priority,
+                        "accepted": p.accepted,
+                        "rejected": p.rejected,
+                    }
                     for p in self.arbiter.producers.values()
                 ],
             },

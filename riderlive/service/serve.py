@@ -70,6 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vmc", metavar="HOST:PORT", help="send the rider as a VMC performer (docs/vmc.md)")
     parser.add_argument("--vmc-horse", metavar="HOST:PORT", help="send the horse too, to another port")
     parser.add_argument("--vmc-rate", type=float, metavar="HZ", help="VMC bundles per second (default 60)")
+    parser.add_argument("--nats", metavar="URL", help="join a stage over NATS: nats://HOST:4222 (docs/deployment.md)")
+    parser.add_argument("--stage", metavar="NAME", help="the stage to join (nats.stage)")
+    parser.add_argument("--rig", metavar="NAME", help="this rig's name on the stage (nats.rig; must be unique)")
     parser.add_argument(
         "--arm",
         action="store_true",
@@ -92,8 +95,18 @@ def run(args: argparse.Namespace) -> int:
             )
             if v is not None
         }
-        if overrides or vmc or getattr(args, "tail", False) or getattr(args, "arm", False):
+        stage = {
+            k: v
+            for k, v in (
+                ("url", getattr(args, "nats", None)),
+                ("stage", getattr(args, "stage", None)),
+                ("rig", getattr(args, "rig", None)),
+            )
+            if v is not None
+        }
+        if overrides or vmc or stage or getattr(args, "tail", False) or getattr(args, "arm", False):
             data = config.model_dump()
+            data["nats"].update(stage)
             data["server"].update(overrides)
             data["vmc"].update(vmc)
             if getattr(args, "tail", False):
@@ -104,6 +117,13 @@ def run(args: argparse.Namespace) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"riderlive serve: {exc}", file=sys.stderr)
         return 2
+    if config.nats.url is not None:
+        from riderlive.bus.stage import preflight
+
+        problem = preflight(config.nats)
+        if problem is not None:
+            print(f"riderlive serve: {problem}", file=sys.stderr)
+            return 2
     try:
         app = create_app(config)
     except (ConfigError, ValueError) as exc:

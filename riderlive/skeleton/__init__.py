@@ -4,7 +4,8 @@
   service sends it in its hello; the page poses its 3D view from it).
 - :func:`bone_quaternions`: the rider's per-bone local rotations ``(x, y, z, w)``,
   flattened, for a rider frame in ``channels.RIDER`` order.
-- :func:`rider_pose`, :func:`horse_pose`: full poses (local and world transforms).
+- :func:`rider_pose`, :func:`horse_pose`: full poses (local and world transforms);
+  ``rider_pose(values, tack=True)`` also reads the rider parts (reins, stirrups).
 
 Axis convention: :data:`riderlive.skeleton.rig.AXES`; details in ``docs/skeleton.md``.
 """
@@ -47,9 +48,13 @@ def _as_mapping(values: Sequence[float] | Mapping[str, float], names: tuple[str,
     return dict(zip(names, values, strict=True))
 
 
-def rider_pose(values: Sequence[float] | Mapping[str, float]) -> Pose:
-    """The rider posed by a rider frame (``channels.RIDER`` order, or a name -> value map)."""
-    return solve(rider_rig(), _as_mapping(values, RIDER_NAMES))
+def rider_pose(values: Sequence[float] | Mapping[str, float], tack: bool = False) -> Pose:
+    """The rider posed by a rider frame (``channels.RIDER`` order, or a name -> value map).
+
+    ``tack``: pose with :func:`rider_rig` ``(tack=True)``, which also reads the rider parts
+    (``channels.RIDER_PARTS``, by name in a map): hands on the reins, feet in the stirrups.
+    """
+    return solve(rider_rig(tack), _as_mapping(values, RIDER_NAMES))
 
 
 def horse_pose(values: Sequence[float] | Mapping[str, float]) -> Pose:
@@ -78,10 +83,14 @@ def hello_skeletons() -> dict[str, Any]:
         unity, vrm = HUMANOID.get(bone["name"], (None, None))
         bone["unity"] = unity
         bone["vrm"] = vrm
+    tack = _with_bind_pose(rider_rig(tack=True))
+    for bone, named in zip(tack["bones"], rider["bones"], strict=True):
+        bone["unity"], bone["vrm"] = named["unity"], named["vrm"]
     return {
         "version": SKELETON_VERSION,
         "axes": dict(AXES),
         "rider": rider,
+        "rider_tack": tack,
         "horse": _with_bind_pose(HORSE_RIG),
         "attach": {"rider_root": "horse.saddle"},
         "bone_quaternions": {"skeleton": "rider", "layout": "x, y, z, w per bone, in rider bone order"},

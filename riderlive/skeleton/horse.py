@@ -9,7 +9,9 @@ horse's right; ``rearPivot.t*`` displace the hips from standing (``tz`` + right)
 ``Ry(ry) Rz(rz) Rx(rx)`` (roll first, yaw last) about the hips, where
 ``riderlive.physics`` has it (``pivot_rest``); the tail root is its dock. The skeleton's axes are those of
 :mod:`riderlive.skeleton.rig` and of the channels (right-handed, ``+z`` the horse's
-right), so every channel drives its axis with a positive sign.
+right), so every channel drives its axis with a positive sign. The neck turns at the
+withers by ``Ry(horseNeck.ry) Rz(horseNeck.rz)``, the head at the poll by
+``Rz(horseHead.rz)``; both are optional channels (0: at rest on the trunk).
 """
 
 from __future__ import annotations
@@ -54,6 +56,16 @@ _ROWS: list[tuple[str, str | None, Vec3]] = [
     ("hips", "rearPivot", (-0.05, 0.0, 0.0)),
     *_leg("lb", "hips", False, _HIND_HOCK, _HIND_CANNON),
     *_leg("rb", "hips", True, _HIND_HOCK, _HIND_CANNON),
+    # Tack (appended: bone indices above are unchanged). The reins end at the bit rings
+    # at the corners of the mouth; each stirrup iron hangs from its bar on the saddle
+    # tree, its leather (the iron's offset) long enough for the rider's rest pose, whose
+    # ball of the foot (``lf_toes``) sits in the iron.
+    ("leftRein", "head", (0.15, -0.34, -0.06)),
+    ("rightRein", "head", (0.15, -0.34, 0.06)),
+    ("leftStirrupBar", "saddle", (0.25, -0.05, -0.17)),
+    ("leftStirrup", "leftStirrupBar", (0.06, -0.59, -0.13)),
+    ("rightStirrupBar", "saddle", (0.25, -0.05, 0.17)),
+    ("rightStirrup", "rightStirrupBar", (0.06, -0.59, 0.13)),
 ]
 
 
@@ -75,6 +87,9 @@ HORSE_RIG = Rig(
         Drive("rearPivot.rz", "rearPivot", Z),
         Drive("rearPivot.ry", "rearPivot", Y),
         Drive("backMid.rz", "backMid", Z),
+        Drive("horseNeck.rz", "neck", Z),
+        Drive("horseNeck.ry", "neck", Y),
+        Drive("horseHead.rz", "head", Z),
     ),
     translations=(
         Drive("root.tx", "root", X),

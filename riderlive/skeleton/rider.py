@@ -13,7 +13,11 @@ twists to the left (counter-clockwise seen from above); the foot twist ``*.rx`` 
 rolls the sole outward (mirrored). Wrist targets (``*_wrist.tz`` forward, ``*.ty`` up)
 move with the seat (``cog.tx``, ``cog.ty``); foot targets (``*_foot.tx`` forward,
 ``*_foot.tz`` away from the belly) and knee poles (``*_knee.tz`` away from the belly,
-``*_knee.ty`` up) stay with the saddle.
+``*_knee.ty`` up) stay with the saddle. ``rider_rig(tack=True)`` adds the rider parts
+(``riderlive.rules.parts``) on top: ``*_rein.t*`` to the wrist targets (the hands on the
+reins), ``*_arm.tz`` to the arm poles (elbows out, +), ``*_stirrup.t*`` to the foot
+targets (the leathers); all in the seat frame, ``tz`` + to the right. Without them (or
+with the plain rig) the limbs are Appendix B's.
 """
 
 from __future__ import annotations
@@ -103,7 +107,7 @@ def rider_neutral() -> dict[str, float]:
     return {name: float(v) for name, v in zip(RIDER_NAMES, values, strict=True)}
 
 
-def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
+def _limb_drives(tack: bool) -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
     rotations: list[Drive] = []
     chains: list[Chain] = []
     for p, out in (("lf", -1.0), ("rt", 1.0)):
@@ -114,14 +118,19 @@ def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
             Drive(f"{p}_foot.rz", f"{p}_foot", Z),
         ]
         seat = (Offset("cog.tx", X), Offset("cog.ty", Y))
+        rein = (Offset(f"{p}_rein.tx", X), Offset(f"{p}_rein.ty", Y), Offset(f"{p}_rein.tz", Z)) if tack else ()
+        stirrup = (
+            (Offset(f"{p}_stirrup.tx", X), Offset(f"{p}_stirrup.ty", Y), Offset(f"{p}_stirrup.tz", Z)) if tack else ()
+        )
+        elbow = (Offset(f"{p}_arm.tz", Z, out),) if tack else ()
         chains.append(
             Chain(
                 f"{p}_upperarm",
                 f"{p}_forearm",
                 f"{p}_hand",
                 frame=None,
-                target=(Offset(f"{p}_wrist.tz", X), Offset(f"{p}_wrist.ty", Y), *seat),
-                pole=seat,
+                target=(Offset(f"{p}_wrist.tz", X), Offset(f"{p}_wrist.ty", Y), *seat, *rein),
+                pole=(*seat, *elbow),
             )
         )
         chains.append(
@@ -130,7 +139,7 @@ def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
                 f"{p}_shin",
                 f"{p}_foot",
                 frame=None,
-                target=(Offset(f"{p}_foot.tx", X), Offset(f"{p}_foot.tz", Z, out)),
+                target=(Offset(f"{p}_foot.tx", X), Offset(f"{p}_foot.tz", Z, out), *stirrup),
                 pole=(Offset(f"{p}_knee.tz", Z, out), Offset(f"{p}_knee.ty", Y)),
             )
         )
@@ -138,11 +147,15 @@ def _limb_drives() -> tuple[tuple[Drive, ...], tuple[Chain, ...]]:
 
 
 @functools.cache
-def rider_rig() -> Rig:
-    """The rider rig (built once; its neutral values come from the default rules)."""
-    limb_rotations, chains = _limb_drives()
+def rider_rig(tack: bool = False) -> Rig:
+    """The rider rig (built once; its neutral values come from the default rules).
+
+    ``tack``: the arm and leg IK also read the rider parts (``channels.RIDER_PARTS``:
+    hands on the reins, elbows, feet in the stirrups); the bones are the same.
+    """
+    limb_rotations, chains = _limb_drives(tack)
     return Rig(
-        name="rider",
+        name="rider_tack" if tack else "rider",
         bones=BONES,
         neutral=rider_neutral(),
         rotations=(

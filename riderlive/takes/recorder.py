@@ -30,7 +30,7 @@ from typing import Any
 
 import orjson
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import HORSE_NAMES, HORSE_NECK_HEAD, RIDER_NAMES
 from riderlive.names import check_name
 
 COLUMNS: tuple[str, ...] = ("t", *HORSE_NAMES, *RIDER_NAMES)
@@ -111,6 +111,11 @@ def recover_take(path: Path) -> bool:
     return True
 
 
+_NECK_AT_REST = [0.0] * len(HORSE_NECK_HEAD)
+_BEFORE_NECK = len(HORSE_NAMES) - len(HORSE_NECK_HEAD)
+"""Horse frames of this length lack the optional neck and head (``channels.HORSE_NECK_HEAD``)."""
+
+
 class TakeRecorder:
     """An open take; ``add`` a row per tick, ``close`` at the end."""
 
@@ -160,6 +165,9 @@ class TakeRecorder:
             self.meta["engine_t0"] = engine_t
             if monotonic:
                 self.meta["monotonic_t0"] = monotonic
+        horse = list(horse)
+        if len(horse) == _BEFORE_NECK:  # a frame from before the optional neck and head: at rest
+            horse += _NECK_AT_REST
         row = [engine_t - self._t0, *horse, *rider]
         self._lines.append(",".join(map(repr, map(float, row))))
         self.rows += 1

@@ -102,6 +102,9 @@ class MemoryPlug:
     def on_fault(self, error: BaseException) -> None:
         self.log.append(f"first aid: {type(error).__name__}")
 
+    def idle(self, now: float) -> None:
+        self._maybe_fail("idle")
+
     def takeover(self, pose: Sequence[float]) -> None:
         self.open = True
         self.goals = list(pose)

@@ -289,6 +289,7 @@ class Posing:
         self.back_radius = np.array([rider.back_radius])
         self.braid_offset = np.array(rider.braid_offset)
         self.braid_rest = aim(rider.braid_direction)
+        self.hair_gains = (rider.hair_up_gain, rider.hair_side_gain)
 
     def hindquarters(self, frame: FloatArray) -> Frame:
         yaw = rotation_y(_h(frame, "root.ry"))
@@ -321,7 +322,9 @@ class Posing:
         head_rot = spine @ rotation_y(_r(rider, "head.ry")) @ rotation_z(-_r(rider, "head.rz"))
         back = seat + self.back_ends @ spine.T
         head = Frame(seat + spine @ self.head_offset, head_rot)
-        braid = Frame(head.point(self.braid_offset), head.rotation @ self.braid_rest)
+        up, side = self.hair_gains  # section 8.9: the attributes tilt the braid's tie
+        tilt = rotation_z(-up * _r(rider, "hair.up")) @ rotation_x(-side * _r(rider, "hair.side"))
+        braid = Frame(head.point(self.braid_offset), head.rotation @ tilt @ self.braid_rest)
         return head, braid, Capsules(back[:1], back[1:], self.back_radius)
 
     def anchors(

@@ -25,8 +25,8 @@ def error_for(d: dict[str, Any]) -> ConfigError:
     return info.value
 
 
-def test_the_three_shipped_platforms_load() -> None:
-    assert shipped_platforms() == ["heave_pitch_roll", "stewart_linear", "stewart_rotary"]
+def test_the_shipped_platforms_load() -> None:
+    assert shipped_platforms() == ["heave_pitch_roll", "stewart_compact", "stewart_linear", "stewart_rotary"]
     kinds = {load_platform(name).kind for name in shipped_platforms()}
     assert kinds == set(Kind)
     cfg = load_platform(PLATFORM_DIR / "stewart_rotary.toml")

@@ -15,7 +15,7 @@ from riderlive.channels import HORSE_NAMES
 
 
 class Producer:
-    """Streams frames ``make(t) -> dict`` at ``rate`` Hz to /ws/horse in a thread."""
+    """Streams frames ``make(t) -> dict`` at ``rate`` Hz to /ws/horse (or ``path``) in a thread."""
 
     def __init__(
         self,
@@ -24,9 +24,10 @@ class Producer:
         rate: float = 100.0,
         hello: dict[str, Any] | None = None,
         binary: bool = False,
+        path: str = "/ws/horse",
         **connect_kwargs: Any,
     ) -> None:
-        self.ws: ClientConnection = connect(url + "/ws/horse", **connect_kwargs).__enter__()
+        self.ws: ClientConnection = connect(url + path, **connect_kwargs).__enter__()
         self.welcome = json.loads(self.ws.recv(timeout=5))
         self.make, self.rate, self.binary = make, rate, binary
         self.messages: list[dict[str, Any]] = []
@@ -65,6 +66,42 @@ class Producer:
 
     def close(self) -> None:
         self.closed.set()
+        self.ws.close()
+
+
+class Stream:
+    """Streams recorded rows (``times`` s, ``rows``) to ``path`` at their own timing, in a thread."""
+
+    def __init__(self, url: str, path: str, times: Any, rows: Any, hello: dict[str, Any] | None = None) -> None:
+        self.ws: ClientConnection = connect(url + path).__enter__()
+        self.welcome = json.loads(self.ws.recv(timeout=5))
+        if hello:
+            self.ws.send(json.dumps({"type": "hello", **hello}))
+        self.times, self.rows = [float(t) for t in times], [list(map(float, r)) for r in rows]
+        self.messages: list[dict[str, Any]] = []
+        self.started = time.perf_counter()
+        self.done = threading.Event()
+        threading.Thread(target=self._send, daemon=True).start()
+        threading.Thread(target=self._recv, daemon=True).start()
+
+    def _send(self) -> None:
+        t0 = self.times[0]
+        try:
+            for t, row in zip(self.times, self.rows, strict=True):
+                time.sleep(max(0.0, self.started + (t - t0) - time.perf_counter()))
+                self.ws.send(json.dumps({"t": t, "v": row}))
+        except Exception:
+            pass
+        self.done.set()
+
+    def _recv(self) -> None:
+        try:
+            for message in self.ws:
+                self.messages.append(json.loads(message))
+        except Exception:
+            pass
+
+    def close(self) -> None:
         self.ws.close()
 
 

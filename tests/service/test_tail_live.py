@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES, is_known
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES, is_known
 from riderlive.framefile import read_frames
 from riderlive.physics.config import load_physics
 from riderlive.physics.drive import FixedStepper, TakeSource
@@ -91,7 +91,7 @@ def test_take_records_the_tail_and_equals_an_offline_run(tail_server: tuple[Live
     stopped = server.request("POST", "/api/record/stop").json()["take"]
     path = server.workdir / Path(stopped["path"])
     table = read_frames(path)
-    assert table.names == (*HORSE_NAMES, *RIDER_NAMES, *TAIL)
+    assert table.names == (*HORSE_NAMES, *RIDER_NAMES, *TAIL, *SADDLE_NAMES), "the saddle's after the tail"
     meta = json.loads(path.with_suffix(".json").read_text())
     physics = state["tick"]["physics"]
     assert physics["channels"] == len(TAIL) and physics["errors"] == 0
@@ -99,7 +99,7 @@ def test_take_records_the_tail_and_equals_an_offline_run(tail_server: tuple[Live
     assert meta["engine_t0"] == physics["start"], "the take holds every tick since the physics started"
     data = table.values
     n_h, n_r = len(HORSE_NAMES), len(RIDER_NAMES)
-    horse, rider, recorded = data[:, :n_h], data[:, n_h : n_h + n_r], data[:, n_h + n_r :]
+    horse, rider, recorded = data[:, :n_h], data[:, n_h : n_h + n_r], data[:, n_h + n_r : n_h + n_r + len(TAIL)]
     times = table.times(200.0)  # engine_t - engine_t0: the physics' own clock, to the bit
     model = SkinnedModel.build(load_physics())
     source = TakeSource(times, horse, rider)

@@ -61,27 +61,34 @@ class Server:
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 env=env,
+                start_new_session=True,  # its own process group: stop() ends the tick process too
             )
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
+                self.stop()
                 raise RuntimeError(f"server exited: {log.read_text()[-2000:]}")
             with contextlib.suppress(OSError):
                 self.get("/api/state")
                 return
             time.sleep(0.1)
+        self.stop()  # never leave a server that did not answer behind
         raise RuntimeError(f"server did not answer within {timeout} s: {log.read_text()[-2000:]}")
 
     def stop(self) -> None:
-        if self.process is None:
+        """SIGTERM (the service parks and exits), then kill whatever is left of its process group."""
+        process, self.process = self.process, None
+        if process is None:
             return
-        self.process.send_signal(signal.SIGTERM)
-        try:
-            self.process.wait(10)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait(5)
-        self.process = None
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(5)
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(process.pid, signal.SIGKILL)  # a child the service left (it should leave none)
 
     def request(self, method: str, path: str, body: Any = None) -> Any:
         data = None if body is None else json.dumps(body).encode()
@@ -105,9 +112,11 @@ def _needs_service() -> None:
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     _needs_service()
     s = Server(free_port(), tmp_path_factory.mktemp("serve"))
-    s.start()
-    yield s
-    s.stop()
+    try:
+        s.start()
+        yield s
+    finally:
+        s.stop()
 
 
 @pytest.fixture(scope="session")

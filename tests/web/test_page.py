@@ -12,7 +12,7 @@ import pytest
 from riderlive.channels import BY_NAME, HORSE_NAMES, RIDER_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.rules import RiderModel
-from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_rig
+from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_pose, rider_rig
 from tests.web.conftest import PageUnderTest, Server, free_port, open_page
 
 pytestmark = pytest.mark.browser
@@ -26,7 +26,11 @@ def _recent(p: PageUnderTest, channel: str, seconds: float) -> list[float]:
 def test_page_loads_live_without_console_errors(live_page: PageUnderTest) -> None:
     live_page.wait_for("riderlive.fps > 0", timeout=5)
     assert live_page.state("riderlive.state") == "live"
-    assert live_page.page.locator("#conn").inner_text() == "live"
+    assert live_page.page.locator("#conn").inner_text() == "connected"
+    # Nobody feeds /ws/horse: the procedural fallback drives, and the page says so.
+    live_page.wait_for("riderlive.driverText === 'procedural — waiting for live input'", timeout=5)
+    assert live_page.page.locator("#driver").inner_text() == "procedural — waiting for live input"
+    assert live_page.page.locator("#rigstate").inner_text() == "no rig attached"
     assert live_page.page.locator("#estop").is_visible()
     assert live_page.page.locator("#gone").is_hidden()
     assert live_page.state("riderlive.errors") == []
@@ -41,8 +45,12 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
             "[riderlive.seq, riderlive.values, riderlive.pose.rider, riderlive.pose.horse]"
         )
         poses.append((seq, values, pose))
-        # The page's pose is the Python skeleton's pose of the same frame.
-        expected = np.array(bone_quaternions(values)).reshape(-1, 4)
+        # The page's pose is the Python skeleton's pose of the same frame (with the rider
+        # parts, hands on the reins and feet in the stirrups, when the service publishes them).
+        if live_page.state("riderlive.riderRigName") == "rider_tack":
+            expected = np.array(rider_pose(values, tack=True).local_rotations)  # type: ignore[call-arg]
+        else:
+            expected = np.array(bone_quaternions(values)).reshape(-1, 4)
         got = np.array([pose[n] for n in names])
         assert np.allclose(got, expected, atol=1e-9)
         horse_values = {n: v for n, v in values.items() if n in HORSE_NAMES}
@@ -86,8 +94,14 @@ def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Serv
     live_page.page.locator("#estop").click()
     _wait_estop(server, True, "the e-stop never reached the service")
     live_page.wait_for("document.getElementById('estop').classList.contains('engaged')", timeout=5)
+    # It says that it is latched, and what it stopped: here, nothing (no rig).
+    live_page.wait_for("!document.getElementById('estop-state').hidden", timeout=5)
+    shown = live_page.page.locator("#estop-state").inner_text()
+    assert "E-STOP LATCHED" in shown and "no rig attached" in shown, shown
     live_page.page.locator("#reset").click()
     _wait_estop(server, False, "reset did not clear the e-stop")
+    live_page.wait_for("document.getElementById('estop-state').hidden", timeout=5)
+    assert not live_page.page.locator("#estop").evaluate("b => b.classList.contains('engaged')")
 
 
 def test_space_bar_is_an_estop_and_never_presses_the_focused_button(live_page: PageUnderTest, server: Server) -> None:
@@ -144,11 +158,12 @@ def test_record_button_makes_a_take_that_replays_from_the_list(live_page: PageUn
     live_page.wait_for("document.getElementById('rec-now').textContent === ''", timeout=5)
     names = [t["name"] for t in server.get("/api/takes")["takes"]]
     assert names, "no take was recorded"
-    live_page.wait_for(f"[...document.querySelectorAll('#takes li')].some((li) => li.textContent === {names[0]!r})")
+    row = f"#takes li[data-take='{names[0]}']"
+    live_page.wait_for(f'document.querySelector("{row}") !== null')
     seq = live_page.state("riderlive.seq")
-    page.locator("#takes li", has_text=names[0]).click()
+    page.locator(f"{row} .take-replay").click()
     try:
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 10
         while server.get("/api/state")["source"].get("take") != names[0]:
             assert time.monotonic() < deadline, "clicking the recorded take did not replay it"
             time.sleep(0.05)
@@ -168,8 +183,8 @@ def test_a_take_replays_on_the_page(live_page: PageUnderTest, server: Server) ->
     (takes / "page-test-take.csv").write_text("\n".join(rows) + "\n")
     expected = dict(zip(RIDER_NAMES, RiderModel(scale=DEFAULT_SCALE).evaluate([frame[n] for n in HORSE_NAMES])))
 
-    live_page.wait_for("[...document.querySelectorAll('#takes li')].some((li) => li.textContent === 'page-test-take')")
-    live_page.page.locator("#takes li", has_text="page-test-take").click()
+    live_page.wait_for("document.querySelector('#takes li[data-take=\"page-test-take\"]') !== null")
+    live_page.page.locator("#takes li[data-take='page-test-take'] .take-replay").click()
     try:
         live_page.wait_for("Math.abs(riderlive.values['rearPivot.rz'] - 7.5) < 1e-9", timeout=5)
         state = server.get("/api/state")["source"]
@@ -189,11 +204,13 @@ def test_a_take_replays_on_the_page(live_page: PageUnderTest, server: Server) ->
 
 
 def test_views_switch_the_camera(live_page: PageUnderTest) -> None:
-    spots = {}
-    for view in ("side", "front", "perspective"):
+    spots = {"default": live_page.state("riderlive.camera")}
+    for view in ("side", "front", "perspective", "rear", "rider", "top"):
         live_page.page.locator(f"[data-view={view}]").click()
         spots[view] = live_page.state("riderlive.camera")
-    assert len({tuple(np.round(v, 3)) for v in spots.values()}) == 3
+    # Every preset is its own; "side" is not the view the page opens with.
+    assert len({tuple(np.round(v, 3)) for k, v in spots.items() if k != "default"}) == 6
+    assert not np.allclose(spots["side"], spots["default"], atol=0.1)
     side, front = np.array(spots["side"]), np.array(spots["front"])
     assert abs(side[2]) > 3 * abs(side[0])  # looks along z: at the horse's flank
     assert abs(front[0]) > 3 * abs(front[2])  # looks along x: at the horse's chest
@@ -254,8 +271,8 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
     token = "page-test-token-0123"
     config = f'[security]\ntoken = "{token}"\nrequire_token = true\n\n[tick]\nlength_scale = 1.0\n'
     s = Server(free_port(), tmp_path, extra_config=config)
-    s.start()
     try:
+        s.start()
         without = open_page(browser, s.url)
         without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
         without.page.locator("#estop").click()
@@ -269,7 +286,10 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         # Lengths arrive in thesis units; the page poses the metre skeleton with value / 25.
         values, pose = p.state("[riderlive.values, riderlive.pose.rider]")
         metres = {n: v / DEFAULT_SCALE if BY_NAME[n].kind is Kind.TRANSLATION else v for n, v in values.items()}
-        want = np.array(bone_quaternions({n: metres[n] for n in RIDER_NAMES})).reshape(-1, 4)
+        if p.state("riderlive.riderRigName") == "rider_tack":
+            want = np.array(rider_pose(metres, tack=True).local_rotations)  # type: ignore[call-arg]
+        else:
+            want = np.array(bone_quaternions({n: metres[n] for n in RIDER_NAMES})).reshape(-1, 4)
         assert np.allclose([pose[n] for n in rider_rig().names], want, atol=1e-9)
         first = p.state("riderlive.session")
 
@@ -317,3 +337,40 @@ def test_arm_and_disarm_sit_by_the_estop_and_name_the_rig(live_page: PageUnderTe
         }"""
     )
     assert running == [True, False]
+
+
+def test_the_platform_is_drawn_with_its_actuators_coloured_by_closeness(live_page: PageUnderTest) -> None:
+    """A status with the platform's real ``status()`` (one actuator at its soft limit) fills the
+    platform panel and draws base, top and actuators in the 3D view."""
+    from riderlive.platform.device import PlatformPlug
+    from riderlive.platform.pipeline import PlatformModel
+
+    assert live_page.page.locator("#platform").is_hidden()  # no platform attached to this service
+    plug = PlatformPlug(PlatformModel.load("stewart_compact"), "/dev/null")
+    plug.positions = [plug.lower[0], *plug.model.home_positions[1:]]
+    platform = {"name": plug.name, "state": "running", "detail": "", "fault": None, **plug.status()}
+    shown = live_page.page.evaluate(
+        """(platform) => {
+            riderlive.link.handle({type: "status", estop: false, platform});
+            const rows = [...document.querySelectorAll("#platform-actuators tbody tr")];
+            const g = riderlive.platform.geometry;
+            return {
+                visible: !document.getElementById("platform").hidden,
+                closeness: rows.map((r) => Number(r.dataset.closeness)),
+                target: rows.map((r) => r.cells[1].textContent),
+                state: document.getElementById("platform-state").textContent,
+                drawn: riderlive.platform.group.visible,
+                points: g.getAttribute("position").count,
+                firstLeg: Array.from(g.getAttribute("color").array.slice(12, 15)),
+            };
+        }""",
+        platform,
+    )
+    assert shown["visible"] and shown["drawn"]
+    home = plug.status()["platform"]["actuators"][1]["closeness"]  # home is 40.4 mm, mid-range 42.5
+    assert shown["closeness"][0] == 1.0 and shown["closeness"][1:] == [pytest.approx(home, abs=1e-3)] * 5
+    assert shown["target"][0] == "5.0"  # mm of stroke at the soft minimum
+    assert shown["state"].startswith("stewart_compact: running")
+    assert shown["points"] == 6 * 3 * 2  # per actuator: a base edge, a top edge, the actuator
+    red, green, _ = shown["firstLeg"]
+    assert red > 0.8 and green < 0.2  # at its limit: red

@@ -1,5 +1,7 @@
-// The control panel: REST calls to the service (source, presets, weights, animator,
-// record, takes, e-stop) and the rig's servo table. Paths: docs/protocol.md.
+// The control panel: REST calls to the service (source, moves, presets, weights,
+// animator, record, e-stop, reset) and the rig's servo table. Paths: docs/protocol.md.
+
+import { filterWeights, renderWeights } from "./weights.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -16,7 +18,8 @@ export function controlToken() {
   return sessionStorage.getItem("riderlive.token");
 }
 
-export async function api(method, path, body) {
+/** A REST call; the JSON answer (or a Blob with `as = "blob"`); throws with the service's reason. */
+export async function api(method, path, body, as = "json") {
   const init = { method, headers: {} };
   const token = controlToken();
   if (token) init.headers.authorization = `Bearer ${token}`;
@@ -25,6 +28,7 @@ export async function api(method, path, body) {
     init.body = JSON.stringify(body);
   }
   const res = await fetch(path, init);
+  if (res.ok && as === "blob") return res.blob();
   const text = await res.text();
   let data = null;
   try {
@@ -37,13 +41,13 @@ export async function api(method, path, body) {
   return data;
 }
 
-function say(text, bad = false) {
+export function say(text, bad = false) {
   const m = $("message");
   m.textContent = text;
   m.style.color = bad ? "var(--bad)" : "";
 }
 
-async function attempt(what, fn) {
+export async function attempt(what, fn) {
   try {
     const out = await fn();
     say(`${what}: ok`);
@@ -87,21 +91,16 @@ function slider(parent, key, value, lo, hi, onInput) {
   return input;
 }
 
-function rangeFor(v) {
-  if (v === 0) return [-1, 1];
-  const a = Math.abs(v);
-  return v > 0 ? [0, 3 * a] : [-3 * a, 0];
-}
-
 /**
  * The e-stop: bound first, before anything else on the page can fail. Click, or the
  * space bar anywhere but in a text field (a focused button loses focus first, so the
  * space bar never presses it as well).
  */
-export function bindEstop() {
+export function bindEstop(after = () => {}) {
   const fire = async () => {
-    $("estop").classList.add("engaged");
+    $("estop").classList.add("engaged"); // at once; the service's answer and status confirm or clear it
     await attempt("E-STOP", () => api("POST", "/api/estop"));
+    after();
   };
   $("estop").addEventListener("click", fire);
   document.addEventListener("keydown", (ev) => {
@@ -141,18 +140,22 @@ export class Controls {
 
   bind() {
     $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
-    // Arming names the device (the service refuses any other name); Disarm parks it.
-    $("arm").addEventListener("click", () => this.device && attempt(`arm ${this.device}`, () => api("POST", "/api/arm", { device: this.device, by: "page" })));
-    $("disarm").addEventListener("click", () => attempt("disarm", () => api("POST", "/api/disarm", this.device ? { device: this.device, by: "page" } : {})));
     $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
     $("src-kind").addEventListener("change", () => this.showSourceRows());
     $("src-apply").addEventListener("click", () => this.applySource());
-    $("jump").addEventListener("click", () => attempt("jump", () => api("POST", "/api/horse/perform", { move: "jump" })));
+    for (const move of ["jump", "rear", "stop", "buck"]) {
+      const b = document.createElement("button");
+      b.id = `move-${move}`;
+      b.textContent = move[0].toUpperCase() + move.slice(1);
+      b.title = `ask the procedural horse for a ${move}`;
+      b.addEventListener("click", () => attempt(move, () => api("POST", "/api/horse/perform", { move })));
+      $("moves").appendChild(b);
+    }
     $("preset").addEventListener("change", async () => {
       await attempt("preset", () => api("PUT", "/api/preset", { name: $("preset").value }));
       await this.loadParams();
     });
-    $("param-filter").addEventListener("input", () => this.filterParams());
+    $("param-filter").addEventListener("input", () => filterWeights());
     $("rec-start").addEventListener("click", () => attempt("record", () => api("POST", "/api/record/start", {})).then(() => this.refresh()));
     $("rec-stop").addEventListener("click", () => attempt("stop", () => api("POST", "/api/record/stop")).then(() => this.refresh()));
     $("anim-zero").addEventListener("click", () => {
@@ -205,19 +208,13 @@ export class Controls {
   async loadParams() {
     const params = await attempt("params", () => api("GET", "/api/params"));
     if (!params) return;
-    const box = $("params");
-    box.innerHTML = "";
-    for (const [key, value] of Object.entries(params)) {
-      if (typeof value !== "number") continue;
-      const [lo, hi] = rangeFor(value);
-      slider(box, key, value, lo, hi, this.onParam);
+    let groups = null;
+    try {
+      groups = (await api("GET", "/api/params/groups")).groups;
+    } catch {
+      /* an older service: grouped by the keys' prefixes */
     }
-    this.filterParams();
-  }
-
-  filterParams() {
-    const f = $("param-filter").value.trim();
-    for (const label of $("params").children) label.hidden = f !== "" && !label.textContent.includes(f);
+    renderWeights(params, groups, this.onParam);
   }
 
   /** State, takes: polled about once a second. */
@@ -233,48 +230,20 @@ export class Controls {
     if (!this.sourceShown && src.kind) {
       this.sourceShown = true;
       $("src-kind").value = src.kind;
+      if (src.gait) $("src-gait").value = src.gait;
+      if (typeof src.speed === "number") $("src-speed").value = src.speed;
+      $("src-speed-out").textContent = (+$("src-speed").value).toFixed(1);
       this.showSourceRows();
     }
     $("src-now").textContent = src.kind ? `now: ${src.kind}${src.gait ? ` ${src.gait}` : ""}${src.take ? ` ${src.take}` : ""}` : "";
     const rec = state.recording;
     $("rec-now").textContent = rec ? `recording ${rec.name} (${rec.rows} rows)` : "";
-    const estopped = state.estop === true || (state.tick && state.tick.estop === true);
-    this.state.estop = Boolean(estopped);
-    $("estop").classList.toggle("engaged", Boolean(estopped));
-    try {
-      const takes = await api("GET", "/api/takes");
-      const list = (Array.isArray(takes) ? takes : takes.takes || []).map((t) => (typeof t === "string" ? t : t.name));
-      if (list.join("\n") === this.shownTakes) return;
-      this.shownTakes = list.join("\n");
-      const ul = $("takes");
-      ul.innerHTML = "";
-      for (const name of list) {
-        const li = document.createElement("li");
-        li.textContent = name;
-        li.title = "replay this take";
-        li.addEventListener("click", () => this.applySource(name));
-        ul.appendChild(li);
-      }
-      const sel = $("src-take");
-      const cur = sel.value;
-      sel.innerHTML = list.map((n) => `<option>${n}</option>`).join("");
-      if (list.includes(cur)) sel.value = cur;
-    } catch {
-      /* takes are optional */
-    }
+    if (this.onState) this.onState(state);
+    if (this.takes) await this.takes.refresh();
   }
 
-  /** Status from the websocket (the tick's status; `rig` is the rig's, with its servos). */
-  status(msg) {
-    if (typeof msg.estop === "boolean") $("estop").classList.toggle("engaged", msg.estop);
-    const rig = msg.rig || null;
-    const fault = rig && rig.fault ? ` · fault: ${rig.fault.message || rig.fault.kind || JSON.stringify(rig.fault)}` : "";
-    $("rigstate").textContent = rig ? `${rig.name || "rig"}: ${rig.state}${rig.detail ? ` (${rig.detail})` : ""}${fault}` : "";
-    this.device = rig ? rig.name : null;
-    const state = rig ? rig.state : "";
-    $("arm").hidden = $("disarm").hidden = !rig;
-    $("arm").disabled = !["disarmed", "parked"].includes(state);
-    $("disarm").disabled = !["homing", "soft_start", "running"].includes(state);
+  /** The servo table of a rig (`rig.servos` of a status message), shown while a rig is attached. */
+  servos(rig) {
     const servos = rig ? rig.servos : null;
     if (!Array.isArray(servos) || servos.length === 0) {
       $("rig").hidden = true;

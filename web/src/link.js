@@ -19,6 +19,7 @@ export class RiderLink {
     this.ws = null;
     this.frames = 0;
     this.restarts = 0;
+    this.subscription = {}; // more subscribe fields (panels: e.g. {saddle: true})
     this.connect();
   }
 
@@ -77,7 +78,11 @@ export class RiderLink {
         this.tickRate = msg.tick_rate;
         this.on.hello(msg);
         const rate = Math.min(this.rate, msg.tick_rate || this.rate);
-        this.send({ type: "subscribe", horse_channels: horse, rate });
+        // The rider parts (reins, stirrups) come by subscription only, listed apart.
+        this.parts = (msg.rider_part_channels || []).map((c) => c.name);
+        const sub = { type: "subscribe", horse_channels: horse, rate, ...this.subscription };
+        if (this.parts.length) sub.channels = [...new Set([...this.riderNames, ...this.parts])];
+        this.send(sub);
         this.setState("live");
         break;
       }
@@ -101,7 +106,7 @@ export class RiderLink {
     }
   }
 
-  /** A frame as {seq, t, sourceT, driver, values: {name: value}}. */
+  /** A frame as {seq, t, sourceT, driver, values: {name: value}, saddle, estimate}. */
   toFrame(msg) {
     const values = {};
     const put = (names, list) => {
@@ -110,7 +115,7 @@ export class RiderLink {
     };
     put(this.riderNames, msg.values);
     put(this.horseNames, msg.horse);
-    return { seq: msg.seq, t: msg.t, sourceT: msg.source_t, driver: msg.driver, values };
+    return { seq: msg.seq, t: msg.t, sourceT: msg.source_t, driver: msg.driver, values, saddle: msg.saddle, estimate: msg.estimate };
   }
 
   send(obj) {

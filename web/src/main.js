@@ -1,16 +1,24 @@
-// riderlive previs page: wires the link (websocket), the rigs, the 3D view, the plots
-// and the controls. Page state for tests and the curious: window.riderlive.
+// riderlive previs page: wires the link (websocket), the rigs, the 3D view, the plots,
+// the status lines and the controls. Page state for tests and the curious: window.riderlive.
+// New panels: see panels.js (one module per panel, one line here).
 
-import { bindEstop, Controls, controlToken } from "./controls.js";
+import { api, attempt, bindEstop, Controls, controlToken } from "./controls.js";
 import { LatencyPanel } from "./latency.js";
 import { RiderLink } from "./link.js";
+import { emit, on } from "./panels.js";
+import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
 import { compileRig, solve } from "./rig.js";
-import { chainPoints, placed, View } from "./scene.js";
+import { SaddlePanel } from "./saddle.js";
+import { chainPoints, DEFAULT_VIEW, placed, View, VIEWS, WRAP } from "./scene.js";
+import { Status } from "./status.js";
+import { Takes } from "./takes.js";
 
 const $ = (id) => document.getElementById(id);
 const DEFAULT_PLOTS = ["lower_back.rz", "cog.ty", "head.rz", "lfHoof.ty"];
 const METRE_SCALE = 25; // thesis rig units per metre: the service speaks metres at this length_scale
+const QUERY = new URLSearchParams(location.search);
+const RENDER = QUERY.get("render") === "sticks" ? "sticks" : "mesh";
 
 const page = {
   connected: false,
@@ -24,6 +32,8 @@ const page = {
   pose: { rider: {}, horse: {} },
   service: null,
   errors: [],
+  render: RENDER,
+  exaggeration: 1,
 };
 window.riderlive = page;
 
@@ -38,34 +48,109 @@ function groupChain(names, prefix) {
   return [...groups.keys()].sort().map((k) => groups.get(k));
 }
 
+/** The 3D view, or null with a message saying why (no WebGL 2: the plots and controls still work). */
+function makeView(skeletons) {
+  try {
+    const view = new View($("scene"), compileRig(skeletons.horse), compileRig(skeletons.rider), { render: RENDER });  // the bodies need only the bones
+    page.view3d = true;
+    return view;
+  } catch (err) {
+    page.view3d = false;
+    $("no3d").hidden = false;
+    $("no3d").textContent = `No 3D view: this browser gives no WebGL 2 (${err.message || err}). Plots, status and controls work.`;
+    return null;
+  }
+}
+
+/** Rider values drawn `k` times further from the rig's rest (display only). */
+function exaggerated(values, rig, names, k) {
+  if (k === 1) return values;
+  const out = { ...values };
+  for (const n of names) if (n in out && n in rig.neutral) out[n] = rig.neutral[n] + k * (out[n] - rig.neutral[n]);
+  return out;
+}
+
 async function start() {
-  const skeletons = await (await fetch("skeletons.json")).json();
-  // Served by the same service as the frames, so always the skeletons it poses with.
-  const horseRig = compileRig(skeletons.horse);
-  const riderRig = compileRig(skeletons.rider);
-  const view = new View($("scene"), horseRig, riderRig);
   const plots = new Plots($("plot"));
   const controls = new Controls(page);
-  page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
-  page.setView = (name) => view.setView(name);
+  const status = new Status(page, api, attempt);
+  page.status = status;
+  const takes = new Takes(api, attempt, (name) => controls.applySource(name), () => page.tickRate || 120);
+  controls.takes = takes;
+  controls.onState = (state) => status.fromState(state);
   page.history = (name, seconds) => plots.recent(name, seconds);
-  Object.defineProperty(page, "camera", { get: () => view.camera.position.toArray() });
-  for (const b of document.querySelectorAll("[data-view]")) b.addEventListener("click", () => view.setView(b.dataset.view));
+  page.plots = plots;
 
-  let chains = { tail: [], braid: [] };
-  let toMetres = 1;
-  let lengthChannels = [];
-  let latest = null;
-  let frameCount = 0;
+  // Skeletons: the hello's (the service poses with them); /skeletons.json until it comes.
+  let skeletons = await (await fetch("skeletons.json")).json();
+  // The rider parts (hands on the reins, feet in the stirrups) pose with the `rider_tack`
+  // rig when the service publishes them; without them the rider rig is Appendix B's limbs.
+  let withParts = false;
+  const riderOf = (sk) => compileRig(withParts && sk.rider_tack ? sk.rider_tack : sk.rider);
+  let horseRig = compileRig(skeletons.horse);
+  let riderRig = riderOf(skeletons);
+  let view = makeView(skeletons);
+  const useSkeletons = (sk, parts) => {
+    if (!sk || !sk.rider || !sk.horse) return;
+    if (parts !== withParts) {
+      withParts = parts;
+      riderRig = riderOf(JSON.stringify(sk) === JSON.stringify(skeletons) ? skeletons : sk);
+    }
+    if (JSON.stringify(sk) === JSON.stringify(skeletons)) return;
+    skeletons = sk;
+    horseRig = compileRig(sk.horse);
+    riderRig = riderOf(sk);
+    if (view) view.renderer.dispose();
+    const canvas = $("scene").cloneNode(false);
+    $("scene").replaceWith(canvas);
+    view = makeView(sk);
+    if (view) view.setView(page.viewName || DEFAULT_VIEW);
+    if (view && page.platform) view.scene.add(page.platform.group);
+  };
+  page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
+  const saddle = new SaddlePanel($("panel"), page);
+  const platform = new PlatformView(view ? view.scene : { add() {} }, $("panel"), controlToken());
+  page.platform = platform;
+  Object.defineProperty(page, "riderRigName", { get: () => (withParts && skeletons.rider_tack ? "rider_tack" : "rider") });
+
+  // View controls.
+  for (const [name, v] of Object.entries(VIEWS)) {
+    const b = document.createElement("button");
+    b.dataset.view = name;
+    b.textContent = v.label;
+    b.addEventListener("click", () => page.setView(name));
+    $("view-buttons").appendChild(b);
+  }
+  page.setView = (name) => {
+    page.viewName = name;
+    if (view) view.setView(name);
+    for (const b of document.querySelectorAll("[data-view]")) b.classList.toggle("on", b.dataset.view === name);
+  };
+  page.setView(DEFAULT_VIEW);
+  Object.defineProperty(page, "camera", { get: () => (view ? view.camera.position.toArray() : null) });
+  $("camera").addEventListener("change", () => view && view.setFollow($("camera").value === "follow"));
+  $("exaggeration").addEventListener("input", () => {
+    page.exaggeration = +$("exaggeration").value;
+    $("exaggeration-out").textContent = page.exaggeration.toFixed(1);
+  });
+  page.setIdColors = (onOff) => view && view.setIdColors(onOff);
+  page.project = (p) => (view ? view.project(p) : null);
+
+  // Plots.
   const chips = () => {
-    $("plot-chips").innerHTML = plots.chosen
-      .map((n) => `<span class="chip" style="color:${plots.color(n)}" data-name="${n}" title="remove">${n} ×</span>`)
-      .join("");
-    for (const c of $("plot-chips").children)
+    $("plot-chips").innerHTML = "";
+    for (const n of plots.chosen) {
+      const c = document.createElement("span");
+      c.className = "chip";
+      c.style.color = plots.color(n);
+      c.textContent = `${n} ×`;
+      c.title = "remove";
       c.addEventListener("click", () => {
-        plots.chosen = plots.chosen.filter((n) => n !== c.dataset.name);
+        plots.chosen = plots.chosen.filter((x) => x !== n);
         chips();
       });
+      $("plot-chips").appendChild(c);
+    }
   };
   $("plot-add").addEventListener("change", () => {
     const n = $("plot-add").value;
@@ -73,34 +158,57 @@ async function start() {
     $("plot-add").value = "";
     chips();
   });
+  $("plot-window").addEventListener("change", () => (plots.window = +$("plot-window").value));
+  $("plot-own").addEventListener("change", () => (plots.ownScale = $("plot-own").checked));
+
+  let chains = { tail: [], braid: [] };
+  let toMetres = 1;
+  let lengthChannels = [];
+  let riderNames = [];
+  let latest = null;
+  let frameCount = 0;
 
   const link = new RiderLink(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws/rider`, {
     hello(msg) {
       page.session = msg.session;
+      useSkeletons(msg.skeletons, (msg.rider_part_channels || []).length > 0);
       // The skeletons are in metres; a service with another length_scale speaks other units.
       toMetres = (msg.length_scale || METRE_SCALE) / METRE_SCALE;
-      lengthChannels = [...(msg.channels || []), ...(msg.horse_channels || [])]
-        .filter((c) => c.unit === "length")
-        .map((c) => c.name);
+      saddle.hello(toMetres);
+      const channels = [...(msg.channels || []), ...(msg.rider_part_channels || []), ...(msg.horse_channels || [])];
+      lengthChannels = channels.filter((c) => c.unit === "length").map((c) => c.name);
+      const unitOf = { length: msg.length_unit || "m", deg: "°" };
+      for (const c of channels) plots.units[c.name] = unitOf[c.unit] ?? (c.unit === "unitless" ? "" : c.unit || "");
+      riderNames = [...(msg.channels || []), ...(msg.rider_part_channels || [])].map((c) => c.name);
       page.tickRate = msg.tick_rate;
-      const all = [...(msg.channels || []), ...(msg.horse_channels || [])].map((c) => c.name);
+      const all = [...new Set(channels.map((c) => c.name))];
       chains = { tail: groupChain(all, "tail"), braid: groupChain(all, "braid") };
       $("plot-add").innerHTML = `<option value="">add a channel…</option>${all.map((n) => `<option>${n}</option>`).join("")}`;
       if (plots.chosen.length === 0) plots.chosen = DEFAULT_PLOTS.filter((n) => all.includes(n));
       chips();
       controls.load(msg.channels || []);
+      status.fetchDevices();
+      emit("hello", msg);
     },
     frame(frame) {
       latest = frame;
       frameCount += 1;
       page.frames += 1;
       page.seq = frame.seq;
-      page.driver = frame.driver;
+      if (frame.driver !== page.driver) {
+        page.driver = frame.driver;
+        status.show();
+      }
       plots.push(frame.t, frame.values);
+      saddle.frame(frame);
+      emit("frame", frame);
     },
     status(msg) {
-      page.status = msg;
-      controls.status(msg);
+      page.tickStatus = msg;
+      status.fromStatus(msg);
+      controls.servos(msg.rig || null);
+      platform.status(msg);
+      emit("status", msg);
     },
     state(state, why) {
       page.state = state;
@@ -108,11 +216,13 @@ async function start() {
       const pill = $("conn");
       pill.className = `pill ${state}`;
       pill.dataset.state = state;
-      pill.textContent = state === "live" ? "live" : state === "gone" ? "service gone" : "connecting…";
+      pill.textContent = state === "live" ? "connected" : state === "gone" ? "service gone" : "connecting…";
       $("gone").hidden = state !== "gone";
       $("gone-why").textContent = why || "no connection";
+      emit("state", state);
     },
   }, 120, controlToken());
+  link.subscription = SaddlePanel.subscription();
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
   const latency = new LatencyPanel($("panel"), $("message"));
@@ -128,10 +238,10 @@ async function start() {
   let scaleLocked = false;
   page.setRenderScale = (scale) => {
     scaleLocked = scale !== null;
-    if (scaleLocked) view.setScale((page.renderScale = scale));
+    if (scaleLocked && view) view.setScale((page.renderScale = scale));
   };
   function adaptScale() {
-    if (scaleLocked) return;
+    if (scaleLocked || !view) return;
     if (page.fps < 40 && scaleStep < SCALES.length - 1) {
       scaleStep += 1;
       goodSeconds = 0;
@@ -141,6 +251,72 @@ async function start() {
     } else return;
     page.renderScale = SCALES[scaleStep];
     view.setScale(page.renderScale);
+  }
+
+  /** Pose both skeletons for `values` and draw them. */
+  function drawFrame(values) {
+    let v = values;
+    if (toMetres !== 1) {
+      v = { ...values };
+      for (const n of lengthChannels) if (n in v) v[n] *= toMetres;
+    }
+    const follow = !view || view.follow;
+    // Following: the horse stays at the origin, the ground scrolls. Fixed: the horse
+    // travels, coming round every WRAP metres.
+    const tx = v["root.tx"] || 0;
+    const tz = v["root.tz"] || 0;
+    const shift = follow ? [tx, tz] : [tx - (((tx % WRAP) + WRAP) % WRAP) + WRAP / 2, tz - (((tz % WRAP) + WRAP) % WRAP) + WRAP / 2];
+    const hv = { ...v, "root.tx": tx - shift[0], "root.tz": tz - shift[1] };
+    const horsePose = solve(horseRig, hv);
+    const truth = solve(riderRig, v);
+    const riderPose = page.exaggeration === 1 ? truth : solve(riderRig, exaggerated(v, riderRig, riderNames, page.exaggeration));
+    const horseW = placed(horsePose, [0, 0, 0, 1], [0, 0, 0]);
+    const si = horseRig.index.saddle;
+    const riderW = placed(riderPose, horseW.rotations[si], horseW.positions[si]);
+    const byName = (rig, list) => Object.fromEntries(rig.bones.map((b, i) => [b.name, list[i]]));
+    page.pose = {
+      // Built when read (tests, the console), not every animation frame; `rider` is the published pose.
+      get rider() {
+        return byName(riderRig, truth.localRotations);
+      },
+      get horse() {
+        return byName(horseRig, horsePose.localRotations);
+      },
+      get riderWorld() {
+        return byName(riderRig, riderW.positions);
+      },
+      get horseWorld() {
+        return byName(horseRig, horseW.positions);
+      },
+    };
+    if (!view) return;
+    // Chain positions (tail_NN.t*, braid_NN.t*) are world positions: shifted as the horse is.
+    const toView = (p) => [p[0] - shift[0], p[1], p[2] - shift[1]];
+    const ti = horseRig.index.tailRoot;
+    const tailPts = ti === undefined ? null : chainPoints(v, chains.tail, horseW.positions[ti], horseW.rotations[ti], toView);
+    const hi = riderRig.index.head;
+    const braidPts = hi === undefined ? null : chainPoints(v, chains.braid, riderW.positions[hi], riderW.rotations[hi], toView);
+    view.draw({
+      horse: { pose: horsePose, world: horseW },
+      rider: { pose: riderPose, world: riderW },
+      tail: tailPts && { values: v, groups: chains.tail, points: tailPts },
+      braid: braidPts && { points: braidPts },
+      travel: follow ? tx : 0,
+    });
+    page.tack = view.tackUsed;
+    page.tackBones = view.tack ? view.tack.uses : null;
+  }
+
+  // The 3D view as drawn, with the pose it shows (tests): taken right after the next render.
+  const snapshots = [];
+  page.snapshot = () => new Promise((resolve) => snapshots.push(resolve));
+  function takeSnapshots() {
+    if (!snapshots.length || !view) return;
+    const shot = { image: view.canvas.toDataURL("image/png"), width: view.canvas.width, scale: view.canvas.width / view.canvas.clientWidth };
+    shot.riderWorld = page.pose.riderWorld;
+    shot.horseWorld = page.pose.horseWorld;
+    shot.values = page.values;
+    for (const resolve of snapshots.splice(0)) resolve(shot);
   }
 
   let rafCount = 0;
@@ -158,54 +334,17 @@ async function start() {
       lastSecond = now;
       adaptScale();
       $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
-      $("driver").textContent = page.driver ? `driver: ${page.driver}` : "";
     }
-    if (latest && latest !== lastLatest) {
-      lastLatest = latest;
-      page.values = latest.values;
-      let values = latest.values;
-      if (toMetres !== 1) {
-        values = { ...values };
-        for (const n of lengthChannels) if (n in values) values[n] *= toMetres;
-      }
-      const hv = { ...values };
-      const follow = $("follow").checked;
-      if (follow) {
-        hv["root.tx"] = 0;
-        hv["root.tz"] = 0;
-      }
-      const horsePose = solve(horseRig, hv);
-      const riderPose = solve(riderRig, values);
-      const horseW = placed(horsePose, [0, 0, 0, 1], [0, 0, 0]);
-      const si = horseRig.index.saddle;
-      const riderW = placed(riderPose, horseW.rotations[si], horseW.positions[si]);
-      const byName = (rig, list) => Object.fromEntries(rig.bones.map((b, i) => [b.name, list[i]]));
-      page.pose = {
-        // Built when read (tests, the console), not every animation frame.
-        get rider() {
-          return byName(riderRig, riderPose.localRotations);
-        },
-        get horse() {
-          return byName(horseRig, horsePose.localRotations);
-        },
-        get riderWorld() {
-          return byName(riderRig, riderW.positions);
-        },
-      };
-      // Chain positions (tail_NN.t*, braid_NN.t*) are world positions; on the treadmill the
-      // horse's travel (root.tx, root.tz) is taken out as it is for the horse.
-      const rootTx = follow ? values["root.tx"] || 0 : 0;
-      const rootTz = follow ? values["root.tz"] || 0 : 0;
-      const toHorse = (p) => [p[0] - rootTx, p[1], p[2] - rootTz];
-      const ti = horseRig.index.tailRoot;
-      view.chain("tail", chainPoints(values, chains.tail, horseW.positions[ti], horseW.rotations[ti], toHorse));
-      const hi = riderRig.index.head;
-      view.chain("braid", chainPoints(values, chains.braid, riderW.positions[hi], riderW.rotations[hi], toHorse));
-      view.update(horseW, riderW, follow ? values["root.tx"] || 0 : 0);
-    } else if (!latest) {
-      const horseW = placed(solve(horseRig, {}), [0, 0, 0, 1], [0, 0, 0]);
-      const si = horseRig.index.saddle;
-      view.update(horseW, placed(solve(riderRig, {}), horseW.rotations[si], horseW.positions[si]), 0);
+    try {
+      if (latest && (latest !== lastLatest || page.exaggeration !== 1)) {
+        lastLatest = latest;
+        page.values = latest.values;
+        drawFrame(latest.values);
+        takeSnapshots();
+      } else if (!latest) drawFrame({});
+    } catch (err) {
+      page.errors.push(String(err));
+      throw err;
     }
     if (now - lastPlot >= 33) {
       lastPlot = now; // plots at <= 30 Hz: enough for the eye, half the canvas work
@@ -217,8 +356,9 @@ async function start() {
   requestAnimationFrame(tick);
 }
 
-bindEstop();
+bindEstop(() => page.status && page.status.fetchDevices());
 window.addEventListener("error", (ev) => page.errors.push(String(ev.message)));
+page.on = on;
 start().catch((err) => {
   page.errors.push(String(err));
   $("message").textContent = `page failed to start: ${err}`;

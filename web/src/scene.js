@@ -1,151 +1,160 @@
-// The 3D view: horse and rider drawn from posed skeletons (three.js, right-handed,
-// +y up; riderlive's skeleton axes are +x forward, +y up, +z right, so no conversion).
+// The 3D view: ground with contact shadows, the horse and rider (skinned meshes, or the
+// primitive sticks with ?render=sticks), tack, tail and braid; camera presets and a
+// camera that follows the horse or stays fixed. three.js is right-handed, +y up;
+// riderlive's skeleton axes are +x forward, +y up, +z right, so no conversion.
 
 import {
-  AmbientLight,
-  BoxGeometry,
-  BufferAttribute,
-  BufferGeometry,
+  CanvasTexture,
   Color,
-  CylinderGeometry,
   DirectionalLight,
-  GridHelper,
-  InstancedMesh,
-  Line,
-  LineBasicMaterial,
-  Matrix4,
+  HemisphereLight,
   Mesh,
+  MeshBasicMaterial,
   MeshLambertMaterial,
   PerspectiveCamera,
-  Quaternion,
+  PlaneGeometry,
+  RepeatWrapping,
   Scene,
-  SphereGeometry,
+  SRGBColorSpace,
   Vector3,
   WebGLRenderer,
 } from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
+import { Bodies } from "./bodies.js";
 import { qmul, rotate } from "./rig.js";
+import { Sticks } from "./sticks.js";
+import { Tack } from "./tack.js";
+import { restingTail, tailStrands, Tubes } from "./tail.js";
 
-const UP = new Vector3(0, 1, 0);
-const VIEWS = {
-  side: { pos: [0.15, 1.3, 4.9], target: [0.15, 1.15, 0] },
-  front: { pos: [4.9, 1.5, 0.0], target: [0, 1.15, 0] },
-  perspective: { pos: [3.2, 2.4, 3.6], target: [0, 1.1, 0] },
+/** Camera presets: about the horse when the camera follows, about the track's middle when fixed. */
+export const VIEWS = {
+  perspective: { pos: [3.4, 2.3, -3.4], target: [0.05, 1.2, 0], label: "¾ front" },
+  side: { pos: [0.1, 1.35, -5.2], target: [0.1, 1.2, 0], label: "Side" },
+  front: { pos: [5.2, 1.6, 0.0], target: [0, 1.2, 0], label: "Front" },
+  rear: { pos: [-4.8, 2.0, 1.2], target: [0, 1.2, 0], label: "Rear" },
+  rider: { pos: [1.7, 2.5, -2.3], target: [0.05, 1.95, 0], label: "Rider" },
+  top: { pos: [0.0, 6.5, -0.01], target: [0, 1.0, 0], label: "Top" },
 };
-const CHAIN_SEGMENT = 0.07;
+export const DEFAULT_VIEW = "perspective";
+/** A fixed camera sees the horse come round every WRAP metres of travel. */
+export const WRAP = 24;
+const SEGMENT = 0.07;
 
-/** Bone segments: one instanced cylinder (a single draw call) from each joint's parent to the joint. */
-class Bones {
-  constructor(scene, rig, material, radius) {
-    this.rig = rig;
-    const geom = new CylinderGeometry(1, 1, 1, 8, 1);
-    geom.translate(0, 0.5, 0);
-    // The root's placement is no bone; nor is the step from the root to its first joint.
-    this.drawn = rig.bones.map((b, i) => i).filter((i) => {
-      const b = rig.bones[i];
-      return b.parent >= 0 && rig.bones[b.parent].parent >= 0;
-    });
-    this.radius = this.drawn.map((i) => (typeof radius === "function" ? radius(rig.bones[i]) : radius));
-    this.mesh = new InstancedMesh(geom, material, this.drawn.length);
-    this.mesh.frustumCulled = false;
-    scene.add(this.mesh);
-    this.m = new Matrix4();
-    this.q = new Quaternion();
-    this.a = new Vector3();
-    this.d = new Vector3();
-    this.s = new Vector3();
+function groundTexture() {
+  const c = document.createElement("canvas");
+  c.width = c.height = 256;
+  const g = c.getContext("2d");
+  g.fillStyle = "#6f6250";
+  g.fillRect(0, 0, 256, 256);
+  let seed = 7;
+  const rnd = () => ((seed = (seed * 16807) % 2147483647) / 2147483647);
+  for (let i = 0; i < 2500; i++) {
+    const v = 90 + rnd() * 40;
+    g.fillStyle = `rgba(${v + 20},${v + 8},${v - 10},0.35)`;
+    g.fillRect(rnd() * 256, rnd() * 256, 2, 2);
   }
-
-  update(world) {
-    const { a, d, q, s, m } = this;
-    this.drawn.forEach((i, k) => {
-      const parent = this.rig.bones[i].parent;
-      a.fromArray(world.positions[parent]);
-      d.fromArray(world.positions[i]).sub(a);
-      const len = d.length();
-      if (len < 1e-6) {
-        s.set(0, 0, 0);
-        q.identity();
-      } else {
-        q.setFromUnitVectors(UP, d.multiplyScalar(1 / len));
-        s.set(this.radius[k], len, this.radius[k]);
-      }
-      m.compose(a, q, s);
-      this.mesh.setMatrixAt(k, m);
-    });
-    this.mesh.instanceMatrix.needsUpdate = true;
-  }
+  g.fillStyle = "rgba(40,32,24,0.5)"; // a line every metre (the texture is 2 m)
+  g.fillRect(0, 0, 256, 2);
+  g.fillRect(0, 128, 256, 2);
+  const t = new CanvasTexture(c);
+  t.wrapS = t.wrapT = RepeatWrapping;
+  t.colorSpace = SRGBColorSpace;
+  return t;
 }
 
-/** World transforms of a posed rig, placed by (rot, pos). */
-export function placed(pose, rot, pos) {
-  return {
-    positions: pose.worldPositions.map((p) => {
-      const r = rotate(rot, p);
-      return [r[0] + pos[0], r[1] + pos[1], r[2] + pos[2]];
-    }),
-    rotations: pose.worldRotations.map((q) => qmul(rot, q)),
-  };
+function blobTexture() {
+  const c = document.createElement("canvas");
+  c.width = c.height = 64;
+  const g = c.getContext("2d");
+  const grad = g.createRadialGradient(32, 32, 0, 32, 32, 32);
+  grad.addColorStop(0, "rgba(0,0,0,1)");
+  grad.addColorStop(1, "rgba(0,0,0,0)");
+  g.fillStyle = grad;
+  g.fillRect(0, 0, 64, 64);
+  return new CanvasTexture(c);
+}
+
+/** Soft dark ellipses on the ground under the body and each hoof, fading as they rise. */
+class ContactShadows {
+  constructor(scene, count) {
+    const tex = blobTexture();
+    const plane = new PlaneGeometry(1, 1).rotateX(-Math.PI / 2);
+    this.blobs = Array.from({ length: count }, () => {
+      const m = new Mesh(plane, new MeshBasicMaterial({ map: tex, transparent: true, depthWrite: false, opacity: 0.5 }));
+      m.renderOrder = 1;
+      scene.add(m);
+      return m;
+    });
+  }
+
+  /** `spots`: [x, height above ground, z, size (m), strength 0..1]. */
+  update(spots) {
+    this.blobs.forEach((m, i) => {
+      const s = spots[i];
+      m.visible = Boolean(s);
+      if (!s) return;
+      const [x, h, z, size, strength] = s;
+      const lift = Math.max(0, h);
+      m.position.set(x, 0.003 + i * 1e-4, z);
+      const grow = size * (1 + 1.5 * lift);
+      m.scale.set(grow * (s[5] || 1), 1, grow);
+      m.material.opacity = strength * Math.max(0, 1 - lift / 1.2);
+    });
+  }
 }
 
 export class View {
-  constructor(canvas, horseRig, riderRig) {
+  constructor(canvas, horseRig, riderRig, { render = "mesh" } = {}) {
     this.canvas = canvas;
+    this.render = render;
     this.renderer = new WebGLRenderer({ canvas, antialias: false, powerPreference: "low-power" });
     this.renderer.setPixelRatio(1);
     this.scene = new Scene();
-    this.scene.background = new Color(0x1b1f24);
-    this.camera = new PerspectiveCamera(40, 1, 0.05, 100);
+    this.scene.background = new Color(0x1d2228);
+    this.camera = new PerspectiveCamera(40, 1, 0.05, 120);
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.enableDamping = false;
-    this.scene.add(new AmbientLight(0xffffff, 1.1));
-    const sun = new DirectionalLight(0xffffff, 1.6);
-    sun.position.set(3, 6, -4);
+    this.scene.add(new HemisphereLight(0xdfe8ff, 0x4a3c2c, 1.6));
+    const sun = new DirectionalLight(0xffffff, 1.7);
+    sun.position.set(2, 6, -3);
     this.scene.add(sun);
-    this.grid = new GridHelper(20, 20, 0x3a4450, 0x2a3038);
-    this.scene.add(this.grid);
-
-    const horseMat = new MeshLambertMaterial({ color: 0x8b5a2b });
-    const hoofMat = new MeshLambertMaterial({ color: 0x222222 });
-    const riderMat = new MeshLambertMaterial({ color: 0x4d7fbf });
-    const skinMat = new MeshLambertMaterial({ color: 0xe0b090 });
+    this.groundTex = groundTexture();
+    this.groundTex.repeat.set(40, 40);
+    const ground = new Mesh(new PlaneGeometry(80, 80).rotateX(-Math.PI / 2), new MeshLambertMaterial({ map: this.groundTex }));
+    this.scene.add(ground);
+    this.ground = ground;
+    this.shadows = new ContactShadows(this.scene, 6);
     this.horseRig = horseRig;
     this.riderRig = riderRig;
-    this.horseBones = new Bones(this.scene, horseRig, horseMat, (b) => (b.name.endsWith("Hoof") ? 0.045 : 0.04));
-    this.riderBones = new Bones(this.scene, riderRig, riderMat, (b) =>
-      ["lower_back", "waist", "spine_c", "spine_d", "spine_f"].includes(b.name) ? 0.09 : 0.035,
-    );
-    const body = new Mesh(new SphereGeometry(1, 20, 12), horseMat);
-    body.scale.set(0.92, 0.3, 0.26);
-    this.scene.add(body);
-    this.body = body;
-    const head = new Mesh(new CylinderGeometry(0.1, 0.06, 0.52, 10), horseMat);
-    this.scene.add(head);
-    this.horseHead = head;
-    this.hooves = ["lf", "rf", "lb", "rb"].map((h) => {
-      const m = new Mesh(new BoxGeometry(0.12, 0.06, 0.11), hoofMat);
-      this.scene.add(m);
-      return [horseRig.index[`${h}Hoof`], m];
-    });
-    const riderHead = new Mesh(new SphereGeometry(0.1, 16, 10), skinMat);
-    this.scene.add(riderHead);
-    this.riderHead = riderHead;
-    this.extremities = ["lf_hand", "rt_hand", "lf_toes", "rt_toes"].map((n) => {
-      const m = new Mesh(new BoxGeometry(0.09, 0.04, 0.06), n.endsWith("hand") ? skinMat : hoofMat);
-      this.scene.add(m);
-      return [riderRig.index[n], m];
-    });
-    this.chains = new Map(); // "tail" | "braid" -> Line
-    this.setView("side");
+    if (render === "sticks") this.sticks = new Sticks(this.scene, horseRig, riderRig);
+    else this.bodies = new Bodies(this.scene, horseRig, riderRig);
+    this.tack = render === "sticks" ? null : new Tack(this.scene, horseRig, riderRig);
+    this.tail = new Tubes(this.scene, 4, 12, 0x1c1511, (s, t) => (s === 0 ? 0.035 + 0.03 * Math.sin(Math.PI * Math.min(1, t * 1.2)) : 0.018 * (1 - 0.6 * t)));
+    this.braid = new Tubes(this.scene, 1, 10, 0x6b4a2a, (s, t) => 0.018 * (1 - 0.5 * t));
+    this.follow = true;
+    this.setView(DEFAULT_VIEW);
     this.resize();
   }
 
   setView(name) {
     const v = VIEWS[name];
+    if (!v) return;
+    this.viewName = name;
     this.camera.position.fromArray(v.pos);
     this.controls.target.fromArray(v.target);
     this.controls.update();
-    this.viewName = name;
+  }
+
+  /** Follow the horse (the ground scrolls under it) or stay fixed (the horse passes by). */
+  setFollow(on) {
+    this.follow = on;
+  }
+
+  setIdColors(on) {
+    this.idColors = on;
+    if (this.bodies) this.bodies.setIdColors(on);
+    this.ground.visible = !on;
+    for (const b of this.shadows.blobs) b.material.visible = !on;
   }
 
   /** Render at `scale` x the canvas' CSS size (fewer pixels when the machine is busy). */
@@ -165,59 +174,38 @@ export class View {
     }
   }
 
-  /** Draw a chain (tail or braid) through world points; hidden when null. */
-  chain(name, points) {
-    let line = this.chains.get(name);
-    if (!points) {
-      if (line) line.visible = false;
-      return;
-    }
-    if (!line || line.userData.n !== points.length) {
-      if (line) this.scene.remove(line);
-      const geom = new BufferGeometry();
-      geom.setAttribute("position", new BufferAttribute(new Float32Array(points.length * 3), 3));
-      line = new Line(geom, new LineBasicMaterial({ color: name === "tail" ? 0x3b2412 : 0xd9b36c }));
-      line.userData.n = points.length;
-      this.scene.add(line);
-      this.chains.set(name, line);
-    }
-    line.visible = true;
-    const attr = line.geometry.getAttribute("position");
-    points.forEach((p, i) => attr.setXYZ(i, p[0], p[1], p[2]));
-    attr.needsUpdate = true;
-    line.geometry.computeBoundingSphere();
+  /** Pixel (CSS px from the canvas' top left) of a world point: tests compare it with screenshots. */
+  project(p) {
+    const v = new Vector3(p[0], p[1], p[2]).project(this.camera);
+    return [((v.x + 1) / 2) * this.canvas.clientWidth, ((1 - v.y) / 2) * this.canvas.clientHeight];
   }
 
-  /** Place both skeletons; `horse` and `rider` are {positions, rotations} in world space. */
-  update(horse, rider, groundShift) {
-    this.horseBones.update(horse);
-    this.riderBones.update(rider);
+  /**
+   * Draw one frame. `horse`, `rider`: {pose (rig.solve), world (placed)}; `tail`,
+   * `braid`: {values, groups, points} or null; `travel`: the ground's shift under a
+   * following camera (metres along x).
+   */
+  draw({ horse, rider, tail, braid, travel }) {
+    if (this.bodies) this.bodies.update(horse.pose, rider.pose);
+    else this.sticks.update(horse.world, rider.world);
+    this.tackUsed = this.tack ? this.tack.update(horse.world, rider.world) : {};
     const hi = this.horseRig.index;
-    const q = new Quaternion();
-    const back = horse.positions[hi.backMid];
-    q.fromArray(horse.rotations[hi.backMid]);
-    this.body.quaternion.copy(q);
-    this.body.position.set(-0.15, -0.14, 0).applyQuaternion(q).add(new Vector3(back[0], back[1], back[2]));
-    const hp = horse.positions[hi.head];
-    const mp = horse.positions[hi.muzzle];
-    this.horseHead.position.set((hp[0] + mp[0]) / 2, (hp[1] + mp[1]) / 2, (hp[2] + mp[2]) / 2);
-    this.horseHead.quaternion.setFromUnitVectors(UP, new Vector3(hp[0] - mp[0], hp[1] - mp[1], hp[2] - mp[2]).normalize());
-    for (const [i, m] of this.hooves) {
-      m.position.fromArray(horse.positions[i]);
-      m.position.y += 0.03;
-      m.quaternion.fromArray(horse.rotations[i]);
-    }
-    const ri = this.riderRig.index;
-    const h = rider.positions[ri.head];
-    q.fromArray(rider.rotations[ri.head]);
-    this.riderHead.position.set(0, 0.1, 0).applyQuaternion(q).add(new Vector3(h[0], h[1], h[2]));
-    for (const [i, m] of this.extremities) {
-      const p = rider.positions[i];
-      q.fromArray(rider.rotations[i]);
-      m.quaternion.copy(q);
-      m.position.set(0.04, 0, 0).applyQuaternion(q).add(new Vector3(p[0], p[1], p[2]));
-    }
-    this.grid.position.x = -(((groundShift % 1) + 1) % 1);
+    const hw = horse.world;
+    const pivotRot = hw.rotations[hi.rearPivot ?? 0];
+    if (tail && tail.points) this.tail.update(tailStrands(tail.values, tail.groups, tail.points, pivotRot));
+    else if (hi.tailRoot !== undefined) this.tail.update([restingTail(hw.positions[hi.tailRoot], pivotRot)]);
+    this.braid.update(braid && braid.points ? [braid.points] : null);
+    const spots = ["lfHoof", "rfHoof", "lbHoof", "rbHoof"].map((n) => {
+      const p = hw.positions[hi[n]];
+      return p ? [p[0] + 0.02, p[1], p[2], 0.22, 0.55] : null;
+    });
+    const mid = hw.positions[hi.backMid ?? 0];
+    spots.push([mid[0] - 0.1, mid[1] - 1.3, mid[2], 1.3, 0.45, 0.45]);
+    const seat = rider.world.positions[0];
+    spots.push([seat[0], seat[1] - 1.3, seat[2], 0.5, 0.3]);
+    this.shadows.update(spots);
+    // A following camera keeps its place relative to the horse; the ground scrolls by the travel.
+    this.groundTex.offset.x = this.follow ? (((travel / 2) % 1) + 1) % 1 : 0;
     this.resize();
     this.renderer.render(this.scene, this.camera);
   }
@@ -247,9 +235,20 @@ export function chainPoints(values, names, root, rootRot, toWorld) {
       const h = ((values[n] ?? 0) * Math.PI) / 360;
       rot = qmul(rot, [axis[0] * Math.sin(h), axis[1] * Math.sin(h), axis[2] * Math.sin(h), Math.cos(h)]);
     }
-    const step = rotate(rot, [-CHAIN_SEGMENT, 0, 0]);
+    const step = rotate(rot, [-SEGMENT, 0, 0]);
     p = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
     pts.push(p);
   }
   return pts;
+}
+
+/** World transforms of a posed rig, placed by (rot, pos). */
+export function placed(pose, rot, pos) {
+  return {
+    positions: pose.worldPositions.map((p) => {
+      const r = rotate(rot, p);
+      return [r[0] + pos[0], r[1] + pos[1], r[2] + pos[2]];
+    }),
+    rotations: pose.worldRotations.map((q) => qmul(rot, q)),
+  };
 }

@@ -1,0 +1,335 @@
+"""One rig on a stage: what ``riderlive serve --nats URL --stage S --rig R`` runs in the web process.
+
+- **Out**: every tick record on ``...<rig>.frame`` (rider + horse, RLF1 binary or JSON:
+  the service's own codec), the status on ``...<rig>.status`` at once on change and every
+  ``nats.status_interval`` s. The tick's callback only queues records (latest 0.25 s,
+  older ones counted ``frames_dropped``); a task publishes them, so a slow or dead
+  broker never delays the tick, the websockets or the takes.
+- **In**: horse input and control (:mod:`riderlive.bus.inbound`); the stage e-stop,
+  which latches the e-stop exactly as ``POST /api/estop`` does (source ``nats``); the
+  stage heartbeat; discovery requests of ``riderlive stage``.
+- **Stage dead-man**: without a stage heartbeat for ``nats.heartbeat_timeout`` s, an
+  armed rig is disarmed: its devices ease to park, then torque off (the lifecycle's
+  controlled stop, category 1), and arming is refused until the heartbeat is back.
+  Nothing re-arms when it returns. A broker that dies, a cut cable, a stopped heartbeat
+  source: all look the same, and all stop the stage rather than freezing it mid-move.
+- **Names**: a rig name already answering on the stage is refused at start
+  (:class:`RigNameTaken`); two rigs that raced to the same name see each other's status
+  and count ``collisions`` (and say so in their status).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import logging
+import os
+import socket
+import time
+from collections import Counter, deque
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import orjson
+
+from riderlive.bus.config import NatsSection
+from riderlive.bus.inbound import Control, HorseInput, dumps
+from riderlive.bus.subjects import Kind, Stage, parse
+from riderlive.bus.transport import Message, NoResponders, Subscription, Transport, TransportError
+from riderlive.channels import HORSE_NAMES
+from riderlive.devices.latch import StopSource
+from riderlive.devices.lifecycle import DeviceState
+from riderlive.realtime import commands as cmd
+from riderlive.realtime import layout as L
+from riderlive.service.codecs import PROTOCOL_VERSION, encode_frame
+
+if TYPE_CHECKING:
+    from riderlive.service.runtime import Service
+
+log = logging.getLogger(__name__)
+QUEUE_SECONDS = 0.25
+"""Records waiting for the broker beyond this age are dropped (as ``hub.CATCH_UP``)."""
+NAME_CHECK_TIMEOUT = 0.5
+
+
+class RigNameTaken(TransportError):
+    """Another rig answers on this stage under this name."""
+
+
+def armed(status: dict[str, Any]) -> bool:
+    """Some device is armed (homing, soft start, running) in a tick status."""
+    for device in status.get("devices", []):
+        with contextlib.suppress(ValueError):
+            if DeviceState(device.get("state")).armed:
+                return True
+    return False
+
+
+async def check_name_free(transport: Transport, stage: Stage, rig: str, session: str = "") -> None:
+    """RigNameTaken when a rig already answers as ``rig`` on ``stage``."""
+    subject = stage.rig(rig).subject(Kind.CONTROL)
+    try:
+        answer = await transport.request(subject, dumps({"action": "state"}), NAME_CHECK_TIMEOUT)
+    except NoResponders:
+        return
+    except TimeoutError:
+        raise RigNameTaken(f"rig name {rig!r} is in use on stage {stage.name!r} (it does not answer)") from None
+    try:
+        other = orjson.loads(answer)
+    except orjson.JSONDecodeError:
+        other = {}
+    if other.get("session") == session and session:
+        return
+    where = f"{other.get('host', '?')} pid {other.get('pid', '?')}"
+    raise RigNameTaken(f"rig name {rig!r} is already in use on stage {stage.name!r} (by {where}); choose another --rig")
+
+
+class RigNode:
+    """See the module docstring. ``start`` joins the stage, ``stop`` leaves it."""
+
+    def __init__(self, service: Service, transport: Transport, config: NatsSection) -> None:
+        assert config.rig is not None
+        self.service = service
+        self.transport = transport
+        self.config = config
+        self.stage = Stage(config.stage)
+        self.subjects = self.stage.rig(config.rig)
+        self.frame_subject = self.subjects.subject(Kind.FRAME)
+        self.status_subject = self.subjects.subject(Kind.STATUS)
+        trust = config.control_auth == "credentials"
+        self.horse = HorseInput(service, transport, trust, config.producer_forget)
+        self.control = Control(service, transport, trust, self.arm_refusal, self.describe)
+        self.subscription = dataclasses.replace(
+            service.hub.default, horse=tuple(range(len(HORSE_NAMES))), encoding=config.encoding
+        )
+        self.queue: deque[np.ndarray] = deque()
+        self.wake = asyncio.Event()
+        self.counts: Counter[str] = Counter()
+        self.last_heartbeat: float | None = None
+        self.heartbeat_lost = False
+        self.started = time.perf_counter()
+        self._subs: list[Subscription] = []
+        self._tasks: list[asyncio.Task[None]] = []
+        self._rates: dict[str, float] = {}
+        self._last_counts: tuple[float, int, int, int] = (time.perf_counter(), 0, 0, 0)
+
+    # -- joining and leaving ----------------------------------------------------------------
+
+    async def start(self) -> None:
+        await check_name_free(self.transport, self.stage, self.subjects.rig, self.service.session)
+        t = self.transport
+        stage = self.stage
+        self._subs = [
+            await t.subscribe(self.subjects.subject(Kind.CONTROL, "*"), self.control.on_message, 256),
+            await t.subscribe(self.subjects.horse_any(), self.horse.on_message, 8192),
+            await t.subscribe(stage.subject(Kind.ESTOP, "*"), self.on_estop, 1024),
+            await t.subscribe(stage.subject(Kind.HEARTBEAT, "*"), self.on_heartbeat, 1024),
+            await t.subscribe(stage.subject(Kind.DISCOVER), self.on_discover, 256),
+            await t.subscribe(self.status_subject, self.on_status, 256),
+        ]
+        await t.flush()
+        self.service.arm_checks.append(self.arm_refusal)
+        self.service.sinks.append(self.offer)
+        loop = asyncio.get_running_loop()
+        self._tasks = [loop.create_task(self._publisher()), loop.create_task(self._watch())]
+        log.warning("joined stage %r as rig %r", stage.name, self.subjects.rig)
+
+    async def stop(self) -> None:
+        with contextlib.suppress(ValueError):
+            self.service.sinks.remove(self.offer)
+        with contextlib.suppress(ValueError):
+            self.service.arm_checks.remove(self.arm_refusal)
+        for task in self._tasks:
+            task.cancel()
+        for sub in self._subs:
+            with contextlib.suppress(Exception):
+                await sub.unsubscribe()
+        self.horse.close()
+        with contextlib.suppress(Exception):
+            await self.transport.publish(self.status_subject, dumps({**self.describe(), "leaving": True}))
+            await self.transport.flush(1.0)
+        await self.transport.close()
+
+    # -- out --------------------------------------------------------------------------------
+
+    def offer(self, records: list[np.ndarray]) -> None:
+        """The tick's callback: queue the new records (never waits)."""
+        self.queue.extend(records)
+        if self.queue:
+            oldest = float(self.queue[-1][L.OUT_ENGINE_T]) - QUEUE_SECONDS
+            while float(self.queue[0][L.OUT_ENGINE_T]) < oldest:
+                self.queue.popleft()
+                self.counts["frames_dropped"] += 1
+        self.wake.set()
+
+    async def _publisher(self) -> None:
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            while self.queue:
+                record = self.queue.popleft()
+                data = encode_frame(self.subscription, record)
+                await self.transport.publish(self.frame_subject, data if isinstance(data, bytes) else data.encode())
+                self.counts["frames_out"] += 1
+
+    def describe(self) -> dict[str, Any]:
+        """This rig's status message (``...<rig>.status``, discovery, ``state``)."""
+        service = self.service
+        status = service.link.status()
+        now = time.perf_counter()
+        age = None if self.last_heartbeat is None else now - self.last_heartbeat
+        devices = [{"name": d.get("name"), "state": d.get("state")} for d in status.get("devices", [])]
+        return {
+            "type": "status",
+            "protocol": PROTOCOL_VERSION,
+            "stage": self.stage.name,
+            "rig": self.subjects.rig,
+            "session": service.session,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "tick_up": service.supervisor.up,
+            "tick_rate": service.config.tick.rate,
+            "driver": status.get("driver"),
+            "estop": service.link.latch.latched,
+            "devices": devices,
+            "rates": dict(self._rates),
+            "heartbeat": {"timeout": self.config.heartbeat_timeout, "age": age, "ok": not self.heartbeat_lost},
+            "perf_origin": service.link.start,
+            "channels": list(service.hub.names),
+            "counts": dict(self.counts),
+            "output_lapped": int(service.link.outputs.lapped),  # records read too late: never published
+            "transport": dict(self.transport.stats.events),
+        }
+
+    def _update_rates(self, now: float) -> None:
+        then, ticks, out, inp = self._last_counts
+        metrics = self.service.metrics
+        frames_in = sum(p.accepted for p in self.horse.producers.values())
+        dt = max(now - then, 1e-6)
+        self._rates = {
+            "ticks_hz": (metrics.ticks_published - ticks) / dt,
+            "frames_out_hz": (self.counts["frames_out"] - out) / dt,
+            "horse_in_hz": (frames_in - inp) / dt,
+        }
+        self._last_counts = (now, metrics.ticks_published, self.counts["frames_out"], frames_in)
+
+    # -- in ---------------------------------------------------------------------------------
+
+    async def on_estop(self, msg: Message) -> None:
+        """The stage e-stop: latched at once, whatever the payload or version (counted)."""
+        latched = self.service.supervisor.estop(StopSource.NATS)
+        self.counts["estops"] += 1
+        parsed = parse(msg.subject)
+        if parsed is None or not parsed.known_version:
+            self.service.metrics.bad_frames["unknown_version"] += 1
+        if msg.reply:
+            await self.transport.publish(msg.reply, dumps({"rig": self.subjects.rig, "latched_at": latched}))
+
+    async def on_heartbeat(self, msg: Message) -> None:
+        parsed = parse(msg.subject)
+        if parsed is None or not parsed.known_version:
+            self.service.metrics.bad_frames["unknown_version"] += 1
+            return
+        self.last_heartbeat = time.perf_counter()
+        self.counts["heartbeats"] += 1
+
+    async def on_discover(self, msg: Message) -> None:
+        if msg.reply:
+            await self.transport.publish(msg.reply, dumps(self.describe()))
+
+    async def on_status(self, msg: Message) -> None:
+        """Our own status subject: another session publishing on it is a name collision."""
+        try:
+            session = orjson.loads(msg.data).get("session")
+        except (orjson.JSONDecodeError, AttributeError):
+            session = None
+        if session != self.service.session:
+            self.counts["collisions"] += 1
+            if self.counts["collisions"] == 1:
+                log.critical("another rig publishes as %r on stage %r: rename one", self.subjects.rig, self.stage.name)
+
+    # -- the stage dead-man -------------------------------------------------------------------
+
+    def heartbeat_age(self, now: float) -> float:
+        """Seconds since the last heartbeat (since joining when none was heard yet)."""
+        return now - (self.started if self.last_heartbeat is None else self.last_heartbeat)
+
+    def arm_refusal(self) -> str | None:
+        """Why arming must wait (no stage heartbeat), or None."""
+        timeout = self.config.heartbeat_timeout
+        if timeout > 0.0 and (self.last_heartbeat is None or self.heartbeat_age(time.perf_counter()) > timeout):
+            return (
+                f"no stage heartbeat within {timeout:g} s on stage {self.stage.name!r} "
+                "(run `riderlive stage heartbeat`): arming refused"
+            )
+        return None
+
+    async def _watch(self) -> None:
+        """The dead-man, producer sweeps, status on change and every ``status_interval``."""
+        timeout = self.config.heartbeat_timeout
+        interval = min(0.05, timeout / 5.0) if timeout > 0.0 else 0.05
+        next_status = 0.0
+        status_version = -1
+        while True:
+            await asyncio.sleep(interval)
+            now = time.perf_counter()
+            if timeout > 0.0:
+                await self._dead_man(now, timeout)
+            self.horse.sweep(now)
+            version = self.service.link.status_blob.version
+            if now >= next_status or version != status_version:
+                if now >= next_status:
+                    self._update_rates(now)
+                    next_status = now + self.config.status_interval
+                status_version = version
+                await self.transport.publish(self.status_subject, dumps(self.describe()))
+
+    async def _dead_man(self, now: float, timeout: float) -> None:
+        lost = self.heartbeat_age(now) > timeout
+        if lost != self.heartbeat_lost:
+            self.heartbeat_lost = lost
+            self.counts["heartbeat_lost" if lost else "heartbeat_back"] += 1
+            log.warning(
+                "stage heartbeat %s", "lost: armed devices park, arming refused" if lost else "back (nothing re-arms)"
+            )
+        if not lost or not armed(self.service.link.status()):
+            return
+        self.counts["heartbeat_stops"] += 1
+        by = f"stage heartbeat lost ({self.heartbeat_age(now):.2f} s)"
+        reply = await self.service.supervisor.ask(lambda r: cmd.Disarm(None, by, r))
+        if not reply.ok and armed(self.service.link.status()):
+            log.critical("the heartbeat stop was refused (%s): e-stop", reply.message)
+            self.service.supervisor.estop(StopSource.NATS)
+
+
+async def join_stage(service: Service) -> RigNode:
+    """Connect to the broker of ``service.config.nats`` and join its stage as a rig."""
+    from riderlive.bus.nats import connect, credentials_of
+
+    config = service.config.nats
+    assert config.url is not None
+    transport = await connect(
+        config.url, credentials_of(config), f"riderlive rig {config.rig}", connect_timeout=config.connect_timeout
+    )
+    node = RigNode(service, transport, config)
+    try:
+        await node.start()
+    except BaseException:
+        await transport.close()
+        raise
+    return node
+
+
+def render_metrics(node: RigNode) -> str:
+    """Prometheus text for the stage link."""
+    lines = [
+        "# HELP riderlive_nats_connected 1 while connected to the stage's broker.",
+        "# TYPE riderlive_nats_connected gauge",
+        f"riderlive_nats_connected {int(node.transport.connected)}",
+        "# HELP riderlive_nats_events_total Stage link events (frames, heartbeats, stops, broker events).",
+        "# TYPE riderlive_nats_events_total counter",
+    ]
+    events = Counter(node.counts) + Counter(node.transport.stats.events)
+    lines += [f'riderlive_nats_events_total{{event="{k}"}} {v}' for k, v in sorted(events.items())]
+    return "\n".join(lines) + "\n"

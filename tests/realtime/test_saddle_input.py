@@ -1,0 +1,105 @@
+"""The saddle in the tick: per-sample estimator steps, the rebuilt horse, staleness, units, the saddle pose."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from riderlive.channels import HORSE, HORSE_NAMES, Kind
+from riderlive.horse import ProceduralHorse
+from riderlive.horse.script import gait_script
+from riderlive.realtime.core import Driver, Mode, TickCore, Timing
+from riderlive.realtime.layout import InputKind
+from riderlive.realtime.saddle_input import GAITS, LOCKS, NO_ESTIMATE, make_saddle_input, saddle_pose
+from riderlive.rules import RiderModel
+from riderlive.saddle import Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
+from riderlive.saddle.synthetic import record
+
+LENGTHS = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
+
+
+@pytest.fixture(scope="module")
+def trot():
+    return record(gait_script("trot", 3.0, seed=4), 200.0, seed=4)
+
+
+def test_every_sample_is_stepped_and_the_frame_is_the_estimators(trot) -> None:
+    """Samples pushed in a burst (one tick's worth) give the state of stepping each one."""
+    live = make_saddle_input(25.0, SaddlePoint())
+    model, state = Model(), State()
+    times, values = trot.saddle.t, trot.saddle.values
+    for k, (t, row) in enumerate(zip(times.tolist(), values.tolist(), strict=True)):
+        assert live.push(t, t + 0.002 + 0.001 * (k % 3), row)
+        state = step(model, state, t, row)
+    assert live.state.samples == len(times) == state.samples
+    assert estimate(live.state).lock == "locked" and estimate(live.state).gait == "trot"
+    now = float(times[-1]) + 0.002 + 0.01  # engine time; the least-delayed offset is 2 ms
+    source_t, frame = live.sample(now)
+    assert source_t == pytest.approx(float(times[-1]) + 0.01)
+    np.testing.assert_allclose(frame, horse_frame(model, state, source_t), atol=1e-12)
+    row = live.estimate_row(now)
+    assert LOCKS[int(row[0])] == "locked" and GAITS[int(row[1])] == "trot"
+    assert row[4] == pytest.approx(0.01), "age: source seconds since the last sample"
+
+
+def test_older_samples_are_refused_and_a_stopped_stream_goes_stale_once(trot) -> None:
+    live = make_saddle_input(25.0, SaddlePoint())
+    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
+        live.push(t, t, row)
+    last = float(trot.saddle.t[-1])
+    assert not live.push(last, last, trot.saddle.values[-1].tolist()), "not after the last: refused"
+    hold = live.model.hold + live.model.ease
+    assert live.sample(last + hold - 0.01) is not None
+    assert live.sample(last + hold + 0.01) is None and live.sample(last + hold + 0.5) is None
+    assert live.counters()["stale"] == 1, "one episode, counted once"
+    frame = live.sample(last + hold - 0.001)
+    assert frame is not None and max(abs(v) for v in frame[1][: len(HORSE_NAMES) - 4]) < 1e-3, "eased to standing"
+    live.clear()
+    assert live.sample(last) is None and live.estimate_row(last) == NO_ESTIMATE
+    assert live.counters()["samples"] == len(trot.saddle.t), "counters survive a new stream"
+
+
+def test_lengths_are_converted_to_and_from_the_service_unit(trot) -> None:
+    """A service speaking centimetres (length_scale 0.25): the same horse, lengths x 100."""
+    metres, centimetres = make_saddle_input(25.0, SaddlePoint()), make_saddle_input(0.25, SaddlePoint())
+    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
+        metres.push(t, t, row)
+        centimetres.push(t, t, [v * 100.0 if i < 3 else v for i, v in enumerate(row)])
+    now = float(trot.saddle.t[-1]) + 0.005
+    a, b = metres.sample(now)[1], centimetres.sample(now)[1]
+    scale = np.ones(len(a))
+    scale[LENGTHS] = 100.0
+    np.testing.assert_allclose(np.array(b), np.array(a) * scale, rtol=1e-9, atol=1e-9)
+
+
+def test_saddle_pose_in_service_units_is_the_saddle_of_the_horse(trot) -> None:
+    horse = trot.horse.values[123].tolist()
+    point = SaddlePoint(forward=0.8, up=0.1)
+    in_metres = saddle_from_horse(horse, point)
+    np.testing.assert_allclose(saddle_pose(horse, 1.0, point), in_metres, atol=1e-12)
+    in_cm = [v * 100.0 if i in LENGTHS else v for i, v in enumerate(horse)]
+    expected = [v * 100.0 if i < 3 else v for i, v in enumerate(in_metres)]
+    np.testing.assert_allclose(saddle_pose(in_cm, 0.01, point), expected, rtol=1e-9, atol=1e-9)
+    assert saddle_pose([0.0] * len(HORSE_NAMES), 1.0, point) == pytest.approx([0.0] * 6), "standing: at rest"
+
+
+def test_the_core_rides_a_saddle_stream_and_reports_its_estimate(trot) -> None:
+    model = RiderModel(scale=25.0)
+    core = TickCore(model, Timing(blend_time=0.0), ProceduralHorse("walk", 1.5, 0), Mode.INPUT)
+    times, values = trot.saddle.t, trot.saddle.values
+    tick, k, results = 1.0 / 120.0, 0, []
+    for n in range(int(times[-1] / tick)):
+        now = n * tick
+        while k < len(times) and times[k] <= now:
+            core.push_input(7, float(times[k]), float(times[k]), values[k].tolist(), InputKind.SADDLE)
+            k += 1
+        results.append(core.step(now))
+    last = results[-1]
+    assert last.driver is Driver.INPUT and last.producer == 7
+    assert LOCKS[int(last.estimate[0])] == "locked" and GAITS[int(last.estimate[1])] == "trot"
+    np.testing.assert_allclose(last.rider, model.evaluate(last.horse), atol=1e-9)
+    np.testing.assert_allclose(last.saddle, saddle_from_horse(last.horse), atol=1e-12)
+    # A horse producer takes over: the estimate goes, the saddle pose stays (of its horse).
+    core.push_input(8, 0.0, times[-1], [0.0] * len(HORSE_NAMES))
+    after = core.step(float(times[-1]) + 0.05)
+    assert after.producer == 8 and after.estimate == NO_ESTIMATE and after.saddle == pytest.approx([0.0] * 6)
