@@ -72,7 +72,7 @@ def test_the_service_plans_a_platform_beside_a_rig_or_alone(tmp_path: Path) -> N
 def test_a_bad_platform_file_is_refused_at_plan_time(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     text = (Path(__file__).resolve().parents[2] / "config/platforms/stewart_compact.toml").read_text()
-    bad.write_text(text.replace("max_length = 0.60", "max_length = 0.40"))
+    bad.write_text(text.replace("max_length = 0.535", "max_length = 0.40"))
     with pytest.raises(ConfigError, match=r"bad\.toml: actuators\.max_length"):
         plan("platform", str(bad), "/dev/x", 100.0)
 
