@@ -17,6 +17,7 @@ import pydantic
 from fastapi import FastAPI, HTTPException, Request
 
 from riderlive.devices.lifecycle import REFUSAL_STATUS, Refusal
+from riderlive.names import NAME_PATTERN
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 
@@ -30,8 +31,8 @@ LINK_ERRORS = ("rx_cobs", "rx_short", "rx_oversize", "rx_crc", "rx_version", "rx
 class PlatformTune(pydantic.BaseModel):
     """A PATCH body: which platform, and the cueing parameters to change (units of CueingParams)."""
 
-    model_config = pydantic.ConfigDict(extra="forbid")
-    device: str | None = pydantic.Field(default=None, min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.-]+$")
+    model_config = pydantic.ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+    device: str | None = pydantic.Field(default=None, pattern=NAME_PATTERN)
     intensity: float | None = pydantic.Field(default=None, ge=0.0, le=100.0)
     drift_cutoff_hz: float | None = pydantic.Field(default=None, ge=0.01, le=0.5)
     washout_translation_hz: float | None = pydantic.Field(default=None, ge=0.1, le=2.5)

@@ -69,7 +69,10 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     assert not reply.ok and reply.refusal == "unknown_device" and "'left', 'right'" in reply.message
     reply = devices.request(cmd.Arm("left", "test", 3))
     assert reply.ok and reply.states == {"left": "soft_start", "right": "disarmed"}
-    run(devices, 40, 40)
+    tick, deadline = 40, time.perf_counter() + 5.0  # the soft start takes 50 ms of the clock, not of ticks
+    while devices.states()["left"] == "soft_start" and time.perf_counter() < deadline:
+        run(devices, 2, tick)
+        tick += 2
     assert devices.states()["left"] == "running"
     reload = devices.request(cmd.Reload("left", "test", 4))
     assert not reload.ok and reload.refusal == "moving"
