@@ -39,11 +39,18 @@ def state(live: LiveServer) -> str:
     return str(devices[0]["state"]) if devices else "none"
 
 
+def stop_record(live: LiveServer) -> dict[str, float | None]:
+    """The device's last e-stop record: requested, acted on by the tick, written (perf_counter s)."""
+    devices = live.get("/api/devices", headers=AUTH).json()["devices"]
+    return dict(devices[0]["estop"] or {})
+
+
 def wait_state(live: LiveServer, wanted: str, timeout: float = 10.0) -> None:
     deadline = time.perf_counter() + timeout
     while (now := state(live)) != wanted:
         if time.perf_counter() > deadline:
-            raise SystemExit(f"rig is {now}, wanted {wanted}")
+            device = live.get("/api/devices", headers=AUTH).json()["devices"][0]
+            raise SystemExit(f"rig is {now}, wanted {wanted}: {device.get('detail')!r}, fault {device.get('fault')!r}")
         time.sleep(0.01)
 
 
@@ -66,7 +73,16 @@ def run(rate: float, trials: int, workdir: Path) -> dict[str, list[float]]:
         f'[rig]\nfile = "{workdir / f"bench{rate:g}.toml"}"\nport = "{emu.port}"\n'
     )
     live = LiveServer(config, workdir, token=TOKEN)
-    out: dict[str, list[float]] = {"handler": [], "latch": [], "client": [], "after_off": [], "after_request": []}
+    out: dict[str, list[float]] = {
+        "handler": [],
+        "latch": [],
+        "client": [],
+        "after_off": [],
+        "after_request": [],
+        "acted": [],
+        "written": [],
+        "arrived": [],
+    }
     try:
         client = httpx.Client(base_url=live.base, headers=AUTH, timeout=10.0)
         wait_state(live, "disarmed", 30.0)
@@ -87,6 +103,12 @@ def run(rate: float, trials: int, workdir: Path) -> dict[str, list[float]]:
             out["handler"].append(off - received)
             out["latch"].append(off - answer["latched_at"])
             out["client"].append(off - sent)
+            record = stop_record(live)
+            acted, written = record.get("acted_at"), record.get("off_written_at")
+            if isinstance(acted, float) and isinstance(written, float):
+                out["acted"].append(acted - answer["latched_at"])
+                out["written"].append(written - acted)
+                out["arrived"].append(off - written)
             goals = [t for t, raw in packets if is_goal_write(raw)]
             out["after_off"].append(sum(1 for t in goals if t > off))
             out["after_request"].append(sum(1 for t in goals if t > received))
@@ -125,6 +147,10 @@ def main() -> int:
             print(f"  handler -> torque off on the wire  {summary(r['handler'])}")
             print(f"  latched -> torque off on the wire  {summary(r['latch'])}")
             print(f"  client  -> torque off on the wire  {summary(r['client'])}   (HTTP included)")
+            print("  where the latched -> wire time goes:")
+            print(f"    latched -> the tick acts          {summary(r['acted'])}")
+            print(f"    acts -> torque off written        {summary(r['written'])}")
+            print(f"    written -> arrived at the servos  {summary(r['arrived'])}")
             print(
                 f"  goal writes after the torque-off: {after} (target 0); arriving after the handler had the "
                 f"request: {sum(r['after_request'])} in {sum(1 for x in r['after_request'] if x)} trials"

@@ -60,10 +60,12 @@ IDLE_CHECK_S = 0.5
 
 @dataclass
 class StopRecord:
-    """The last e-stop: requested (latch time), outputs-off written, read back off."""
+    """The last e-stop (``perf_counter`` s, one clock for every process on the host):
+    requested (latch time), acted on by the bus owner, outputs-off written, read back off."""
 
     source: str = ""
     requested_at: float | None = None
+    acted_at: float | None = None
     off_written_at: float | None = None
     confirmed_at: float | None = None
     repeats: int = 0
@@ -72,6 +74,7 @@ class StopRecord:
         return {
             "source": self.source,
             "requested_at": self.requested_at,
+            "acted_at": self.acted_at,
             "off_written_at": self.off_written_at,
             "confirmed_at": self.confirmed_at,
             "confirmed": self.confirmed_at is not None,
@@ -416,13 +419,14 @@ class Device:
         self._setup = None
         self.counters["estops"] += 1
         source = self.latch.source
-        record = StopRecord(source.label if source else "api", self.latch.requested_at)
+        record = StopRecord(source.label if source else "api", self.latch.requested_at, time.perf_counter())
         self.last_stop = record
         self._off_confirmed, self._off_since, self._next_check = False, now, now
         try:
             if self.plug.is_open:
                 self.plug.outputs_off()
-                record.off_written_at = time.perf_counter()
+                first = getattr(self.plug, "off_written_at", None)  # a plug that writes twice: the first
+                record.off_written_at = first if isinstance(first, float) else time.perf_counter()
                 self._next_check = now + self.period_s
         except Exception as exc:
             log.error("%s: e-stop: outputs-off failed: %s", self.name, exc)

@@ -68,6 +68,8 @@ class RigPlug:
         self.clamped: list[bool] = [False] * n
         self.goal_written_at: float | None = None
         """perf_counter time the last goal SYNC_WRITE returned (handed to the port)."""
+        self.off_written_at: float | None = None
+        """perf_counter time the last outputs-off write returned (the first, if written twice)."""
         self.tracking: list[float | None] = [None] * n
         self.hardware_errors: dict[int, tuple[str, ...]] = {}
         self.disabled: set[int] = set()
@@ -160,8 +162,19 @@ class RigPlug:
         return arrived and motion.move is Move.SOFT_START
 
     def outputs_off(self) -> None:
-        self.bus.broadcast_write(self._spec.spec(Item.TORQUE_ENABLE), 0)
+        """Torque Enable 0 to the broadcast ID, at once. After an e-stop gave up a read, the
+        servo's late reply may still be on the half-duplex line and garble this first
+        write: it is then written again once the line is quiet (the read-back that follows
+        repeats it until every servo reports off)."""
+        torque = self._spec.spec(Item.TORQUE_ENABLE)
+        again = self.bus.unsettled
+        self.bus.broadcast_write(torque, 0, settle=False)
+        self.off_written_at = time.perf_counter()
         self.counters["torque_off_writes"] += 1
+        if again:
+            self.bus.broadcast_write(torque, 0)
+            self.counters["torque_off_writes"] += 1
+            self.counters["torque_off_rewrites"] += 1
 
     def outputs_confirmed_off(self) -> bool:
         torque = self._spec.spec(Item.TORQUE_ENABLE)

@@ -167,13 +167,19 @@ class SdkBus:
     def is_open(self) -> bool:
         return bool(self.port.is_open)
 
-    def _guard(self, what: str, call: Callable[[], T], kind: str = "unicast") -> T:
+    @property
+    def unsettled(self) -> bool:
+        """A reply was given up on: its late remainder may still be on the line."""
+        return self._unsettled
+
+    def _guard(self, what: str, call: Callable[[], T], kind: str = "unicast", settle: bool = True) -> T:
         """Run one SDK call; a pyserial failure becomes PortLost; the port is freed. After
-        a reply that failed, the line is first drained of its late remainder."""
+        a reply that failed, the line is first drained of its late remainder (unless not
+        ``settle``: an e-stop's first write goes out at once)."""
         self.transactions += 1
         self.port.timer = self.timers[kind]
         try:
-            if self._unsettled:
+            if self._unsettled and settle:
                 self._unsettled = False
                 quiet = 2.0 * self.port.latency_ms + 1.0
                 self.stale_bytes += self.port.drain(quiet, quiet + self.port.timer.allowance_ms())
@@ -275,11 +281,16 @@ class SdkBus:
     def reboot(self, servo_id: int) -> None:
         self._transact("reboot", servo_id, _instruction(servo_id, sdk.INST_REBOOT, []), 0)
 
-    def broadcast_write(self, spec: ItemSpec, value: int) -> None:
-        """One WRITE to the broadcast ID: every servo on the bus obeys, none replies."""
+    def broadcast_write(self, spec: ItemSpec, value: int, settle: bool = True) -> None:
+        """One WRITE to the broadcast ID: every servo on the bus obeys, none replies.
+
+        ``settle=False`` writes at once even if a reply given up on may still be on the
+        line (:attr:`unsettled`): on the half-duplex bus the two may collide, so the
+        caller writes again with ``settle=True``, which first waits for a quiet line."""
         data = list(value.to_bytes(spec.size, "little", signed=value < 0))
         packet = _instruction(BROADCAST_ID, sdk.INST_WRITE, [*_u16(spec.address), *data])
-        result = self._guard(f"broadcast write {spec.item}", lambda: self.packets.txPacket(self.port, packet))
+        send = lambda: self.packets.txPacket(self.port, packet)  # noqa: E731
+        result = self._guard(f"broadcast write {spec.item}", send, settle=settle)
         if result != sdk.COMM_SUCCESS:
             raise PortLost(f"{self.port_name}: could not send broadcast write {spec.item}")
 

@@ -40,6 +40,7 @@ from tests.dynamixel.rig_harness import (
     connect,
     drive,
     goal_deg,
+    is_torque_off_write,
     rig_of,
     servo_setups,
     short_rig,
@@ -158,6 +159,43 @@ def test_estop_from_another_thread_wakes_and_no_goal_follows(timed_buses: Callab
     assert device.last_stop.source == "websocket"
     assert emu.torque_off_at is not None
     assert emu.torque_off_at - pressed[0] < 0.002 + 0.001  # woken at once, not at the next tick
+    assert goal_writes_after(emu, pressed[0]) == 0
+    device.close()
+
+
+def test_estop_that_gives_up_a_read_writes_torque_off_at_once_then_again_on_a_quiet_line(
+    timed_buses: Callable[..., TimedBus],
+) -> None:
+    """An e-stop while the tick waits for a reply: the wait is given up, torque off goes out
+    at once (not after draining the line), and once more after the line is quiet (the two
+    could collide with the late reply on the half-duplex bus)."""
+    device, emu = rig_on(timed_buses)
+    start_running(device)
+    emu.apply(FaultSpec(EmuFault.VANISH, 2))  # servo 2 never answers: the read waits its timeout
+    bus = device.plug.bus  # type: ignore[attr-defined]
+    present = device.plug._spec.spec(Item.PRESENT_POSITION)  # type: ignore[attr-defined]
+    pressed: list[float] = []
+
+    def press() -> None:
+        time.sleep(0.0005)
+        pressed.append(device.latch.request(StopSource.API))
+
+    presser = threading.Thread(target=press)
+    presser.start()
+    with pytest.raises(Exception) as given_up:  # StopRequested (or NoReply if the read timed out first)
+        while not pressed:
+            bus.read_block(present.address, present.size, [1, 2, 3], False)
+    presser.join()
+    assert bus.unsettled, f"the read was not given up: {given_up.value!r}"
+    device.poll_stop(time.perf_counter())
+    emu.settle()
+    offs = [at for at, raw in list(emu.arrivals) if at > pressed[0] and is_torque_off_write(raw)]
+    assert len(offs) == 2 and device.plug.counters["torque_off_rewrites"] == 1
+    assert device.last_stop is not None and device.last_stop.off_written_at is not None
+    quiet_s = (2.0 * rig_of(device).bus.latency_timer_ms + 1.0) / 1000.0
+    assert device.last_stop.off_written_at - pressed[0] < quiet_s  # the first one did not wait for the line
+    assert offs[1] - offs[0] >= quiet_s * 0.9  # the second did
+    assert torque(emu, 1) == 0 and torque(emu, 3) == 0
     assert goal_writes_after(emu, pressed[0]) == 0
     device.close()
 
