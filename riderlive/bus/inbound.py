@@ -1,13 +1,16 @@
-"""What a rig accepts from the stage: horse input and control requests.
+"""What a rig accepts from the stage: horse and saddle input, and control requests.
 
-**Horse input** (``riderlive.v1.<stage>.<rig>.horse.<producer>``): each producer name is
-one producer of the service's one arbiter, exactly as a ``/ws/horse`` connection is
-(priority, timeout, ranges, clock jumps: ``service/ingest.py``), messages in the same
-JSON or msgpack forms (``hello``, ``frame``, and ``bye``). When the service needs a
-token for ingest, a producer sends it in its hello (``"token"``) before its frames count.
-Answers (``welcome``, ``control``, ``segment``, ``error``) go to the message's reply
-subject when it has one. A producer silent for ``nats.producer_forget`` s is forgotten;
-at most ``publish.max_clients`` producer names at once (more: ``too_many_producers``).
+**Input** (``riderlive.v1.<stage>.<rig>.horse.<producer>`` and
+``...<rig>.saddle.<producer>``): each (kind, producer name) is one producer of the
+service's one arbiter, exactly as a ``/ws/horse`` or ``/ws/saddle`` connection is
+(priority, timeout, ranges, rate, clock jumps: ``service/ingest.py``, whose
+``IngestEndpoint.handle`` validates every message), messages in the same JSON or msgpack
+forms (``hello``, ``frame``, and ``bye``). When the service needs a token for ingest, a
+producer sends it in its hello (``"token"``) before its frames count. Answers
+(``welcome``, ``control``, ``segment``, ``error``) go to the message's reply subject
+when it has one. A producer silent for ``nats.producer_forget`` s is forgotten; at most
+``publish.max_clients`` producers (horse and saddle together) at once (more:
+``too_many_producers``).
 
 **Control** (``riderlive.v1.<stage>.<rig>.control``, request/reply): ``{"action": A,
 "device": ..., "by": ..., "token": ...}`` with A one of ``state``, ``arm``, ``disarm``,
@@ -29,16 +32,15 @@ from typing import TYPE_CHECKING, Any
 import orjson
 import pydantic
 
-from riderlive.bus.subjects import parse
+from riderlive.bus.subjects import Kind, parse
 from riderlive.bus.transport import Message, Transport
-from riderlive.channels import HORSE
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
-from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, parse_message
+from riderlive.service.codecs import BadFrame, parse_message
 from riderlive.service.devices_api import AnyDeviceRequest, DeviceRequest
-from riderlive.service.ingest import Producer, next_producer_id
+from riderlive.service.ingest import IngestEndpoint, Producer, next_producer_id
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -66,17 +68,23 @@ def parse_payload(data: bytes, max_bytes: int) -> dict[str, Any]:
     return parse_message(data, max_bytes)
 
 
-class HorseInput:
-    """NATS producers feeding the service's arbiter (see the module docstring)."""
+ProducerKey = tuple[str, str]
+"""(kind, producer name): ``("horse", "mocap")``, ``("saddle", "imu")``."""
+
+
+class ProducerInput:
+    """NATS producers (horse and saddle) feeding the service's arbiter (see the module docstring)."""
 
     def __init__(self, service: Service, transport: Transport, trust_broker: bool, forget: float) -> None:
         self.service = service
         self.transport = transport
         self.trust_broker = trust_broker
         self.forget = forget
-        self.producers: dict[str, Producer] = {}
-        self.authorized: set[str] = set()
-        self.driving: dict[str, bool] = {}
+        self.endpoints: dict[str, IngestEndpoint] = {Kind.HORSE: service.ingest, Kind.SADDLE: service.saddle_ingest}
+        """The websocket endpoints' own validation, one per input kind."""
+        self.producers: dict[ProducerKey, Producer] = {}
+        self.authorized: set[ProducerKey] = set()
+        self.driving: dict[ProducerKey, bool] = {}
 
     @property
     def needs_token(self) -> bool:
@@ -85,11 +93,12 @@ class HorseInput:
     async def on_message(self, msg: Message) -> None:
         service = self.service
         parsed = parse(msg.subject)
-        if parsed is None or not parsed.known_version:
+        endpoint = None if parsed is None else self.endpoints.get(parsed.kind)
+        if parsed is None or endpoint is None or not parsed.known_version:
             service.metrics.bad_frames["unknown_version"] += 1
             await self._answer(msg, {"type": "error", "reason": "unknown_version", "message": msg.subject[:200]})
             return
-        key = parsed.producer
+        key = (parsed.kind, parsed.producer)
         producer = self.producers.get(key)
         if producer is None and len(self.producers) >= service.config.publish.max_clients:
             service.metrics.bad_frames["too_many_producers"] += 1
@@ -97,10 +106,11 @@ class HorseInput:
             await self._answer(msg, {"type": "error", "reason": "too_many_producers", "message": message})
             return
         if producer is None:
-            producer = Producer(id=next_producer_id(), name=f"nats:{key}")
+            kind = "" if parsed.kind == Kind.HORSE else f"{parsed.kind}:"
+            producer = Producer(id=next_producer_id(), name=f"nats:{kind}{parsed.producer}", spec=endpoint.spec)
             self.producers[key] = producer
             service.arbiter.producers[producer.id] = producer
-            await self._answer(msg, self.welcome(producer))
+            await self._answer(msg, endpoint.welcome(producer))
         now = time.perf_counter()
         try:
             obj = parse_payload(msg.data, service.config.input.max_message_bytes)
@@ -114,7 +124,7 @@ class HorseInput:
                 self.drop(key)
                 return
             obj.pop("token", None)
-            drives = service.ingest.handle(producer, obj, now)
+            drives = endpoint.handle(producer, obj, now)
         except Exception as exc:
             if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged
                 log.exception("ingest failed on a NATS message from %s", producer.name)
@@ -130,24 +140,15 @@ class HorseInput:
             self.driving[key] = drives
             await self._answer(msg, {"type": "control", "driving": drives})
 
-    def welcome(self, producer: Producer) -> dict[str, Any]:
-        config = self.service.config
-        return {
-            "type": "welcome",
-            "protocol": PROTOCOL_VERSION,
-            "session": self.service.session,
-            "producer": producer.id,
-            "channels": [{"name": c.name, "unit": c.unit} for c in HORSE],
-            "length_scale": config.tick.length_scale,
-            "max_message_bytes": config.input.max_message_bytes,
-            "max_rate": config.input.max_rate,
-        }
+    def accepted(self, kind: Kind) -> int:
+        """Frames accepted so far from the current NATS producers of ``kind``."""
+        return sum(p.accepted for (k, _), p in self.producers.items() if k == kind)
 
     async def _answer(self, msg: Message, message: dict[str, Any]) -> None:
         if msg.reply:
             await self.transport.publish(msg.reply, dumps(message))
 
-    def drop(self, key: str) -> None:
+    def drop(self, key: ProducerKey) -> None:
         """Forget a producer: its stream ends (the tick eases or another producer drives)."""
         producer = self.producers.pop(key, None)
         self.authorized.discard(key)

@@ -5,7 +5,7 @@
   ``nats.status_interval`` s. The tick's callback only queues records (latest 0.25 s,
   older ones counted ``frames_dropped``); a task publishes them, so a slow or dead
   broker never delays the tick, the websockets or the takes.
-- **In**: horse input and control (:mod:`riderlive.bus.inbound`); the stage e-stop,
+- **In**: horse and saddle input and control (:mod:`riderlive.bus.inbound`); the stage e-stop,
   which latches the e-stop exactly as ``POST /api/estop`` does (source ``nats``); the
   stage heartbeat; discovery requests of ``riderlive stage``.
 - **Stage dead-man**: without a stage heartbeat for ``nats.heartbeat_timeout`` s, an
@@ -34,7 +34,7 @@ import numpy as np
 import orjson
 
 from riderlive.bus.config import NatsSection
-from riderlive.bus.inbound import Control, HorseInput, dumps
+from riderlive.bus.inbound import Control, ProducerInput, dumps
 from riderlive.bus.subjects import Kind, Stage, parse
 from riderlive.bus.transport import Message, NoResponders, Subscription, Transport, TransportError
 from riderlive.channels import HORSE_NAMES
@@ -98,7 +98,7 @@ class RigNode:
         self.frame_subject = self.subjects.subject(Kind.FRAME)
         self.status_subject = self.subjects.subject(Kind.STATUS)
         trust = config.control_auth == "credentials"
-        self.horse = HorseInput(service, transport, trust, config.producer_forget)
+        self.inputs = ProducerInput(service, transport, trust, config.producer_forget)
         self.control = Control(service, transport, trust, self.arm_refusal, self.describe)
         self.subscription = dataclasses.replace(
             service.hub.default, horse=tuple(range(len(HORSE_NAMES))), encoding=config.encoding
@@ -112,7 +112,7 @@ class RigNode:
         self._subs: list[Subscription] = []
         self._tasks: list[asyncio.Task[None]] = []
         self._rates: dict[str, float] = {}
-        self._last_counts: tuple[float, int, int, int] = (time.perf_counter(), 0, 0, 0)
+        self._last_counts: tuple[float, int, int, int, int] = (time.perf_counter(), 0, 0, 0, 0)
 
     # -- joining and leaving ----------------------------------------------------------------
 
@@ -122,7 +122,8 @@ class RigNode:
         stage = self.stage
         self._subs = [
             await t.subscribe(self.subjects.subject(Kind.CONTROL, "*"), self.control.on_message, 256),
-            await t.subscribe(self.subjects.horse_any(), self.horse.on_message, 8192),
+            await t.subscribe(self.subjects.horse_any(), self.inputs.on_message, 8192),
+            await t.subscribe(self.subjects.saddle_any(), self.inputs.on_message, 8192),
             await t.subscribe(stage.subject(Kind.ESTOP, "*"), self.on_estop, 1024),
             await t.subscribe(stage.subject(Kind.HEARTBEAT, "*"), self.on_heartbeat, 1024),
             await t.subscribe(stage.subject(Kind.DISCOVER), self.on_discover, 256),
@@ -145,7 +146,7 @@ class RigNode:
         for sub in self._subs:
             with contextlib.suppress(Exception):
                 await sub.unsubscribe()
-        self.horse.close()
+        self.inputs.close()
         with contextlib.suppress(Exception):
             await self.transport.publish(self.status_subject, dumps({**self.describe(), "leaving": True}))
             await self.transport.flush(1.0)
@@ -203,16 +204,17 @@ class RigNode:
         }
 
     def _update_rates(self, now: float) -> None:
-        then, ticks, out, inp = self._last_counts
+        then, ticks, out, horse_in, saddle_in = self._last_counts
         metrics = self.service.metrics
-        frames_in = sum(p.accepted for p in self.horse.producers.values())
+        horse_now, saddle_now = self.inputs.accepted(Kind.HORSE), self.inputs.accepted(Kind.SADDLE)
         dt = max(now - then, 1e-6)
         self._rates = {
             "ticks_hz": (metrics.ticks_published - ticks) / dt,
             "frames_out_hz": (self.counts["frames_out"] - out) / dt,
-            "horse_in_hz": (frames_in - inp) / dt,
+            "horse_in_hz": (horse_now - horse_in) / dt,
+            "saddle_in_hz": (saddle_now - saddle_in) / dt,
         }
-        self._last_counts = (now, metrics.ticks_published, self.counts["frames_out"], frames_in)
+        self._last_counts = (now, metrics.ticks_published, self.counts["frames_out"], horse_now, saddle_now)
 
     # -- in ---------------------------------------------------------------------------------
 
@@ -276,7 +278,7 @@ class RigNode:
             now = time.perf_counter()
             if timeout > 0.0:
                 await self._dead_man(now, timeout)
-            self.horse.sweep(now)
+            self.inputs.sweep(now)
             version = self.service.link.status_blob.version
             if now >= next_status or version != status_version:
                 if now >= next_status:

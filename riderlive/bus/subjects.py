@@ -5,6 +5,7 @@
     riderlive.v1.<stage>.<rig>.frame            rig -> engines   one tick: rider + horse (RLF1 binary or JSON)
     riderlive.v1.<stage>.<rig>.status           rig -> stage     devices, e-stop, rates, heartbeat (JSON, 1 Hz+)
     riderlive.v1.<stage>.<rig>.horse.<producer> producers -> rig horse input, as on /ws/horse (JSON or msgpack)
+    riderlive.v1.<stage>.<rig>.saddle.<producer> producers -> rig saddle input, as on /ws/saddle (JSON or msgpack)
     riderlive.v1.<stage>.<rig>.control          request/reply    arm, disarm, reset, reload, estop, state (JSON)
     riderlive.v1.<stage>.estop                  anyone -> all    the stage e-stop: every rig latches
     riderlive.v1.<stage>.heartbeat              stage -> all     the stage heartbeat (the rigs' dead-man input)
@@ -37,6 +38,7 @@ class Kind(enum.StrEnum):
     FRAME = "frame"
     STATUS = "status"
     HORSE = "horse"
+    SADDLE = "saddle"
     CONTROL = "control"
     ESTOP = "estop"
     HEARTBEAT = "heartbeat"
@@ -45,6 +47,8 @@ class Kind(enum.StrEnum):
 
 STAGE_KINDS = frozenset({Kind.ESTOP, Kind.HEARTBEAT, Kind.DISCOVER})
 """Subjects of the whole stage (no rig token)."""
+INPUT_KINDS = frozenset({Kind.HORSE, Kind.SADDLE})
+"""Producer input subjects: ``...<rig>.<kind>.<producer>`` (one more token)."""
 
 
 def check_name(value: str, what: str) -> str:
@@ -86,15 +90,32 @@ class RigSubjects:
     rig: str
 
     def subject(self, kind: Kind, version: str | None = None) -> str:
-        assert kind not in STAGE_KINDS and kind is not Kind.HORSE
+        assert kind not in STAGE_KINDS and kind not in INPUT_KINDS
         return f"{self.stage._base(version)}.{self.rig}.{kind.value}"
 
+    def input(self, kind: Kind, producer: str, version: str | None = None) -> str:
+        """Producer ``producer``'s input subject of ``kind`` (horse or saddle)."""
+        assert kind in INPUT_KINDS
+        return f"{self.stage._base(version)}.{self.rig}.{kind.value}.{check_name(producer, 'producer')}"
+
+    def input_any(self, kind: Kind) -> str:
+        """Every producer's input subject of ``kind``, of every version."""
+        assert kind in INPUT_KINDS
+        return f"{self.stage._base('*')}.{self.rig}.{kind.value}.*"
+
     def horse(self, producer: str, version: str | None = None) -> str:
-        return f"{self.stage._base(version)}.{self.rig}.horse.{check_name(producer, 'producer')}"
+        return self.input(Kind.HORSE, producer, version)
+
+    def saddle(self, producer: str, version: str | None = None) -> str:
+        return self.input(Kind.SADDLE, producer, version)
 
     def horse_any(self) -> str:
         """Every producer's horse subject, of every version."""
-        return f"{self.stage._base('*')}.{self.rig}.horse.*"
+        return self.input_any(Kind.HORSE)
+
+    def saddle_any(self) -> str:
+        """Every producer's saddle subject, of every version."""
+        return self.input_any(Kind.SADDLE)
 
 
 @dataclass(frozen=True)
@@ -121,6 +142,6 @@ def parse(subject: str) -> Parsed | None:
         return Parsed(parts[1], parts[2], "", parts[3])
     if len(parts) == 5:
         return Parsed(parts[1], parts[2], parts[3], parts[4])
-    if len(parts) == 6 and parts[4] == Kind.HORSE:
+    if len(parts) == 6 and parts[4] in INPUT_KINDS:
         return Parsed(parts[1], parts[2], parts[3], parts[4], parts[5])
     return None

@@ -250,19 +250,7 @@ class IngestEndpoint:
         producer_id = next_producer_id()
         producer = Producer(id=producer_id, name=f"{spec.prefix}-{producer_id}", spec=spec, websocket=websocket)
         service.arbiter.producers[producer.id] = producer
-        await websocket.send_json(
-            {
-                "type": "welcome",
-                "protocol": PROTOCOL_VERSION,
-                "session": service.session,
-                "producer": producer.id,
-                "kind": spec.what,
-                "channels": [{"name": c.name, "unit": c.unit} for c in spec.channels],
-                "length_scale": config.tick.length_scale,
-                "max_message_bytes": config.input.max_message_bytes,
-                "max_rate": config.input.max_rate,
-            }
-        )
+        await websocket.send_json(self.welcome(producer))
         driving: bool | None = None
         try:
             if first is not None:
@@ -295,6 +283,21 @@ class IngestEndpoint:
         finally:
             if service.arbiter.remove(producer.id):
                 service.link.send(cmd.ProducerGone(producer.stream))
+
+    def welcome(self, producer: Producer) -> dict[str, Any]:
+        """The first message to a new producer (here and on NATS, ``bus/inbound.py``)."""
+        config = self.service.config
+        return {
+            "type": "welcome",
+            "protocol": PROTOCOL_VERSION,
+            "session": self.service.session,
+            "producer": producer.id,
+            "kind": self.spec.what,
+            "channels": [{"name": c.name, "unit": c.unit} for c in self.spec.channels],
+            "length_scale": config.tick.length_scale,
+            "max_message_bytes": config.input.max_message_bytes,
+            "max_rate": config.input.max_rate,
+        }
 
     def handle(self, producer: Producer, obj: dict[str, Any], now: float | None = None) -> bool | None:
         """Apply one decoded message; for a frame return whether it drives."""

@@ -26,8 +26,10 @@ def test_every_subject_parses_back_to_what_built_it(stage: str, rig: str, produc
             rig,
             kind,
         )
-    horse = parse(subjects.horse(producer))
-    assert horse is not None and horse.producer == producer and horse.known_version
+    for kind, subject in ((Kind.HORSE, subjects.horse(producer)), (Kind.SADDLE, subjects.saddle(producer))):
+        parsed_input = parse(subject)
+        assert parsed_input is not None and parsed_input.known_version
+        assert (parsed_input.rig, parsed_input.kind, parsed_input.producer) == (rig, kind, producer)
     for kind in (Kind.ESTOP, Kind.HEARTBEAT, Kind.DISCOVER):
         whole = parse(Stage(stage).subject(kind))
         assert whole is not None and whole.rig == "" and whole.kind == kind
@@ -48,6 +50,11 @@ def test_the_scheme_is_what_the_docs_say() -> None:
     assert stage.rig("r1").subject(Kind.FRAME) == "riderlive.v1.A.r1.frame"
     assert stage.rig("r1").horse("mocap") == "riderlive.v1.A.r1.horse.mocap"
     assert stage.rig("r1").horse_any() == "riderlive.*.A.r1.horse.*"
+    assert stage.rig("r1").saddle("imu") == "riderlive.v1.A.r1.saddle.imu"
+    assert stage.rig("r1").saddle_any() == "riderlive.*.A.r1.saddle.*"
+    assert parse("riderlive.v1.A.r1.saddle.imu.x") is None and parse("riderlive.v1.A.r1.frame.imu") is None
+    with pytest.raises(ValueError, match="producer"):
+        stage.rig("r1").saddle("a.b")
     assert stage.subject(Kind.ESTOP, "*") == "riderlive.*.A.estop"
     assert stage.every_rig(Kind.STATUS) == "riderlive.v1.A.*.status"
     assert parse("riderlive.v1.A.r1.horse.p.extra") is None and parse("other.v1.A.r1.frame") is None
