@@ -317,6 +317,7 @@ async function start() {
       travel: follow ? tx : 0,
     });
     page.tack = view.tackUsed;
+    page.clothFlaps = clothPts.length; // cloth flaps drawn (0 without the physics)
     page.tackBones = view.tack ? view.tack.uses : null;
   }
 
