@@ -6,7 +6,8 @@ What is timed, per internal step (1/240 s), as CPU microseconds of one thread (t
 spent waiting for a core on a shared machine does not count; each figure is the best
 of several blocks, and the best over ``--rounds`` child processes):
 
-- the skinned tail + braid: the whole step (posing, 2 strands, 2 x 11-bone chains,
+- the skinned tail + braid (+ the two cloth flaps since issue 17): the whole step
+  (posing, 2 strands and 2 x 11-bone chains, 4 and 4 with the flaps,
   the state objects), and posing alone;
 - the reference tail, 400 and 4000 strands x 12 vertices (posing + solver).
 
@@ -123,7 +124,7 @@ def main() -> int:
     print(f"baseline: {args.baseline} from git (the hand-written kernels and the NumPy reference tail)")
     print(f"{'':40s} {'single source':>14s} {'baseline':>10s} {'ratio':>7s}")
     labels = {
-        "skinned": "skinned tail + braid, whole step",
+        "skinned": "skinned tail + braid (+ flaps), whole step",
         "posing": "  of which posing (anchors)",
         "reference 400": "reference tail, 400 strands x 12",
         "reference 4000": "reference tail, 4000 strands x 12",

@@ -196,9 +196,12 @@ AXIS_CONVENTION: dict[str, str] = {
 """The thesis rigs' axis convention (section 7), as published in hellos and docs."""
 
 
-BONE_CHANNEL = re.compile(r"(?P<node>(?:tail|braid)_\d{2})\.(?P<attr>t[xyz]|r[xyz]|q[xyzw]|fan)|tail_ref\.t[xyz]")
-"""Simulated bone chains (``riderlive.physics``): ``tail_NN`` / ``braid_NN`` with world
-position ``t*`` (m), local rotation ``r*`` (deg) and ``q*`` (unit quaternion, x y z w),
+BONE_CHANNEL = re.compile(
+    r"(?P<node>(?:tail|braid|lf_cloth|rt_cloth)_\d{2})\.(?P<attr>t[xyz]|r[xyz]|q[xyzw]|fan)|tail_ref\.t[xyz]"
+)
+"""Simulated bone chains (``riderlive.physics``): ``tail_NN`` / ``braid_NN`` / ``lf_cloth_NN`` /
+``rt_cloth_NN`` (the rider's coat-skirt flaps) with world position ``t*`` (m), local
+rotation ``r*`` (deg) and ``q*`` (unit quaternion, x y z w),
 ``fan`` (sub-chain spread, m); ``tail_ref`` is the reference tail's mean tip (m)."""
 
 

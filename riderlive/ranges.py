@@ -49,10 +49,11 @@ CHANNEL_DEFAULTS: dict[str, Range] = {
     "root.ry": (-1e6, 1e6),
     "tail_*.t*": (-1e5, 1e5),
     "braid_*.t*": (-1e5, 1e5),
+    "*_cloth_*.t*": (-1e5, 1e5),
     "tail_ref.t*": (-1e5, 1e5),
 }
 """The horse's hooves and pivots are relative to its body; ``root`` is its world
-position (100 km) and heading (turns accumulate); the simulated tail and braid are
+position (100 km) and heading (turns accumulate); the simulated tail, braid and cloth flaps are
 world positions too."""
 
 

@@ -14,9 +14,12 @@ The hindquarters frame: origin at ``root.t* + Ry(root.ry) (pivot_rest + rearPivo
 the hindquarters sphere and the hip ends of the hind-leg capsules are fixed in it;
 the legs' lower ends follow the back hooves. The rider is a simple pose, not a
 skeleton: the seat is fixed in the hindquarters frame (lifted by ``cog.ty``, within
-``lift_limit``), the spine leans ``Rx(lower_back.rx) Ry(lower_back.ry) Rz(-lower_back.rz)``
+``lift_limit``; the hips frame is the spine's frame there), the spine leans
+``Rx(lower_back.rx) Ry(lower_back.ry) Rz(-lower_back.rz)``
 (a positive ``lower_back.rz`` leans forward), the head turns ``Ry(head.ry) Rz(-head.rz)``.
-The braid hangs from the back of the head; the rider's back is one capsule.
+The braid hangs from the back of the head, the two coat-skirt flaps from the hips;
+the rider's back is one capsule. Section 8.9's attributes tilt the ties: ``hair.*``
+the braid's (in the head frame), ``cloth.*`` both flaps' (in the hips frame).
 """
 
 from __future__ import annotations
@@ -69,6 +72,8 @@ class RiderChannels(NamedTuple):
     head_rz: int
     hair_up: int
     hair_side: int
+    cloth_up: int
+    cloth_side: int
 
 
 def _resolve(fields: tuple[str, ...], index: dict[str, int]) -> tuple[int, ...]:
@@ -82,9 +87,14 @@ UPRIGHT = np.zeros(len(RIDER_INDEX))
 """The rider frame posing uses without a rider: upright, seated."""
 
 # Frames the posing kernel returns, and rows of its table of body points (metres, in the frame named).
-HINDQUARTERS, DOCK, HEAD, BRAID = range(4)
+HINDQUARTERS, DOCK, HEAD, BRAID, HIPS, CLOTH_L, CLOTH_R = range(7)
 PIVOT, DOCK_AT, CENTRE, HIP_L, HIP_R, HOOF_L, HOOF_R, SEAT, HEAD_AT, BACK_LO, BACK_HI, BRAID_AT, HAIR = range(13)
-"""``HAIR`` is no point: its row holds the braid's gains per unit of ``hair.up`` and ``hair.side`` (deg)."""
+CLOTH_AT, CLOTH = 13, 14
+"""``HAIR`` and ``CLOTH`` are no points: their rows hold the gains per unit of ``hair.up`` / ``cloth.up``
+and ``hair.side`` / ``cloth.side`` (deg), then (``CLOTH``) the flaps' tilt limit (deg). ``CLOTH_AT`` is the
+right flap's root (the left's is mirrored)."""
+MIRROR = np.diag([1.0, 1.0, -1.0])
+"""Reflection across the horse's midplane (z to -z)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,10 +111,10 @@ class Frame:
 
 @dataclass(frozen=True, eq=False)
 class Pose:
-    """Hindquarters, dock, head and braid frames, and the colliders (the horse's three, the rider's back)."""
+    """Hindquarters, dock, head, braid, hips and flap frames; the colliders (the horse's three, the rider's back)."""
 
-    origins: FloatArray  # (4, 3): HINDQUARTERS, DOCK, HEAD, BRAID
-    rotations: FloatArray  # (4, 3, 3)
+    origins: FloatArray  # (7, 3): HINDQUARTERS, DOCK, HEAD, BRAID, HIPS, CLOTH_L, CLOTH_R
+    rotations: FloatArray  # (7, 3, 3)
     colliders: Capsules  # hindquarters sphere, left and right hind legs, rider's back
 
     def frame(self, which: int) -> Frame:
@@ -143,10 +153,15 @@ class Body:
             BACK_HI: rider.back_top,
             BRAID_AT: rider.braid_offset,
             HAIR: (rider.hair_up_gain, rider.hair_side_gain, 0.0),
+            CLOTH_AT: rider.cloth_offset,
+            CLOTH: (rider.cloth_up_gain, rider.cloth_side_gain, rider.cloth_tilt_limit),
         }
         self.points = np.ascontiguousarray([rows[i] for i in range(len(rows))], dtype=np.float64)
         self.dock_rest = aim(horse.dock_direction)
         self.braid_rest = aim(rider.braid_direction)
+        right = aim(rider.cloth_direction)
+        self.cloth_rest = np.ascontiguousarray([MIRROR @ right @ MIRROR, right])
+        """The flaps' rest rotations in the hips frame (left, right): the left is the right's mirror image."""
         self.radius = np.array([horse.hindquarters_radius, horse.leg_radius, horse.leg_radius, rider.back_radius])
         self.lift_limit = float(rider.lift_limit)
 
@@ -158,6 +173,7 @@ class Body:
             self.points,
             self.dock_rest,
             self.braid_rest,
+            self.cloth_rest,
             self.lift_limit,
         )
         return Pose(origins, rotations, Capsules(a, b, self.radius))
@@ -203,10 +219,12 @@ def pose(  # noqa: PLR0917
     points: FloatArray,
     dock_rest: FloatArray,
     braid_rest: FloatArray,
+    cloth_rest: FloatArray,
     lift_limit: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Frame origins (4, 3) and rotations (4, 3, 3) (HINDQUARTERS, DOCK, HEAD, BRAID), capsule ends (4, 3) x 2."""
-    origins, rotations = np.empty((4, 3)), np.empty((4, 3, 3))
+    """Frame origins (7, 3) and rotations (7, 3, 3) (HINDQUARTERS, DOCK, HEAD, BRAID, HIPS, CLOTH_L, CLOTH_R),
+    capsule ends (4, 3) x 2; ``cloth_rest`` (2, 3, 3) are the flaps' rest rotations (left, right)."""
+    origins, rotations = np.empty((7, 3)), np.empty((7, 3, 3))
     cap_a, cap_b = np.empty((4, 3)), np.empty((4, 3))
     root = np.array([h[HORSE.root_tx], h[HORSE.root_ty], h[HORSE.root_tz]])
     yaw = rotation(1, h[HORSE.root_ry])
@@ -245,4 +263,15 @@ def pose(  # noqa: PLR0917
         rotation(2, -points[HAIR, 0] * rider[RIDER.hair_up]), rotation(0, -points[HAIR, 1] * rider[RIDER.hair_side])
     )
     rotations[BRAID] = matmul(matmul(head_rot, tilt), braid_rest)
+    # The cloth attributes tilt both flaps' ties the same way, in the hips frame, each tilt within the limit.
+    origins[HIPS] = seat
+    rotations[HIPS] = spine
+    limit = points[CLOTH, 2]
+    rise = min(max(points[CLOTH, 0] * rider[RIDER.cloth_up], -limit), limit)
+    swing = min(max(points[CLOTH, 1] * rider[RIDER.cloth_side], -limit), limit)
+    skirt = matmul(spine, matmul(rotation(2, -rise), rotation(0, -swing)))
+    c = points[CLOTH_AT]
+    for k, frame, z in ((0, CLOTH_L, -c[2]), (1, CLOTH_R, c[2])):
+        place(origins[frame], seat, spine, c[0], c[1], z)
+        rotations[frame] = matmul(skirt, cloth_rest[k])
     return origins, rotations, cap_a, cap_b

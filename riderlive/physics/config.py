@@ -102,6 +102,19 @@ class RiderBody(StrictModel):
     hair_side_gain: float = 20.0
     """... and to the rider's right by this many degrees per unit of ``hair.side``."""
     braid: StrandParams = StrandParams(length=0.45, root_length=0.04, bend=0.35, damping=0.5, iterations=1)
+    cloth_offset: Vec3 = (-0.1, 0.0, 0.2)
+    """Root of the right coat-skirt flap in the hips frame (the spine's frame at the seat); z mirrored for the left."""
+    cloth_direction: Vec3 = (-0.3, -1.0, 0.3)
+    """The right flap's tie at rest, in the hips frame: down, a little back and out (z mirrored for the left)."""
+    cloth_up_gain: float = 3.0
+    """Both flaps' ties tilt up and back (about the hips' z) by this many degrees per unit of ``cloth.up`` (8.9)."""
+    cloth_side_gain: float = 3.0
+    """... and to the rider's right (about the hips' x) by this many degrees per unit of ``cloth.side``."""
+    cloth_tilt_limit: Annotated[float, pydantic.Field(ge=0.0, le=180.0)] = 75.0
+    """Each of the two tilts is limited to +- this many degrees (an absurd attribute leaves the flap finite)."""
+    cloth: StrandParams = StrandParams(length=0.4, root_length=0.08, bend=0.45, damping=2.0, iterations=1)
+    """Each flap: 0.4 m of coat skirt, its top 8 cm rigid with the hips (the pinned tie), stiffer and more
+    damped than the braid (it must have the tail's and the braid's vertex count: one solver state)."""
 
 
 class PhysicsConfig(StrictModel):

@@ -1,10 +1,11 @@
 """Publishing: the bone chains' channels (outside the step), in the rigs' node.attr form.
 
-Per bone ``tail_NN`` / ``braid_NN`` (NN from 00 at the root):
+Per bone ``tail_NN`` / ``braid_NN`` / ``lf_cloth_NN`` / ``rt_cloth_NN`` (NN from 00 at the root):
 
 - ``tx ty tz``: world position of the bone's head (its strand vertex), metres;
 - ``qx qy qz qw``: local rotation (relative to the parent bone; bone 00 relative to
-  the hindquarters frame for the tail, the head frame for the braid), unit quaternion;
+  the hindquarters frame for the tail, the head frame for the braid, the hips frame for
+  the cloth flaps), unit quaternion;
 - ``rx ry rz``: the same local rotation as Euler degrees, rotate order XYZ, in the
   rigs' axis convention: the bone's long axis is local X (``rx`` twists), ``rz``
   bends front/back, ``ry`` side to side;
@@ -19,17 +20,19 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.physics import chain, quaternion
-from riderlive.physics.skinned import BRAID, TAIL, SkinnedModel, SkinnedState
+from riderlive.physics.skinned import BRAID, CLOTH_L, CLOTH_R, TAIL, SkinnedModel, SkinnedState
 
 FloatArray = npt.NDArray[np.float64]
 BONE_ATTRS: tuple[str, ...] = ("tx", "ty", "tz", "rx", "ry", "rz", "qx", "qy", "qz", "qw")
+CHAINS: tuple[tuple[str, int], ...] = (("tail", TAIL), ("braid", BRAID), ("lf_cloth", CLOTH_L), ("rt_cloth", CLOTH_R))
+"""Published chains in output order: name prefix and strand column."""
 
 
 def channel_names(model: SkinnedModel) -> tuple[str, ...]:
-    """Every published channel of the skinned tail and braid, in output order."""
+    """Every published channel of the skinned tail, braid and cloth flaps, in output order."""
     bones = model.strands.n_vertices - 1
     names: list[str] = []
-    for prefix, column in (("tail", TAIL), ("braid", BRAID)):
+    for prefix, column in CHAINS:
         for j in range(bones):
             names += [f"{prefix}_{j:02d}.{a}" for a in BONE_ATTRS]
             if model.bones.fan_profile[j, column] > 0.0:
@@ -54,5 +57,5 @@ def publish(model: SkinnedModel, state: SkinnedState) -> FloatArray:
     per_bone = np.concatenate((heads, quaternion.to_euler_xyz(local), local, fan), axis=-1)
     keep = np.ones(per_bone.shape, dtype=bool)
     keep[..., -1] = model.bones.fan_profile > 0.0
-    order = (TAIL, BRAID)
+    order = [column for _, column in CHAINS]
     return np.asarray(per_bone[:, order].transpose(1, 0, 2)[keep[:, order].transpose(1, 0, 2)], dtype=np.float64)

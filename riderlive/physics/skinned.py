@@ -1,13 +1,14 @@
-"""The cheap character strands: the skinned tail's one strand and the rider's braid, in one solver state.
+"""The cheap character strands: the skinned tail's one strand, the rider's braid and coat-skirt flaps, in one state.
 
-Column 0 of the strand arrays is the tail, column 1 the braid: one solver state and
-one call serve both (for arrays this small, calls cost more than arithmetic). Each
-strand drives a bone chain (:mod:`riderlive.physics.chain`); the tail's chain has the
-fan-out sub-chains. The first frame is derived from the bones' rest pose: the bones
-lie along the dock (head) direction, and the strand vertices are the bone joints.
+Column 0 of the strand arrays is the tail, column 1 the braid, columns 2 and 3 the
+left and right cloth flaps: one solver state and one call serve all four (for arrays
+this small, calls cost more than arithmetic). Each strand drives a bone chain
+(:mod:`riderlive.physics.chain`); the tail's chain has the fan-out sub-chains. The
+first frame is derived from the bones' rest pose: the bones lie along the dock (tie)
+direction, and the strand vertices are the bone joints.
 
 Everything collides with everything: the tail with the hindquarters and hind legs,
-the braid with the rider's back (and, when it swings that far, the horse).
+the braid and the flaps with the rider's back (and, when they swing that far, the horse).
 
 One step is one compiled call (:func:`advance`): posing (:func:`riderlive.physics.attach.pose`),
 the strand step (:func:`riderlive.physics.strands.advance`) and the chains
@@ -25,7 +26,9 @@ import numpy.typing as npt
 from riderlive.fastpath import kernel
 from riderlive.physics import chain, strands
 from riderlive.physics.attach import BRAID as BRAID_FRAME
-from riderlive.physics.attach import DOCK, HEAD, HINDQUARTERS, UPRIGHT, Body, Frame, pose
+from riderlive.physics.attach import CLOTH_L as CLOTH_L_FRAME
+from riderlive.physics.attach import CLOTH_R as CLOTH_R_FRAME
+from riderlive.physics.attach import DOCK, HEAD, HINDQUARTERS, HIPS, UPRIGHT, Body, Frame, pose
 from riderlive.physics.chain import ChainModel, ChainState
 from riderlive.physics.collision import Capsules
 from riderlive.physics.config import PhysicsConfig
@@ -34,64 +37,67 @@ from riderlive.physics.reference import segment_lengths
 from riderlive.physics.strands import StrandModel, StrandState
 
 FloatArray = npt.NDArray[np.float64]
-TAIL, BRAID = 0, 1
+TAIL, BRAID, CLOTH_L, CLOTH_R = range(4)
+"""Strand (and chain) columns: the skinned tail, the braid, the left and right cloth flaps."""
 
 
 @dataclass(frozen=True, eq=False)
 class SkinnedState:
-    """Strand state (V, 3, 2) and bone-chain state (V-1, 3, 2); ``parents`` are the anchors' parent frames."""
+    """Strand state (V, 3, 4) and bone-chain state (V-1, 3, 4); ``parents`` are the anchors' parent frames
+    (hindquarters, head, hips, hips), one per column."""
 
     strands: StrandState
     bones: ChainState
-    parents: tuple[Frame, Frame]
+    parents: tuple[Frame, ...]
 
 
 @dataclass(frozen=True, eq=False)
 class Anchors:
-    """Pinned vertices (2, 3, 2), bone 0 up vectors (3, 2), colliders and parent frames at one instant."""
+    """Pinned vertices (2, 3, 4), bone 0 up vectors (3, 4), colliders and parent frames at one instant."""
 
     pins: FloatArray
     up: FloatArray
     colliders: Capsules
-    parents: tuple[Frame, Frame]
+    parents: tuple[Frame, ...]
 
 
 @dataclass(frozen=True, eq=False)
 class SkinnedModel:
-    """Solver model for tail + braid strands, chain model, the body they hang from, and the config."""
+    """Solver model for the tail, braid and flap strands, chain model, the body they hang from, and the config."""
 
     strands: StrandModel
     bones: ChainModel
     config: PhysicsConfig
     body: Body
-    _posing: tuple[FloatArray, FloatArray, FloatArray, float, FloatArray, float, float] = field(init=False, repr=False)
+    _posing: tuple[Any, ...] = field(init=False, repr=False)
     _constants: tuple[Any, ...] = field(init=False, repr=False)
     """Every argument of :func:`advance` after the state and the drive, gathered once."""
 
     def __post_init__(self) -> None:
         b, cfg = self.body, self.config
-        roots = (float(cfg.skinned.strand.root_length), float(cfg.rider.braid.root_length))
-        posing = (b.points, b.dock_rest, b.braid_rest, b.lift_limit, b.radius, *roots)
+        cloth = cfg.rider.cloth.root_length
+        roots = np.array([cfg.skinned.strand.root_length, cfg.rider.braid.root_length, cloth, cloth])
+        posing = (b.points, b.dock_rest, b.braid_rest, b.cloth_rest, b.lift_limit, b.radius, roots)
         object.__setattr__(self, "_posing", posing)
         object.__setattr__(self, "_constants", (*posing, *self.strands.solver, *self.bones.solver))
 
     @staticmethod
     def build(config: PhysicsConfig) -> SkinnedModel:
         """The model for ``config``."""
-        tail, braid = config.skinned.strand, config.rider.braid
-        if tail.vertices != braid.vertices:
-            raise ValueError("the skinned tail and the braid must have the same number of vertices")
-        rest = np.concatenate(
-            (segment_lengths(tail, np.array([tail.length])), segment_lengths(braid, np.array([braid.length]))), axis=1
-        )
+        kinds = (config.skinned.strand, config.rider.braid, config.rider.cloth, config.rider.cloth)
+        if len({k.vertices for k in kinds}) != 1:
+            raise ValueError(
+                "skinned.strand, rider.braid and rider.cloth must have the same number of vertices "
+                f"(got {kinds[0].vertices}, {kinds[1].vertices}, {kinds[2].vertices})"
+            )
         model = StrandModel(
-            rest=rest,
+            rest=np.concatenate([segment_lengths(k, np.array([k.length])) for k in kinds], axis=1),
             inv_mass=1.0,
-            bend=np.array([tail.bend, braid.bend]),
+            bend=np.array([k.bend for k in kinds]),
             pinned=2,
             dt=1.0 / config.rate,
-            iterations=max(tail.iterations, braid.iterations),
-            damping=np.array([tail.damping, braid.damping]),
+            iterations=max(k.iterations for k in kinds),
+            damping=np.array([k.damping for k in kinds]),
             collision_passes=config.collision_passes,
         )
         sk = config.skinned
@@ -101,18 +107,17 @@ class SkinnedModel:
             fan_gain=sk.fan_gain,
             fan_max=sk.fan_max,
             fan_time=sk.fan_time,
-            fan_profile=chain.fan_profile(tail.vertices - 1, [sk.subchains > 0, False]),
+            fan_profile=chain.fan_profile(kinds[0].vertices - 1, [sk.subchains > 0, False, False, False]),
         )
         return SkinnedModel(model, bones, config, Body(config.horse, config.rider))
 
     def anchors(self, drive: Drive) -> Anchors:
-        """Where the tail's dock and the braid's tie are, and what they collide with, for ``drive``."""
-        points, dock_rest, braid_rest, lift_limit, radius, tail_root, braid_root = self._posing
+        """Where the tail's dock and the braid's and flaps' ties are, and what they collide with, for ``drive``."""
+        points, dock_rest, braid_rest, cloth_rest, lift_limit, radius, roots = self._posing
         horse, rider = _contiguous(drive.horse), _rider(drive)
-        origins, rotations, a, b = pose(horse, rider, points, dock_rest, braid_rest, lift_limit)
-        pins, up = anchor_pins(origins, rotations, tail_root, braid_root)
-        parents = (Frame(origins[HINDQUARTERS], rotations[HINDQUARTERS]), Frame(origins[HEAD], rotations[HEAD]))
-        return Anchors(pins, up, Capsules(a, b, radius), parents)
+        origins, rotations, a, b = pose(horse, rider, points, dock_rest, braid_rest, cloth_rest, lift_limit)
+        pins, up = anchor_pins(origins, rotations, roots)
+        return Anchors(pins, up, Capsules(a, b, radius), _parents(origins, rotations))
 
     def initial(self, drive: Drive) -> SkinnedState:
         """Bones in their rest pose along the anchors; the strands are derived from the bone joints."""
@@ -135,8 +140,15 @@ class SkinnedModel:
             _rider(drive),
             *self._constants,
         )
-        parents = (Frame(origins[HINDQUARTERS], rotations[HINDQUARTERS]), Frame(origins[HEAD], rotations[HEAD]))
-        return SkinnedState(StrandState(x, prev), ChainState(axis, up, velocity, fan), parents)
+        return SkinnedState(StrandState(x, prev), ChainState(axis, up, velocity, fan), _parents(origins, rotations))
+
+
+PARENTS = (HINDQUARTERS, HEAD, HIPS, HIPS)
+"""The posed frame each column's bone 0 is relative to: the tail's, the braid's, the flaps'."""
+
+
+def _parents(origins: FloatArray, rotations: FloatArray) -> tuple[Frame, ...]:
+    return tuple(Frame(origins[f], rotations[f]) for f in PARENTS)
 
 
 def _contiguous(a: FloatArray) -> FloatArray:
@@ -151,19 +163,17 @@ def _rider(drive: Drive) -> FloatArray:
 
 
 @kernel
-def anchor_pins(
-    origins: FloatArray, rotations: FloatArray, tail_root: float, braid_root: float
-) -> tuple[FloatArray, FloatArray]:
-    """The pinned vertices (2, 3, 2) and bone 0 up vectors (3, 2) from the posed dock and braid frames.
+def anchor_pins(origins: FloatArray, rotations: FloatArray, roots: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The pinned vertices (2, 3, 4) and bone 0 up vectors (3, 4) from the posed dock, braid and flap frames.
 
-    Each strand's root sits at its frame's origin, its second vertex ``root`` metres
-    along the frame's x; bone 0's up is the frame's y.
+    Each strand's root sits at its frame's origin, its second vertex ``roots[column]``
+    metres along the frame's x; bone 0's up is the frame's y.
     """
-    pins, up = np.empty((2, 3, 2)), np.empty((3, 2))
-    for column, frame, root in ((TAIL, DOCK, tail_root), (BRAID, BRAID_FRAME, braid_root)):
+    pins, up = np.empty((2, 3, 4)), np.empty((3, 4))
+    for column, frame in ((TAIL, DOCK), (BRAID, BRAID_FRAME), (CLOTH_L, CLOTH_L_FRAME), (CLOTH_R, CLOTH_R_FRAME)):
         for c in range(3):
             pins[0, c, column] = origins[frame, c]
-            pins[1, c, column] = origins[frame, c] + rotations[frame, c, 0] * root
+            pins[1, c, column] = origins[frame, c] + rotations[frame, c, 0] * roots[column]
             up[c, column] = rotations[frame, c, 1]
     return pins, up
 
@@ -180,10 +190,10 @@ def advance(  # noqa: PLR0917
     points: FloatArray,
     dock_rest: FloatArray,
     braid_rest: FloatArray,
+    cloth_rest: FloatArray,
     lift_limit: float,
     radius: FloatArray,
-    tail_root: float,
-    braid_root: float,
+    roots: FloatArray,
     rest: FloatArray,
     w: FloatArray,
     bend: FloatArray,
@@ -206,8 +216,8 @@ def advance(  # noqa: PLR0917
 
     Returns the new x, x_prev, axis, up, velocity, fan, and the posed frames' origins and rotations.
     """
-    origins, rotations, cap_a, cap_b = pose(horse, rider, points, dock_rest, braid_rest, lift_limit)
-    pins, anchor_up = anchor_pins(origins, rotations, tail_root, braid_root)
+    origins, rotations, cap_a, cap_b = pose(horse, rider, points, dock_rest, braid_rest, cloth_rest, lift_limit)
+    pins, anchor_up = anchor_pins(origins, rotations, roots)
     new, new_prev = strands.advance(
         x, prev, pins, cap_a, cap_b, radius, rest, w, bend, keep, pinned, iterations, collision_passes, bends,
         collide_each, fall, leader,

@@ -290,6 +290,10 @@ class Posing:
         self.braid_offset = np.array(rider.braid_offset)
         self.braid_rest = aim(rider.braid_direction)
         self.hair_gains = (rider.hair_up_gain, rider.hair_side_gain)
+        mirror = np.diag([1.0, 1.0, -1.0])
+        self.cloth_offsets = np.array([np.array(rider.cloth_offset) * np.diag(mirror), rider.cloth_offset])
+        self.cloth_rest = (mirror @ aim(rider.cloth_direction) @ mirror, aim(rider.cloth_direction))
+        self.cloth_gains = (rider.cloth_up_gain, rider.cloth_side_gain, rider.cloth_tilt_limit)
 
     def hindquarters(self, frame: FloatArray) -> Frame:
         yaw = rotation_y(_h(frame, "root.ry"))
@@ -309,8 +313,8 @@ class Posing:
         hooves = frame[_ROOT] + (frame[_HOOVES] + self.hoof_shift) @ rotation_y(_h(frame, "root.ry")).T
         return Capsules(np.vstack((centre, hips)), np.vstack((centre, hooves)), self.radius)
 
-    def rider(self, hq: Frame, rider: FloatArray | None) -> tuple[Frame, Frame, Capsules]:
-        """Head frame, braid frame and the back capsule."""
+    def rider(self, hq: Frame, rider: FloatArray | None) -> tuple[Frame, Frame, Capsules, Frame, list[Frame]]:
+        """Head frame, braid frame, the back capsule, the hips frame and the flaps' frames (left, right)."""
         lift = min(max(_r(rider, "cog.ty"), -self.lift_limit), self.lift_limit)
         seat = hq.origin + hq.rotation @ (self.seat + np.array([0.0, lift, 0.0]))
         spine = (
@@ -325,16 +329,25 @@ class Posing:
         up, side = self.hair_gains  # section 8.9: the attributes tilt the braid's tie
         tilt = rotation_z(-up * _r(rider, "hair.up")) @ rotation_x(-side * _r(rider, "hair.side"))
         braid = Frame(head.point(self.braid_offset), head.rotation @ tilt @ self.braid_rest)
-        return head, braid, Capsules(back[:1], back[1:], self.back_radius)
+        hips = Frame(seat, spine)
+        up, side, limit = self.cloth_gains  # and the cloth attributes both flaps' ties, each tilt limited
+        rise = float(np.clip(up * _r(rider, "cloth.up"), -limit, limit))
+        swing = float(np.clip(side * _r(rider, "cloth.side"), -limit, limit))
+        skirt = spine @ rotation_z(-rise) @ rotation_x(-swing)
+        flaps = [Frame(hips.point(o), skirt @ r) for o, r in zip(self.cloth_offsets, self.cloth_rest, strict=True)]
+        return head, braid, Capsules(back[:1], back[1:], self.back_radius), hips, flaps
 
     def anchors(
-        self, horse: FloatArray, rider: FloatArray | None, tail_root: float, braid_root: float
-    ) -> tuple[FloatArray, FloatArray, Capsules, Frame, Frame]:
-        """The previous ``SkinnedModel.anchors``: pins (2, 3, 2), up (3, 2), colliders, hindquarters, head."""
+        self, horse: FloatArray, rider: FloatArray | None, *roots: float
+    ) -> tuple[FloatArray, FloatArray, Capsules, Frame, Frame, Frame]:
+        """The previous ``SkinnedModel.anchors`` with the flaps: pins (2, 3, 4), up (3, 4), colliders,
+        hindquarters, head, hips; ``roots`` are the tail's, braid's and (both) flaps' pinned lengths."""
         hq = self.hindquarters(horse)
         tail = self.dock(hq)
-        head, braid, back = self.rider(hq, rider)
-        base = np.stack((tail.origin, braid.origin), axis=1)
-        along = np.stack((tail.rotation[:, 0] * tail_root, braid.rotation[:, 0] * braid_root), axis=1)
-        up = np.stack((tail.rotation[:, 1], braid.rotation[:, 1]), axis=1)
-        return np.stack((base, base + along)), up, Capsules.concat(self.colliders(horse, hq), back), hq, head
+        head, braid, back, hips, flaps = self.rider(hq, rider)
+        frames = [tail, braid, *flaps]
+        base = np.stack([f.origin for f in frames], axis=1)
+        along = np.stack([f.rotation[:, 0] * r for f, r in zip(frames, roots, strict=True)], axis=1)
+        up = np.stack([f.rotation[:, 1] for f in frames], axis=1)
+        colliders = Capsules.concat(self.colliders(horse, hq), back)
+        return np.stack((base, base + along)), up, colliders, hq, head, hips

@@ -69,13 +69,14 @@ class OracleSkinned:
     def __init__(self, model: SkinnedModel) -> None:
         self.model = model
         self.posing = oracle.Posing(CONFIG.horse, CONFIG.rider)
-        self.roots = (CONFIG.skinned.strand.root_length, CONFIG.rider.braid.root_length)
+        cloth = CONFIG.rider.cloth.root_length
+        self.roots = (CONFIG.skinned.strand.root_length, CONFIG.rider.braid.root_length, cloth, cloth)
 
     def step(self, state: SkinnedState, drive: Drive) -> SkinnedState:
-        pins, up, colliders, hq, head = self.posing.anchors(drive.horse, drive.rider, *self.roots)
+        pins, up, colliders, hq, head, hips = self.posing.anchors(drive.horse, drive.rider, *self.roots)
         moved = oracle.strand_step(self.model.strands, state.strands, pins, colliders)
         bones = oracle.chain_step(self.model.bones, state.bones, moved.x, up)
-        return SkinnedState(moved, bones, (hq, head))
+        return SkinnedState(moved, bones, (hq, head, hips, hips))
 
 
 @cache
@@ -91,7 +92,7 @@ def _compare_take(kind: str) -> tuple[dict[str, float], float, float]:
     for k in range(1, steps + 1):
         drive = src(k * DT)
         got = fast.anchors(drive)
-        pins, up, caps, _, _ = slow.posing.anchors(drive.horse, drive.rider, *slow.roots)
+        pins, up, caps, _, _, _ = slow.posing.anchors(drive.horse, drive.rider, *slow.roots)
         for u, v in ((got.pins, pins), (got.up, up), (got.colliders.a, caps.a), (got.colliders.b, caps.b)):
             anchors = max(anchors, float(np.abs(u - v).max()))
         assert np.array_equal(got.colliders.radius, caps.radius)

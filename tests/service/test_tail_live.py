@@ -61,7 +61,7 @@ def test_hello_lists_the_tail_after_the_rider_and_frames_carry_it(tail_server: t
 
 
 def test_the_page_receives_the_tail_and_braid(tail_server: tuple[LiveServer, dict]) -> None:
-    """The previs page groups ``tail_NN`` / ``braid_NN`` from the hello and gets their values."""
+    """The page groups ``tail_NN`` / ``braid_NN`` / ``*_cloth_NN`` from the hello, gets their values, draws flaps."""
     from riderlive.web import CHROMIUM, CHROMIUM_ARGS
     from tests.web.conftest import open_page
 
@@ -77,6 +77,7 @@ def test_the_page_receives_the_tail_and_braid(tail_server: tuple[LiveServer, dic
             page.wait_for("window.riderlive && riderlive.frames > 5 && 'braid_10.tx' in riderlive.values", 20.0)
             first = page.state("riderlive.values['tail_10.tx']")
             page.wait_for(f"riderlive.values['tail_10.tx'] !== {first!r}")
+            page.wait_for("riderlive.clothFlaps === 2 && 'rt_cloth_10.tx' in riderlive.values", 10.0)
             names = page.state("[...document.querySelectorAll('#plot-add option')].map((o) => o.value)")
             assert page.errors == []
         finally:

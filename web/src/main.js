@@ -161,7 +161,7 @@ async function start() {
   $("plot-window").addEventListener("change", () => (plots.window = +$("plot-window").value));
   $("plot-own").addEventListener("change", () => (plots.ownScale = $("plot-own").checked));
 
-  let chains = { tail: [], braid: [] };
+  let chains = { tail: [], braid: [], lfCloth: [], rtCloth: [] };
   let toMetres = 1;
   let lengthChannels = [];
   let riderNames = [];
@@ -182,7 +182,12 @@ async function start() {
       riderNames = [...(msg.channels || []), ...(msg.rider_part_channels || [])].map((c) => c.name);
       page.tickRate = msg.tick_rate;
       const all = [...new Set(channels.map((c) => c.name))];
-      chains = { tail: groupChain(all, "tail"), braid: groupChain(all, "braid") };
+      chains = {
+        tail: groupChain(all, "tail"),
+        braid: groupChain(all, "braid"),
+        lfCloth: groupChain(all, "lf_cloth"),
+        rtCloth: groupChain(all, "rt_cloth"),
+      };
       $("plot-add").innerHTML = `<option value="">add a channel…</option>${all.map((n) => `<option>${n}</option>`).join("")}`;
       if (plots.chosen.length === 0) plots.chosen = DEFAULT_PLOTS.filter((n) => all.includes(n));
       chips();
@@ -290,20 +295,29 @@ async function start() {
       },
     };
     if (!view) return;
-    // Chain positions (tail_NN.t*, braid_NN.t*) are world positions: shifted as the horse is.
+    // Chain positions (tail_NN.t*, braid_NN.t*, *_cloth_NN.t*) are world positions: shifted as the horse is.
     const toView = (p) => [p[0] - shift[0], p[1], p[2] - shift[1]];
     const ti = horseRig.index.tailRoot;
     const tailPts = ti === undefined ? null : chainPoints(v, chains.tail, horseW.positions[ti], horseW.rotations[ti], toView);
     const hi = riderRig.index.head;
     const braidPts = hi === undefined ? null : chainPoints(v, chains.braid, riderW.positions[hi], riderW.rotations[hi], toView);
+    // The coat-skirt flaps start at their own first bone (at the side of the rider's hips).
+    const pi = riderRig.index.hips;
+    const flap = (names) => {
+      const pts = pi === undefined ? null : chainPoints(v, names, riderW.positions[pi], riderW.rotations[pi], toView);
+      return pts && pts.slice(1);
+    };
+    const clothPts = [flap(chains.lfCloth), flap(chains.rtCloth)].filter((p) => p && p.length > 1);
     view.draw({
       horse: { pose: horsePose, world: horseW },
       rider: { pose: riderPose, world: riderW },
       tail: tailPts && { values: v, groups: chains.tail, points: tailPts },
       braid: braidPts && { points: braidPts },
+      cloth: clothPts.length ? clothPts : null,
       travel: follow ? tx : 0,
     });
     page.tack = view.tackUsed;
+    page.clothFlaps = clothPts.length; // cloth flaps drawn (0 without the physics)
     page.tackBones = view.tack ? view.tack.uses : null;
   }
 

@@ -1,5 +1,5 @@
 // The 3D view: ground with contact shadows, the horse and rider (skinned meshes, or the
-// primitive sticks with ?render=sticks), tack, tail and braid; camera presets and a
+// primitive sticks with ?render=sticks), tack, tail, braid and cloth flaps; camera presets and a
 // camera that follows the horse or stays fixed. three.js is right-handed, +y up;
 // riderlive's skeleton axes are +x forward, +y up, +z right, so no conversion.
 
@@ -131,6 +131,8 @@ export class View {
     this.tack = render === "sticks" ? null : new Tack(this.scene, horseRig, riderRig);
     this.tail = new Tubes(this.scene, 4, 12, 0x1c1511, (s, t) => (s === 0 ? 0.035 + 0.03 * Math.sin(Math.PI * Math.min(1, t * 1.2)) : 0.018 * (1 - 0.6 * t)));
     this.braid = new Tubes(this.scene, 1, 10, 0x6b4a2a, (s, t) => 0.018 * (1 - 0.5 * t));
+    // The rider's coat-skirt flaps (lf_cloth_NN, rt_cloth_NN): flattened to tubes, widening toward the hem.
+    this.cloth = new Tubes(this.scene, 2, 12, 0x2b3a55, (s, t) => 0.03 + 0.03 * t);
     this.follow = true;
     this.setView(DEFAULT_VIEW);
     this.resize();
@@ -182,10 +184,11 @@ export class View {
 
   /**
    * Draw one frame. `horse`, `rider`: {pose (rig.solve), world (placed)}; `tail`,
-   * `braid`: {values, groups, points} or null; `travel`: the ground's shift under a
+   * `braid`: {values, groups, points} or null; `cloth`: [left flap points, right flap points]
+   * or null; `travel`: the ground's shift under a
    * following camera (metres along x).
    */
-  draw({ horse, rider, tail, braid, travel }) {
+  draw({ horse, rider, tail, braid, cloth, travel }) {
     if (this.bodies) this.bodies.update(horse.pose, rider.pose);
     else this.sticks.update(horse.world, rider.world);
     this.tackUsed = this.tack ? this.tack.update(horse.world, rider.world) : {};
@@ -195,6 +198,7 @@ export class View {
     if (tail && tail.points) this.tail.update(tailStrands(tail.values, tail.groups, tail.points, pivotRot));
     else if (hi.tailRoot !== undefined) this.tail.update([restingTail(hw.positions[hi.tailRoot], pivotRot)]);
     this.braid.update(braid && braid.points ? [braid.points] : null);
+    this.cloth.update(cloth);
     const spots = ["lfHoof", "rfHoof", "lbHoof", "rbHoof"].map((n) => {
       const p = hw.positions[hi[n]];
       return p ? [p[0] + 0.02, p[1], p[2], 0.22, 0.55] : null;
