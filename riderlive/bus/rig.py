@@ -1,6 +1,7 @@
 """One rig on a stage: what ``riderlive serve --nats URL --stage S --rig R`` runs in the web process.
 
-- **Out**: every tick record on ``...<rig>.frame`` (rider + horse, RLF1 binary or JSON:
+- **Out**: every tick record on ``...<rig>.frame`` (rider + horse + the saddle pose, and the
+  saddle estimate while a saddle input drives; RLF1 binary or JSON:
   the service's own codec), the status on ``...<rig>.status`` at once on change and every
   ``nats.status_interval`` s. The tick's callback only queues records (latest 0.25 s,
   older ones counted ``frames_dropped``); a task publishes them, so a slow or dead
@@ -101,7 +102,7 @@ class RigNode:
         self.inputs = ProducerInput(service, transport, trust, config.producer_forget)
         self.control = Control(service, transport, trust, self.arm_refusal, self.describe)
         self.subscription = dataclasses.replace(
-            service.hub.default, horse=tuple(range(len(HORSE_NAMES))), encoding=config.encoding
+            service.hub.default, horse=tuple(range(len(HORSE_NAMES))), encoding=config.encoding, saddle=True
         )
         self.queue: deque[np.ndarray] = deque()
         self.wake = asyncio.Event()

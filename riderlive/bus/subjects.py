@@ -2,7 +2,7 @@
 
 ::
 
-    riderlive.v1.<stage>.<rig>.frame            rig -> engines   one tick: rider + horse (RLF1 binary or JSON)
+    riderlive.v1.<stage>.<rig>.frame            rig -> engines   one tick: rider + horse + saddle (RLF1 binary or JSON)
     riderlive.v1.<stage>.<rig>.status           rig -> stage     devices, e-stop, rates, heartbeat (JSON, 1 Hz+)
     riderlive.v1.<stage>.<rig>.horse.<producer> producers -> rig horse input, as on /ws/horse (JSON or msgpack)
     riderlive.v1.<stage>.<rig>.saddle.<producer> producers -> rig saddle input, as on /ws/saddle (JSON or msgpack)

@@ -24,7 +24,7 @@ from riderlive.bus.stage import discover, preflight
 from riderlive.bus.subjects import Kind, Stage
 from riderlive.bus.takes import export, list_takes, record, replay
 from riderlive.bus.transport import Refused
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
 from riderlive.service.codecs import decode_binary_frame
 from riderlive.takes.replay import load_replay
 from tests.bus.harness import RIG_TICK, TOKEN, NatsProbe, start_rig, wait_for
@@ -75,11 +75,12 @@ def _metric(live: LiveServer, reason: str) -> float:
     return 0.0
 
 
-def test_every_tick_reaches_nats_identical_to_ws_rider(rig: LiveServer, probe: NatsProbe) -> None:
+def test_every_tick_reaches_nats_identical_to_ws_rider_saddle_pose_included(rig: LiveServer, probe: NatsProbe) -> None:
     frames = probe.collect(RIG.subject(Kind.FRAME))
     ws_frames: dict[int, dict] = {}
     with ws_connect(rig.ws + "/ws/rider", subprotocols=["riderlive.v1"]) as ws:  # type: ignore[list-item]
-        ws.send(json.dumps({"type": "subscribe", "encoding": "binary", "horse_channels": list(HORSE_NAMES)}))
+        subscribe = {"type": "subscribe", "encoding": "binary", "horse_channels": list(HORSE_NAMES), "saddle": True}
+        ws.send(json.dumps(subscribe))
         deadline = time.perf_counter() + 1.0
         while time.perf_counter() < deadline:
             message = ws.recv(timeout=5)
@@ -98,7 +99,9 @@ def test_every_tick_reaches_nats_identical_to_ws_rider(rig: LiveServer, probe: N
     for seq in common:  # the same record, the same codec: bit-identical values
         assert nats[seq]["values"] == ws_frames[seq]["values"]
         assert nats[seq]["horse"] == ws_frames[seq]["horse"]
+        assert nats[seq]["saddle"] == ws_frames[seq]["saddle"] and nats[seq]["estimate"] == ws_frames[seq]["estimate"]
         assert len(nats[seq]["values"]) == len(RIDER_NAMES) and len(nats[seq]["horse"]) == len(HORSE_NAMES)
+        assert len(nats[seq]["saddle"]) == len(SADDLE_NAMES) and nats[seq]["estimate"] is None  # a horse drives
 
 
 def test_discover_and_status_say_who_and_how_fast(rig: LiveServer, probe: NatsProbe) -> None:
