@@ -316,6 +316,11 @@ def test_clear_resets_the_multi_turn_count_only_when_stopped(bus: EmulatedBus, s
     assert sdk.ph.read4ByteTxRx(sdk.port, 2, 132)[0] == 100
     assert sdk.ph.write1ByteTxRx(sdk.port, 2, 64, 1) == (COMM_SUCCESS, 0)
     assert sdk.ph.write4ByteTxRx(sdk.port, 2, 116, 20_000) == (COMM_SUCCESS, 0)  # off it goes
+    # Moving (122) rises at the servo's next 1 ms control cycle: a CLEAR within the same
+    # millisecond would still find it stopped, so wait for the flag (as a host would read it)
+    deadline = time.perf_counter() + 1.0
+    while sdk.ph.read1ByteTxRx(sdk.port, 2, 122)[0] != 1:
+        assert time.perf_counter() < deadline, "the servo never reported Moving"
     assert sdk.ph.clearMultiTurn(sdk.port, 2) == (COMM_SUCCESS, StatusError.RESULT_FAIL)  # moving
     bus.write_item(3, Item.FIRMWARE_VERSION, 41)
     assert sdk.ph.clearMultiTurn(sdk.port, 3) == (COMM_SUCCESS, StatusError.INSTRUCTION)
