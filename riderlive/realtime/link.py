@@ -117,6 +117,24 @@ class TickLink:
     def send(self, command: cmd.Command) -> None:
         self._commands.send(command)
 
+    def tell(self, command: cmd.Command) -> bool:
+        """Send a command a restarted tick does not need (a producer gone, a one-off move);
+        False, and nothing sent, when the tick is down."""
+        try:
+            self.send(command)
+        except (OSError, ValueError):  # a broken or closed pipe: the tick is down
+            return False
+        return True
+
+    def apply(self, command: cmd.Command, **setup: Any) -> None:
+        """Send a command that changes what the tick runs (rule parameters, animator layer,
+        mode, gait) and keep its effect, the ``setup`` fields of :class:`TickSetup`, for the
+        next generation: a restarted tick starts as the service reports it, not as it was
+        at start. A tick that is down (restarting) gets it at its respawn."""
+        self.base_setup = dataclasses.replace(self.base_setup, **setup)
+        with contextlib.suppress(OSError, ValueError):  # a broken or closed pipe: the tick is down
+            self.send(command)
+
     def replies(self) -> list[cmd.Reply]:
         """The tick's replies that have arrived (call when ``commands_fd`` is readable)."""
         out = []

@@ -115,7 +115,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         moves = getattr(horse_module, "MOVES", None)
         if moves is not None and body.move not in moves:
             raise HTTPException(422, f"unknown move {body.move!r}; choose one of {', '.join(moves)}")
-        service.link.send(cmd.Perform(body.move))
+        if not service.link.tell(cmd.Perform(body.move)):
+            raise HTTPException(503, "the tick is restarting: the move was not queued; ask again")
         return {"move": body.move, "queued": True}
 
     @app.get("/api/presets", dependencies=obs, summary="The shipped rule presets and the current one")

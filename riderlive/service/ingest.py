@@ -282,7 +282,7 @@ class IngestEndpoint:
             pass
         finally:
             if service.arbiter.remove(producer.id):
-                service.link.send(cmd.ProducerGone(producer.stream))
+                service.link.tell(cmd.ProducerGone(producer.stream))
 
     def welcome(self, producer: Producer) -> dict[str, Any]:
         """The first message to a new producer (here and on NATS, ``bus/inbound.py``)."""

@@ -200,13 +200,13 @@ class Service:
         if kind == "procedural":
             gait, speed = request.get("gait"), request.get("speed")
             if gait is not None:
-                self.link.send(cmd.SetGait(gait, speed))
+                self.link.apply(cmd.SetGait(gait, speed), gait=gait, **({} if speed is None else {"speed": speed}))
             self.arbiter.selection = "procedural"
-            self.link.send(cmd.SetMode(Mode.PROCEDURAL))
+            self.link.apply(cmd.SetMode(Mode.PROCEDURAL), mode=Mode.PROCEDURAL)
             self.source = {"kind": "procedural", "gait": gait, "speed": speed}
         elif kind == "live":
             self.arbiter.selection = "live"
-            self.link.send(cmd.SetMode(Mode.INPUT))
+            self.link.apply(cmd.SetMode(Mode.INPUT), mode=Mode.INPUT)
             self.source = {"kind": "live"}
         else:
             path = replay_path(self.config.takes.directory, request["take"])
@@ -221,7 +221,7 @@ class Service:
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
             self.arbiter.replay_id = producer.id
             self.arbiter.selection = "replay"
-            self.link.send(cmd.SetMode(Mode.INPUT))
+            self.link.apply(cmd.SetMode(Mode.INPUT), mode=Mode.INPUT)
             self.source = {"kind": "replay", "take": replay.name, "loop": bool(request.get("loop", False))}
             self._replay_task = asyncio.get_running_loop().create_task(
                 self._play(replay, producer, bool(request.get("loop", False)))
@@ -233,7 +233,7 @@ class Service:
             self._replay_task.cancel()
             self._replay_task = None
         if self.arbiter.replay_id is not None:
-            self.link.send(cmd.ProducerGone(self.arbiter.replay_id))
+            self.link.tell(cmd.ProducerGone(self.arbiter.replay_id))
             self.arbiter.replay_id = None
 
     async def _play(self, replay: Replay, producer: Producer, loop: bool) -> None:
@@ -255,7 +255,7 @@ class Service:
             t_shift += replay.duration + period
             base += replay.duration + period
         # The take ended: its stream goes stale, the rider eases, live may drive again.
-        link.send(cmd.ProducerGone(producer.id))
+        link.tell(cmd.ProducerGone(producer.id))
         self.arbiter.replay_id = None
         self.arbiter.selection = "live"
         self.source = {"kind": "live", "after": f"replay:{replay.name}"}
@@ -276,7 +276,7 @@ class Service:
             if bad is not None:
                 raise ValueError(f"these parameters make {bad} non-finite for a plausible horse; not applied")
         self.params, self.animator = params, animator
-        self.link.send(cmd.SetModel(self.params, self.animator))
+        self.link.apply(cmd.SetModel(params, animator), params=params, animator=animator)
 
     # -- takes ----------------------------------------------------------------
     def recover_takes(self) -> None:
