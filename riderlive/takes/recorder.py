@@ -135,12 +135,17 @@ class TakeRecorder:
         self.path = path
         self.flush_interval = flush_interval
         self._file = path.with_name(f".{path.stem}.recording.csv") if overwrite else path
-        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
+        flags = os.O_WRONLY | os.O_CREAT | (0 if overwrite else os.O_EXCL)
         try:
             self._fd = os.open(self._file, flags, 0o644)
         except FileExistsError:
             raise TakeExists(f"take {path.stem!r} exists; choose another name or pass overwrite") from None
-        fcntl.flock(self._fd, fcntl.LOCK_EX)  # "being recorded" for readers (riderlive export); gone with the process
+        try:  # "being recorded" for readers (riderlive export); gone with the process. Never waits:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # a recorder of this very file holds it
+        except BlockingIOError:
+            os.close(self._fd)
+            raise TakeExists(f"take {path.stem!r} is being recorded (overwrite it once it has stopped)") from None
+        os.ftruncate(self._fd, 0)  # only now: an overwrite that is refused truncates nothing
         os.write(self._fd, (",".join((*COLUMNS, *extra)) + "\n").encode())
         self._lines: list[str] = []
         self._last_flush = time.monotonic()

@@ -109,6 +109,17 @@ def test_the_take_being_recorded_is_not_baked_or_downloaded(server: LiveServer) 
         server.request("POST", "/api/record/stop")
 
 
+def test_overwriting_the_take_being_recorded_is_a_409_and_the_service_keeps_answering(server: LiveServer) -> None:
+    body = {"name": "dup-take", "overwrite": True}
+    assert server.request("POST", "/api/record/start", json=body).status_code == 200
+    try:
+        again = server.request("POST", "/api/record/start", json=body)  # froze the web process before
+        assert again.status_code == 409 and "being recorded" in again.text
+        assert server.get("/api/state").json()["recording"]["name"] == "dup-take"
+    finally:
+        assert server.request("POST", "/api/record/stop").status_code == 200
+
+
 def test_parameter_groups_cover_every_parameter_once_in_preset_order(server: LiveServer) -> None:
     groups = server.get("/api/params/groups").json()["groups"]
     params = server.get("/api/params").json()

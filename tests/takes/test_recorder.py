@@ -99,6 +99,22 @@ def test_an_existing_take_is_never_overwritten_unless_asked(tmp_path: Path) -> N
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "t.json"]
 
 
+def test_overwriting_a_take_that_is_being_recorded_is_refused_at_once_and_changes_nothing(tmp_path: Path) -> None:
+    """Two overwrites of one name while the first records (the fuzzer's case): the second
+    must neither wait for the first's lock (it froze the web process) nor truncate its file."""
+    first = TakeRecorder(tmp_path / "t.csv", overwrite=True, flush_interval=0.0)
+    for i in range(24):
+        first.add(i / 120, ZEROS_H, ZEROS_R)
+    started = time.perf_counter()
+    with pytest.raises(TakeExists, match="being recorded"):
+        TakeRecorder(tmp_path / "t.csv", overwrite=True)
+    assert time.perf_counter() - started < 0.5
+    for i in range(24, 48):
+        first.add(i / 120, ZEROS_H, ZEROS_R)
+    first.close()
+    assert len(read_frames(str(tmp_path / "t.csv"))) == 48, "the recording take lost nothing"
+
+
 def test_a_take_cut_by_a_kill_is_recovered(tmp_path: Path) -> None:
     rec = TakeRecorder(tmp_path / "k.csv", flush_interval=0.0)
     for i in range(10):
