@@ -54,7 +54,7 @@ START_GRACE_S = 60.0
 """A new tick may take this long to its first heartbeat (imports, compiling kernels)."""
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
-of compiled kernels, page faults) without being taken for hung."""
+of compiled kernels, page faults) without being taken for hung, unless a device moves."""
 _ids = itertools.count(1)
 
 
@@ -182,9 +182,19 @@ class TickSupervisor:
         realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
         threshold = max(self.hang_s, tick.hang_floor_realtime if realtime else tick.hang_floor)
         first = self._first_beat
-        if first is None or time.perf_counter() - first < WARMUP_S:
+        if (first is None or time.perf_counter() - first < WARMUP_S) and not self._a_device_moves():
             threshold = max(threshold, WARMUP_HANG_S)
         return threshold
+
+    def _a_device_moves(self) -> bool:
+        """A device of this tick is armed and moving (the safety board): no warm-up
+        leniency then, since a stalled tick is a rig moving without a controller."""
+        board = self.link.board
+        for i in range(len(self.link.setup.devices)):
+            published = board.device(i)
+            if published is not None and published[0].moving:
+                return True
+        return False
 
     def _begin_recovery(self, why: str) -> None:
         self.up = False
