@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import select
 import termios
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -38,6 +39,9 @@ from riderlive.devices.lifecycle import DeviceError, NoReply, PortBusy, PortLost
 from riderlive.dynamixel.tables import ALERT_BIT, BROADCAST_ID, ItemSpec, StatusError
 
 T = TypeVar("T")
+READ_WAIT_S = 0.0002
+"""While a reply is awaited and nothing has arrived: how long one read waits for the port
+(s; it returns as soon as bytes come). Bounds how late an e-stop request ends the wait."""
 
 _PORT_ERRORS = (OSError, termios.error, serial.SerialException, AttributeError, TypeError)
 """What pyserial raises when the device vanishes (termios.error from a flush on a dead
@@ -95,6 +99,17 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = 10_000.0 / self.baudrate
         return True
+
+    def readPort(self, length: int) -> bytes:
+        """What has arrived (at most ``length`` bytes). With nothing there, wait up to
+        :data:`READ_WAIT_S` for the port to become readable instead of returning at once:
+        the SDK calls this in a loop until its timeout, and a real-time process spinning
+        on it can starve the kernel's tty worker (a normal-priority thread) that must
+        deliver the very reply it waits for, on a USB adapter as on the emulator's pty."""
+        data: bytes = self.ser.read(length)
+        if not data:
+            select.select([self.ser.fileno()], [], [], READ_WAIT_S)
+        return data
 
     def isPacketTimeout(self) -> bool:
         if self.stops is not None and self.stops.pending:
