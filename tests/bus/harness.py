@@ -17,6 +17,21 @@ from tests.service.live_server import LiveServer
 
 T = TypeVar("T")
 TOKEN = "stage-token-123"
+TOKEN_CONFIG = f"""
+[tick]
+rate = 100.0
+realtime_priority = false
+
+[input]
+producer_timeout = 0.3
+max_message_bytes = 4096
+
+[security]
+token = "{TOKEN}"
+require_token = true
+"""
+"""A rig's service config on a stage: the token always required, small message limit."""
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
 RIG_TICK = """
 [tick]
 rate = 100.0

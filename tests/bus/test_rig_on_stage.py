@@ -27,26 +27,13 @@ from riderlive.bus.transport import Refused
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
 from riderlive.service.codecs import decode_binary_frame
 from riderlive.takes.replay import load_replay
-from tests.bus.harness import RIG_TICK, TOKEN, NatsProbe, start_rig, wait_for
+from tests.bus.harness import AUTH, RIG_TICK, TOKEN, NatsProbe, start_rig, wait_for
+from tests.bus.harness import TOKEN_CONFIG as CONFIG
 from tests.service.live_server import ROOT, LiveServer
 from tests.service.producers import Producer
 
 STAGE = Stage("A")
 RIG = STAGE.rig("r1")
-CONFIG = f"""
-[tick]
-rate = 100.0
-realtime_priority = false
-
-[input]
-producer_timeout = 0.3
-max_message_bytes = 4096
-
-[security]
-token = "{TOKEN}"
-require_token = true
-"""
-AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
 @pytest.fixture(scope="module")

@@ -25,25 +25,12 @@ from riderlive.horse.script import gait_script
 from riderlive.saddle import Model, saddle_from_horse
 from riderlive.saddle.synthetic import record
 from riderlive.saddle.trial import GaitCase
-from tests.bus.harness import TOKEN, NatsProbe, start_rig, wait_for
+from tests.bus.harness import AUTH, TOKEN, NatsProbe, start_rig, wait_for
+from tests.bus.harness import TOKEN_CONFIG as CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower, Producer, constant
 
 RIG = Stage("S").rig("s1")
-CONFIG = f"""
-[tick]
-rate = 100.0
-realtime_priority = false
-
-[input]
-producer_timeout = 0.3
-max_message_bytes = 4096
-
-[security]
-token = "{TOKEN}"
-require_token = true
-"""
-AUTH = {"Authorization": f"Bearer {TOKEN}"}
 HELLO = orjson.dumps({"type": "hello", "token": TOKEN})
 
 
