@@ -28,7 +28,7 @@ from __future__ import annotations
 from riderlive.framefile import FrameTable
 from riderlive.horse.curves import SCALAR
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
-from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, unschedule
+from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, target_speed, unschedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
 
@@ -46,10 +46,17 @@ __all__ = [
     "Move",
     "ProceduralHorse",
     "ShotScript",
+    "gait_speed",
     "generate",
     "generate_gait",
     "load_script",
 ]
+
+
+def gait_speed(gait: str, speed: float | None = None) -> float:
+    """The ground speed (m/s) ``gait`` (a name, ``halt`` too) runs at: its default when
+    ``speed`` is None, else ``speed`` if the gait allows it (ValueError naming the range)."""
+    return target_speed(parse_gait(gait), speed)
 
 
 def generate_gait(

@@ -95,7 +95,9 @@ class State:
     seq: int = 0
 
 
-def _target_speed(gait: Gait, speed: float | None) -> float:
+def target_speed(gait: Gait, speed: float | None) -> float:
+    """The ground speed (m/s) ``gait`` runs at: its default when ``speed`` is None, else
+    ``speed`` checked against the gait's range (ValueError naming the range)."""
     if gait is Gait.HALT:
         if speed not in (None, 0.0):
             raise ValueError("halt has speed 0")
@@ -106,7 +108,7 @@ def _target_speed(gait: Gait, speed: float | None) -> float:
 
 def initial(model: Model, gait: Gait, speed: float | None = None, t: float = 0.0) -> State:
     """The horse already moving steadily in ``gait`` at time ``t``."""
-    v = _target_speed(gait, speed)
+    v = target_speed(gait, speed)
     ramp = Ramp(t, v, 0.0, v, 3.0)
     layer: Layer = HaltLayer() if gait is Gait.HALT else _gait_layer(model, gait, ramp)
     return State(t=t, layer=layer, ramp=ramp, x0=0.0, gait=gait, gait_speed=v)
@@ -176,7 +178,7 @@ def _set_gait(
     blend: float | None = None,
 ) -> State:
     gait, speed, ramp = cmd.gait, cmd.speed, cmd.ramp
-    target = _target_speed(gait, speed)
+    target = target_speed(gait, speed)
     same = gait is state.gait and isinstance(state.layer, GaitLayer)
     omega = SETTLE_RATIO / ramp if ramp else (2.0 if same else 3.0)
     state = replace(_retarget(state, at, target, omega), gait=gait, gait_speed=target)

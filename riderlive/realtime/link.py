@@ -56,7 +56,8 @@ class TickLink:
         self.base_setup = dataclasses.replace(
             setup, shm_names=names, latch_name=self.latch.name, board_name=self.board.name
         )
-        self.setup = self.base_setup
+        self.start_setup = self.setup = self.base_setup
+        """``start_setup``: as configured; ``base_setup``: with what :meth:`apply` kept since."""
         self.generation = 0
         self.process: multiprocessing.process.BaseProcess | threading.Thread
         self._commands: Connection
@@ -134,6 +135,14 @@ class TickLink:
         self.base_setup = dataclasses.replace(self.base_setup, **setup)
         with contextlib.suppress(OSError, ValueError):  # a broken or closed pipe: the tick is down
             self.send(command)
+
+    def forget_applied(self) -> bool:
+        """The next generation starts as configured (what :meth:`apply` kept made a tick
+        fail to start); False if there was nothing to forget."""
+        if self.base_setup == self.start_setup:
+            return False
+        self.base_setup = self.start_setup
+        return True
 
     def replies(self) -> list[cmd.Reply]:
         """The tick's replies that have arrived (call when ``commands_fd`` is readable)."""

@@ -70,7 +70,8 @@ class TickSetup:
     animator: AnimatorLayer
     length_scale: float
     gait: str = "trot"
-    speed: float = 4.0
+    speed: float | None = None
+    """m/s; None: the gait's own speed."""
     seed: int | None = None
     mode: Mode = Mode.INPUT
     realtime_priority: bool = True
@@ -95,7 +96,7 @@ class TickSetup:
     """Run the tail and braid physics (``riderlive.realtime.tail``) and publish their channels."""
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
-    extra_channels: tuple[str, ...] = ()
+    extra_channels: tuple[str, ...] = PART_NAMES
     """Channels appended to each output record after the rider's: the tail's (when on),
     then the rider parts (``channels.RIDER_PARTS``)."""
     shm_names: dict[str, str] = field(default_factory=dict)
@@ -156,8 +157,8 @@ class TickLoop:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
             self.physics = TickPhysics(setup.physics_file, setup.length_scale)
-            if (*self.physics.names, *PART_NAMES) != setup.extra_channels:
-                raise ValueError("the tick's physics channels differ from the web process's")
+        if (*(self.physics.names if self.physics else ()), *PART_NAMES) != setup.extra_channels:
+            raise ValueError("the tick's extra channels (physics, rider parts) differ from the web process's")
 
     def warm(self) -> None:
         """Compile or load the physics kernels now, so compile time never lands in a tick."""

@@ -110,6 +110,14 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         except (ValueError, OSError) as exc:
             raise HTTPException(400, str(exc)) from None
 
+    @app.get("/api/horse", dependencies=obs, summary="The procedural horse's gaits (speed ranges, m/s) and moves")
+    async def horse() -> dict[str, Any]:
+        gaits = {
+            g.value: {"speed": list(spec.speed), "default": spec.default_speed}
+            for g, spec in horse_module.GAIT_TABLE.items()
+        }
+        return {"gaits": gaits, "moves": list(horse_module.MOVES)}
+
     @app.post("/api/horse/perform", dependencies=ctl, summary="Ask the procedural horse for a move")
     async def perform(body: PerformRequest) -> dict[str, Any]:
         moves = getattr(horse_module, "MOVES", None)

@@ -15,7 +15,7 @@ import pydantic
 from riderlive.bus.config import NatsSection
 from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
-from riderlive.horse import DEFAULT_SCALE, GAITS
+from riderlive.horse import DEFAULT_SCALE, GAITS, gait_speed
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 from riderlive.saddle.pose import SaddlePoint
 
@@ -106,7 +106,8 @@ class SourceSection(StrictModel):
     """In ``live``: the procedural horse runs while no producer drives."""
     resume_after: float = pydantic.Field(default=2.0, ge=0.0, le=600.0)
     gait: str = "trot"
-    speed: float = pydantic.Field(default=4.0, ge=0.0, le=20.0)
+    speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
+    """m/s within the gait's range; unset: the gait's own speed."""
     seed: int | None = None
 
     @pydantic.field_validator("gait")
@@ -114,6 +115,14 @@ class SourceSection(StrictModel):
     def _known_gait(cls, value: str) -> str:
         if value not in GAITS:
             raise ValueError(f"unknown gait; choose one of {', '.join(GAITS)}")
+        return value
+
+    @pydantic.field_validator("speed")
+    @classmethod
+    def _gait_allows(cls, value: float | None, info: pydantic.ValidationInfo) -> float | None:
+        gait = info.data.get("gait")
+        if value is not None and gait is not None:
+            gait_speed(gait, value)  # ValueError naming the gait's range
         return value
 
 

@@ -23,7 +23,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from riderlive.horse import GAITS
+from riderlive.horse import GAITS, gait_speed
 from riderlive.names import NAME_PATTERN
 
 Name = Annotated[str, pydantic.Field(min_length=1, max_length=64, pattern=NAME_PATTERN)]
@@ -47,6 +47,14 @@ class ProceduralSource(Body):
         if value is not None and value not in GAITS:
             raise ValueError(f"unknown gait; choose one of {', '.join(GAITS)}")
         return value
+
+    @pydantic.model_validator(mode="after")
+    def _speed_of_its_gait(self) -> ProceduralSource:
+        if self.speed is not None:
+            if self.gait is None:
+                raise ValueError("speed needs its gait: give both")
+            gait_speed(self.gait, self.speed)  # ValueError naming the gait's range
+        return self
 
 
 class ReplaySource(Body):

@@ -44,7 +44,7 @@ log = logging.getLogger(__name__)
 def make_setup(
     config: ServiceConfig,
     params: RuleParams,
-    extra_channels: tuple[str, ...] = (),
+    extra_channels: tuple[str, ...] = RIDER_PART_NAMES,
     devices: tuple[DeviceSpec, ...] = (),
 ) -> TickSetup:
     source = config.source
@@ -120,10 +120,8 @@ class Service:
         mixed = [a if i % 2 else b for i, (a, b) in enumerate(zip(low, high, strict=True))]
         self._probes = [[0.0] * len(low), low, high, mixed]
         """Horse frames ``set_model`` checks new parameters on: neutral and corners of the ranges."""
-        self.source: dict[str, Any] = {"kind": config.source.kind}
-        if config.source.kind == "procedural":
-            self.source.update(gait=config.source.gait, speed=config.source.speed)
-            self.arbiter.selection = "procedural"
+        self.source: dict[str, Any] = {}
+        self._report_configured()
         self.recorder: TakeRecorder | None = None
         self.take_name: str | None = None
         self._replay_task: asyncio.Task[None] | None = None
@@ -137,11 +135,30 @@ class Service:
         """Each says why arming must wait (e.g. no stage heartbeat), or None."""
         self.stage: RigNode | None = None
 
+    def _report_configured(self) -> None:
+        """Preset, animator layer and source as configured (at start, and when a restarted
+        tick falls back to the configured settings)."""
+        config = self.config
+        self.params = load_preset(config.tick.preset)
+        self.animator = AnimatorLayer()
+        self.source = {"kind": config.source.kind}
+        self.arbiter.selection = "live"
+        if config.source.kind == "procedural":
+            self.source.update(gait=config.source.gait, speed=config.source.speed)
+            self.arbiter.selection = "procedural"
+
+    def _tick_fell_back(self) -> None:
+        """The supervisor restarts the tick with the configured settings: report those."""
+        self._cancel_replay()
+        self._report_configured()
+
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
         self.recover_takes()
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
-        self.supervisor = TickSupervisor(self.link, self.config, self.on_tick, self.hub.publish_status)
+        self.supervisor = TickSupervisor(
+            self.link, self.config, self.on_tick, self.hub.publish_status, self._tick_fell_back
+        )
         await self.supervisor.start()
         if self.config.nats.url is not None:
             from riderlive.bus.rig import join_stage
@@ -200,7 +217,7 @@ class Service:
         if kind == "procedural":
             gait, speed = request.get("gait"), request.get("speed")
             if gait is not None:
-                self.link.apply(cmd.SetGait(gait, speed), gait=gait, **({} if speed is None else {"speed": speed}))
+                self.link.apply(cmd.SetGait(gait, speed), gait=gait, speed=speed)  # None: the gait's own
             self.arbiter.selection = "procedural"
             self.link.apply(cmd.SetMode(Mode.PROCEDURAL), mode=Mode.PROCEDURAL)
             self.source = {"kind": "procedural", "gait": gait, "speed": speed}

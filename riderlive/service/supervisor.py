@@ -16,7 +16,11 @@ Then the guardian (when devices are configured) parks the devices and releases t
 buses; the supervisor waits for that, then starts the next tick generation after a
 backoff (``tick.restart_backoff``, doubling per failure in a row, reset after 30 s of
 good ticking). The new tick connects its devices and leaves them ``disarmed`` (or
-``estop`` while the latch is set): nothing is re-armed. It all shows in the status
+``estop`` while the latch is set): nothing is re-armed. It starts with the settings
+applied since start (preset, animator layer, mode, gait: :meth:`TickLink.apply`); one
+that dies before its first heartbeat with them makes the next start as configured
+(``setups_dropped``; the service reports the configured settings again), so a setting
+that kills a tick at start cannot make a crash loop. It all shows in the status
 (``tick_up``, ``restarting``), ``/api/state`` (``supervision``), ``/metrics``
 (``riderlive_tick_up``, ``riderlive_tick_restarts_total``) and ``/healthz`` / ``/readyz``.
 
@@ -67,11 +71,15 @@ class TickSupervisor:
         config: ServiceConfig,
         on_tick: Callable[[], None],
         publish_status: Callable[[dict[str, Any]], None],
+        on_setup_dropped: Callable[[], None] = lambda: None,
     ) -> None:
         self.link = link
         self.config = config
         self.on_tick = on_tick
         self.publish_status = publish_status
+        self.on_setup_dropped = on_setup_dropped
+        """Called when a restart falls back to the configured settings (the service resets what it reports)."""
+        self.setups_dropped = 0
         self.period = 1.0 / config.tick.rate
         self.hang_s = (config.tick.hang_ticks - 1.0) * self.period
         self.up = True
@@ -152,7 +160,14 @@ class TickSupervisor:
             return
         self.link.process.join(0.1)
         self.deaths += 1
-        self._begin_recovery(f"died ({self.link.exit_reason()})")
+        why = f"died ({self.link.exit_reason()})"
+        if self.link.generation > 1 and self._first_beat is None and self.link.forget_applied():
+            # It died before its first heartbeat with the settings applied since start (a
+            # preset, a gait): the next one starts as configured, not into a crash loop.
+            self.setups_dropped += 1
+            why += " before ticking: the next one starts with the configured settings"
+            self.on_setup_dropped()
+        self._begin_recovery(why)
 
     async def _watch(self) -> None:
         """Every half period: the web heartbeat, a hung tick, the guardian."""
@@ -320,6 +335,7 @@ class TickSupervisor:
             "restarts": self.restarts,
             "deaths": self.deaths,
             "hangs": self.hangs,
+            "setups_dropped": self.setups_dropped,
             "last_exit": self.last_exit,
             "down_for": None if self.down_since is None else time.perf_counter() - self.down_since,
             "down_since": self.down_since,

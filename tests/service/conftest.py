@@ -1,7 +1,9 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
+import httpx
 import pytest
 
 from tests.service.live_server import LiveServer
@@ -33,3 +35,38 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live
     live.stop()
+
+
+_FAILED_LOGS: dict[str, list[str]] = {}
+"""The server logs of failed tests (by test id), printed at the end of the run."""
+
+
+def _state_line(live: LiveServer) -> str:
+    try:
+        headers = {"Authorization": f"Bearer {live.token}"} if live.token else {}
+        state = httpx.get(live.base + "/api/state", headers=headers, timeout=2.0).json()
+    except (httpx.HTTPError, ValueError) as exc:
+        return f"/api/state: {exc}"
+    return f"/api/state supervision: {state.get('supervision')}"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
+    """A failed test against a live server gets its server's supervision and log tail: a
+    tick that went down in CI is otherwise a bare timeout."""
+    outcome: Any = yield
+    report = outcome.get_result()
+    if not report.failed:
+        return
+    for value in getattr(item, "funcargs", {}).values():
+        if isinstance(value, LiveServer):
+            tail = [_state_line(value), *value.log[-40:]]
+            report.sections.append(("riderlive serve", "\n".join(line.rstrip() for line in tail)))
+            _FAILED_LOGS.setdefault(item.nodeid, tail)
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    for nodeid, tail in list(_FAILED_LOGS.items())[:3]:
+        terminalreporter.write_sep("-", f"riderlive serve behind {nodeid}")
+        for line in tail:
+            terminalreporter.write_line(line.rstrip())

@@ -30,6 +30,7 @@ def test_the_example_file_loads_and_matches_the_defaults() -> None:
         ("[ranges]\nlength = [5.0, 1.0]\n", "ranges.length"),
         ("[ranges]\nchannels = { 'lfhoof.ty' = [0.0, 1.0] }\n", "ranges.channels"),
         ("[input]\nclock_jump = 0.0\n", "input.clock_jump"),
+        ("[source]\ngait = 'walk'\nspeed = 4.0\n", "source.speed"),
     ],
 )
 def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> None:
@@ -50,3 +51,14 @@ def test_a_rig_slower_than_the_tick_is_refused_when_asked_naming_both_rates(
     assert main(["serve", "--config", str(config), "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert "bench3 is validated for 100 ticks/s but the service ticks at 120/s" in err
+
+
+def test_a_gait_alone_runs_at_its_own_speed_and_a_speed_must_suit_its_gait(tmp_path: Path) -> None:
+    path = tmp_path / "walk.toml"
+    path.write_text("[source]\ngait = 'walk'\n")
+    assert load_config(path).source.speed is None, "the walk's own speed, not a trot's 4 m/s"
+    path.write_text("[source]\ngait = 'walk'\nspeed = 1.9\n")
+    with pytest.raises(ConfigError, match=r"1\.4-1\.8"):
+        load_config(path)
+    path.write_text("[source]\ngait = 'gallop'\nspeed = 9.0\n")
+    assert load_config(path).source.speed == 9.0

@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from riderlive.framefile import read_frames
+from riderlive.horse import GAIT_TABLE, MOVES
 from tests.service.live_server import LiveServer
 
 SECRET = "hunter2-do-not-echo"
@@ -269,3 +270,20 @@ def test_every_endpoint_answers_bad_bodies_with_a_4xx_json_error(server_rest: Li
     assert set(seen) == {f"{m} {p}" for m, p, _ in listed}, "every endpoint was probed"
     with_body = {f"{m} {p}" for m, p, schema in listed if schema}
     assert all(all(400 <= code < 500 for code in seen[key]) for key in with_body)
+
+
+def test_a_speed_must_suit_its_gait_and_a_refusal_changes_nothing(server_rest: LiveServer) -> None:
+    """The tick would refuse them (and a restarted tick could not start on them): 422 here."""
+    before = server_rest.get("/api/state").json()["source"]
+    horse = server_rest.get("/api/horse").json()
+    assert horse["moves"] == list(MOVES)
+    table = {g.value: {"speed": list(spec.speed), "default": spec.default_speed} for g, spec in GAIT_TABLE.items()}
+    assert horse["gaits"] == table
+    for body, reason in (
+        ({"kind": "procedural", "gait": "walk", "speed": 4.0}, "1.4-1.8"),
+        ({"kind": "procedural", "gait": "gallop", "speed": 8.9}, "9.0-17.0"),
+        ({"kind": "procedural", "speed": 4.0}, "needs its gait"),
+    ):
+        reply = server_rest.request("PUT", "/api/source", json=body)
+        assert reply.status_code == 422 and reason in reply.text, (body, reply.text)
+    assert server_rest.get("/api/state").json()["source"] == before

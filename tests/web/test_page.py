@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from riderlive.channels import BY_NAME, HORSE_NAMES, RIDER_NAMES, Kind
-from riderlive.horse import DEFAULT_SCALE
+from riderlive.horse import DEFAULT_SCALE, GAIT_TABLE, Gait
 from riderlive.rules import RiderModel
 from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_pose, rider_rig
 from tests.web.conftest import PageUnderTest, Server, free_port, open_page
@@ -198,6 +198,26 @@ def test_a_take_replays_on_the_page(live_page: PageUnderTest, server: Server) ->
         for name in ("lower_back.rz", "cog.ty", "head.rz", "lf_foot.tx"):
             assert values[name] == pytest.approx(expected[name], abs=1e-9), name
         live_page.wait_for("document.getElementById('src-now').textContent.includes('page-test-take')", timeout=5)
+    finally:
+        server.request("PUT", "/api/source", {"kind": "live"})
+    assert live_page.errors == []
+
+
+def test_the_speed_slider_spans_the_chosen_gait_and_applies(live_page: PageUnderTest, server: Server) -> None:
+    """A walk cannot be asked at a trot's speed from the page (the service would refuse it)."""
+    page = live_page.page
+    slider = "(() => { const s = document.getElementById('src-speed'); return [+s.min, +s.max, +s.value]; })()"
+    page.select_option("#src-kind", "procedural")
+    for gait, spec in GAIT_TABLE.items():
+        page.select_option("#src-gait", gait.value)
+        live_page.wait_for(f"+document.getElementById('src-speed').max === {spec.speed[1]!r}")
+        assert live_page.state(slider) == [spec.speed[0], spec.speed[1], spec.default_speed], gait
+    page.select_option("#src-gait", "walk")
+    try:
+        page.locator("#src-apply").click()
+        live_page.wait_for("document.getElementById('src-now').textContent.includes('walk')", timeout=5)
+        walk = GAIT_TABLE[Gait.WALK].default_speed
+        assert server.get("/api/state")["source"] == {"kind": "procedural", "gait": "walk", "speed": walk}
     finally:
         server.request("PUT", "/api/source", {"kind": "live"})
     assert live_page.errors == []

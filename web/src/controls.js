@@ -142,6 +142,11 @@ export class Controls {
     $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
     $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
     $("src-kind").addEventListener("change", () => this.showSourceRows());
+    $("src-gait").addEventListener("change", () => this.fitSpeed(true));
+    api("GET", "/api/horse").then((horse) => {
+      this.gaits = horse.gaits;
+      this.fitSpeed(false);
+    }, () => {});
     $("src-apply").addEventListener("click", () => this.applySource());
     for (const move of ["jump", "rear", "stop", "buck"]) {
       const b = document.createElement("button");
@@ -164,6 +169,16 @@ export class Controls {
       attempt("animator", () => api("PUT", "/api/animator", { offsets: this.offsets, gains: this.gains }));
     });
     this.showSourceRows();
+  }
+
+  /** The speed slider spans the chosen gait's range (GET /api/horse); `reset`: at its own speed. */
+  fitSpeed(reset) {
+    const gait = this.gaits && this.gaits[$("src-gait").value];
+    if (!gait) return;
+    const slider = $("src-speed");
+    [slider.min, slider.max] = gait.speed;
+    if (reset || +slider.value < gait.speed[0] || +slider.value > gait.speed[1]) slider.value = gait.default;
+    $("src-speed-out").textContent = (+slider.value).toFixed(1);
   }
 
   showSourceRows() {
@@ -231,6 +246,7 @@ export class Controls {
       this.sourceShown = true;
       $("src-kind").value = src.kind;
       if (src.gait) $("src-gait").value = src.gait;
+      this.fitSpeed(true);
       if (typeof src.speed === "number") $("src-speed").value = src.speed;
       $("src-speed-out").textContent = (+$("src-speed").value).toFixed(1);
       this.showSourceRows();

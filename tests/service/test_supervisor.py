@@ -1,0 +1,65 @@
+"""The tick supervisor with a real tick process: a setting that stops a tick from
+starting makes the next generation start as configured, never a crash loop."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import time
+from collections.abc import Callable
+
+from riderlive.realtime import commands as cmd
+from riderlive.realtime.link import TickLink
+from riderlive.rules import load_preset
+from riderlive.service.config import ServiceConfig
+from riderlive.service.runtime import make_setup
+from riderlive.service.supervisor import TickSupervisor
+
+CONFIG = ServiceConfig.model_validate({"tick": {"rate": 100.0, "realtime_priority": False, "restart_backoff": 0.05}})
+
+
+async def _until(condition: Callable[[], bool], timeout: float, what: str) -> None:
+    deadline = time.perf_counter() + timeout
+    while not condition():
+        assert time.perf_counter() < deadline, what
+        await asyncio.sleep(0.02)
+
+
+async def _crash_then_start_as_configured() -> None:
+    link = TickLink(make_setup(CONFIG, load_preset(CONFIG.tick.preset)))
+    dropped: list[int] = []
+    supervisor = TickSupervisor(
+        link, CONFIG, link.drain_notify, lambda status: None, lambda: dropped.append(link.generation)
+    )
+    await supervisor.start()
+    try:
+        await _until(supervisor.ready, 60.0, "the first tick never ticked")
+        # What the REST layer refuses (a walk at 4 m/s), kept for the next generation anyway:
+        link.apply(cmd.SetGait("walk", 1.5), gait="walk", speed=4.0)
+        assert link.base_setup.speed == 4.0
+        first_pid = link.process.pid
+        assert first_pid is not None
+        os.kill(first_pid, signal.SIGKILL)
+        # Generation 2 dies at start on the kept walk at 4 m/s; generation 3 ticks as configured.
+        await _until(lambda: link.generation >= 3 and supervisor.ready(), 60.0, supervisor.snapshot())
+        snapshot = supervisor.snapshot()
+        assert (snapshot["deaths"], snapshot["restarts"], snapshot["setups_dropped"]) == (2, 2, 1), snapshot
+        assert dropped == [2], "the service is told once, for the generation that failed"
+        assert "configured settings" in str(snapshot["last_exit"])
+        assert link.base_setup == link.start_setup
+        assert (link.setup.gait, link.setup.speed, link.setup.generation) == ("trot", None, 3)
+        await _until(lambda: link.status().get("gait") == "trot", 5.0, "the tick reports its gait")
+        assert abs(link.status()["speed"] - 3.8) < 1e-9, "the configured trot at its own speed"
+        # A second kill with nothing applied since: a plain restart, nothing more dropped.
+        os.kill(int(link.board["tick_pid"]), signal.SIGKILL)
+        await _until(lambda: link.generation >= 4 and supervisor.ready(), 60.0, supervisor.snapshot())
+        assert supervisor.snapshot()["setups_dropped"] == 1
+    finally:
+        await supervisor.stop()
+        link.stop(5.0)
+        link.close()
+
+
+def test_a_setting_that_kills_the_tick_at_start_is_dropped_not_crash_looped() -> None:
+    asyncio.run(_crash_then_start_as_configured())
