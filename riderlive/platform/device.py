@@ -70,6 +70,10 @@ FIRMWARE_PARK_S = 6.0
 25 % of 250 mm/s is 2.3 s (a platform file with a lower speed takes longer: see park_timeout_s)."""
 SETUP_PARK_WAIT_S = 15.0
 """At connect, how long to wait for a device the HELLO found moving to finish its park."""
+FIRST_TELEMETRY_WAIT_S = 0.5
+"""At the end of the setup, how long to wait for the firmware's first telemetry (it
+comes every ``telemetry_ms``, 20 ms by default); past it the setup ends anyway and the
+lifecycle's read-back of outputs-off decides."""
 
 
 def position_units(model: PlatformModel) -> float:
@@ -180,6 +184,15 @@ class PlatformPlug:
                     f"actuator {index + 1} ({exc}): the platform file asks more than its profile allows",
                 ) from None
             yield
+        # DISARMED means outputs off as the firmware reports them: its first telemetry
+        # (every telemetry period) confirms it. Without it the lifecycle's read-back would
+        # find nothing and send the outputs-off, an ESTOP frame that latches a firmware
+        # which was off all along (seen on a loaded machine: host disarmed, firmware estop).
+        deadline = time.monotonic() + FIRST_TELEMETRY_WAIT_S
+        while self.link.telemetry is None and time.monotonic() < deadline:
+            detail("waiting for the device's first telemetry")
+            yield
+            self._call(self.link.service)
         self.counters["setups"] += 1
 
     def close(self) -> None:

@@ -113,6 +113,9 @@ def test_nothing_moves_until_armed_then_it_follows_a_trot_and_stops_as_asked() -
         bench.until(bench.state_is(S.DISARMED), 5.0)
         bench.run(0.3)  # the horse trots; nothing may move
         assert bench.device.state is S.DISARMED and bench.plug.counters["targets_sent"] == 0
+        # Disarmed after the firmware's first telemetry: no outputs-off (a latching ESTOP) to
+        # a firmware that was off all along (it once happened on a loaded machine).
+        assert bench.plug.link.telemetry is not None and bench.plug.counters["estop_frames"] == 0
         fw = firmware.status()
         assert fw["state"] == "disarmed" and fw["outputs_on"] == 0 and not accepted_targets(firmware)
         configs = [e for e in firmware.events if e["event"] == "rx" and e["type"] == link.FrameType.CONFIG]
