@@ -38,8 +38,10 @@ export class Takes {
     const out = await this.attempt(`bake ${name}`, () => this.api("POST", `/api/takes/${encodeURIComponent(name)}/bake`, {}));
     if (out && out.bake) {
       this.baked.add(name);
-      li.querySelector(".take-baked").hidden = false;
-      li.querySelector(".take-info").textContent = `baked ${out.bake.rows} rows with ${out.bake.preset}`;
+      // The list may have been redrawn meanwhile (the take's rows changed): update the row shown now.
+      const row = [...$("takes").children].find((el) => el.dataset.take === name) || li;
+      row.querySelector(".take-baked").hidden = false;
+      row.querySelector(".take-info").textContent = `baked ${out.bake.rows} rows with ${out.bake.preset}`;
     }
   }
 
