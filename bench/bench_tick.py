@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 
+from bench.serving import burn
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Timing
 from riderlive.realtime.link import TickLink
@@ -27,13 +28,6 @@ from riderlive.realtime.tail import physics_channels
 from riderlive.realtime.tick import TickSetup
 from riderlive.rules import RuleParams
 from riderlive.rules.animator import AnimatorLayer
-
-
-def burn(stop_at: float) -> None:
-    """Keep one core busy (the issue's "other core busy")."""
-    x = 0
-    while time.perf_counter() < stop_at:
-        x += 1
 
 
 def busy_python(link: TickLink, seconds: float) -> list[np.ndarray]:

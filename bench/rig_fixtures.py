@@ -20,6 +20,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from bench.serving import burn
 from riderlive.configfile import CONFIG_DIR
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import Instruction, Item
@@ -89,19 +90,13 @@ def torque_offs(packets: list[tuple[float, bytes]]) -> list[float]:
     return [t for t, raw in packets if is_torque_off_write(raw)]
 
 
-def _burn(until: float) -> None:
-    x = 0
-    while time.perf_counter() < until:
-        x += 1
-
-
 @contextlib.contextmanager
 def other_core_busy(seconds: float, enabled: bool = True) -> Iterator[None]:
     """A busy-loop process for ``seconds`` (the other of two cores busy)."""
     if not enabled:
         yield
         return
-    burner = mp.get_context("spawn").Process(target=_burn, args=(time.perf_counter() + seconds,), daemon=True)
+    burner = mp.get_context("spawn").Process(target=burn, args=(time.perf_counter() + seconds,), daemon=True)
     burner.start()
     try:
         yield

@@ -15,7 +15,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def burn(stop_at: float) -> None:
-    """Keep one core busy until ``stop_at`` (``perf_counter``): the other work of a shared machine."""
+    """Keep one core busy until ``stop_at`` (``perf_counter``): the other work of a shared
+    machine, at normal priority (a burner spawned by a SCHED_FIFO bench would inherit
+    real-time priority and compete with the very loop it is meant to stand beside)."""
+    if hasattr(os, "sched_setscheduler"):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     x = 0
     while time.perf_counter() < stop_at:
         x += 1
