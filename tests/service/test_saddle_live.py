@@ -249,10 +249,19 @@ def test_the_saddle_subscription_json_and_binary(server: LiveServer) -> None:
 
 def test_takes_record_the_saddle(server: LiveServer, follower: Follower) -> None:
     name = "saddle-take"
-    assert server.request("POST", "/api/record/start", json={"name": name}).json() == {"recording": name}
-    frames = _run(server, follower, _trot_saddle, 0.6)
-    stopped = server.request("POST", "/api/record/stop").json()["take"]
-    assert stopped["rows"] > 60 and any(_saddle_drives(f) for f in frames)
+    producer = Producer(server.ws, _trot_saddle, rate=100.0, path="/ws/saddle")
+    try:
+        # The take starts once the saddle drives (on a loaded machine the producer's first
+        # frames once came so late that the take held mostly the neutral horse before them).
+        follower.wait_for(_saddle_drives, timeout=10)
+        assert server.request("POST", "/api/record/start", json={"name": name}).json() == {"recording": name}
+        started = time.perf_counter()
+        follower.wait_for(lambda f: f["at"] > started + 1.5, timeout=6.5)  # two strides of the 1.4 Hz trot
+        stopped = server.request("POST", "/api/record/stop").json()["take"]
+    finally:
+        producer.close()
+    frames = [f for f in follower.frames if f["at"] >= started]
+    assert stopped["rows"] > 60 and all(_saddle_drives(f) for f in frames[: len(frames) // 2])
     take = read_frames(str(server.workdir / "takes" / f"{name}.csv"))
     assert take.names[-len(SADDLE_NAMES) :] == SADDLE_NAMES
     horse = np.column_stack([take.column(n) for n in HORSE_NAMES])
