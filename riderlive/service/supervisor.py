@@ -80,6 +80,8 @@ class TickSupervisor:
         self.on_setup_dropped = on_setup_dropped
         """Called when a restart falls back to the configured settings (the service resets what it reports)."""
         self.setups_dropped = 0
+        self.beats_unread = 0
+        """Heartbeat reads of 0 after the generation's first beat (should stay 0; see ``_watch``)."""
         self.period = 1.0 / config.tick.rate
         self.hang_s = (config.tick.hang_ticks - 1.0) * self.period
         self.up = True
@@ -90,6 +92,8 @@ class TickSupervisor:
         self.last_exit: str | None = None
         self.started_at = time.perf_counter()
         self._first_beat: float | None = None
+        self._last_beat = 0.0
+        """When the last heartbeat seen was written (perf_counter s)."""
         self.down_since: float | None = None
         self.last_down_at: float | None = None
         """When the tick was last found dead or hung (perf_counter s; kept after the restart)."""
@@ -179,8 +183,16 @@ class TickSupervisor:
             board["web_beat"] = now
             if self.up and self._recovery is None and self.supervised:
                 age = self.link.beat_age()
-                if age is not None and self._first_beat is None:
-                    self._first_beat = now
+                if age is not None:
+                    self._last_beat = now - age
+                    if self._first_beat is None:
+                        self._first_beat = now
+                elif self._first_beat is not None:
+                    # A generation that has beaten never reads "no beat" again (only a respawn
+                    # clears it), yet one CI run restarted a ticking tick as "never started":
+                    # counted, and the age is taken from the last beat seen (a hang still shows).
+                    self.beats_unread += 1
+                    age = now - self._last_beat
                 if age is not None and age > self.hang_threshold():
                     self.hangs += 1
                     self._begin_recovery(f"hung (no heartbeat for {age * 1000:.0f} ms)")
@@ -336,6 +348,7 @@ class TickSupervisor:
             "deaths": self.deaths,
             "hangs": self.hangs,
             "setups_dropped": self.setups_dropped,
+            "beats_unread": self.beats_unread,
             "last_exit": self.last_exit,
             "down_for": None if self.down_since is None else time.perf_counter() - self.down_since,
             "down_since": self.down_since,
