@@ -100,8 +100,9 @@ class Service:
         """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
-        self.params = load_preset(config.tick.preset)
-        self.animator = AnimatorLayer()
+        self.params: RuleParams
+        self.animator: AnimatorLayer
+        """Both set by ``_report_configured`` below, with the source."""
         self.metrics = ServiceMetrics()
         self.poses = RecordPoses(config.tick.length_scale)
         """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
