@@ -43,8 +43,7 @@ _FAILED_LOGS: dict[str, list[str]] = {}
 
 def _state_line(live: LiveServer) -> str:
     try:
-        headers = {"Authorization": f"Bearer {live.token}"} if live.token else {}
-        state = httpx.get(live.base + "/api/state", headers=headers, timeout=2.0).json()
+        state = live.get("/api/state", timeout=2.0, headers=live.auth).json()
     except (httpx.HTTPError, ValueError) as exc:
         return f"/api/state: {exc}"
     return f"/api/state supervision: {state.get('supervision')}"

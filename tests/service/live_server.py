@@ -60,8 +60,7 @@ class LiveServer:
         deadline = time.perf_counter() + timeout
         while time.perf_counter() < deadline:
             try:
-                headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
-                if self.get("/api/state", headers=headers).json()["counters"].get("ticks", 0) > 10:
+                if self.get("/api/state", headers=self.auth).json()["counters"].get("ticks", 0) > 10:
                     return
             except (httpx.HTTPError, ValueError, KeyError):
                 pass
@@ -79,8 +78,13 @@ class LiveServer:
             if "Application startup complete" in line:
                 self._ready.set()
 
-    def get(self, path: str, **kwargs: object) -> httpx.Response:
-        return httpx.get(self.base + path, timeout=10.0, **kwargs)  # type: ignore[arg-type]
+    @property
+    def auth(self) -> dict[str, str]:
+        """The Authorization header for this server's token ({} without one)."""
+        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
+
+    def get(self, path: str, timeout: float = 10.0, **kwargs: object) -> httpx.Response:
+        return httpx.get(self.base + path, timeout=timeout, **kwargs)  # type: ignore[arg-type]
 
     def request(self, method: str, path: str, **kwargs: object) -> httpx.Response:
         return httpx.request(method, self.base + path, timeout=10.0, **kwargs)  # type: ignore[arg-type]
