@@ -1,12 +1,14 @@
 """A stage over NATS: fan-out against /ws/rider in the same run, and the stage e-stop.
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_nats.py [--rigs 4] [--subscribers 16] [--seconds 5]
-        [--trials 20] [--idle]
+        [--trials 20] [--idle] [--realtime]
 
 A real ``nats-server`` (PyPI) on loopback; ``--rigs`` services (``riderlive serve --nats``,
-tick at 120 Hz at normal priority, each driving bench3 on its own emulated bus in a child
-process; several SCHED_FIFO ticks spinning on 2 cores starve the emulators); the other
-core busy (``--idle`` to leave it). Measured:
+tick at 120 Hz, each driving bench3 on its own emulated bus in a child process); the other
+core busy (``--idle`` to leave it). By default the ticks and the emulators run at normal
+priority (four rigs that would each have a computer share 2 cores here); ``--realtime``
+runs them as deployed, the ticks at SCHED_FIFO 50 and each emulator (standing in for the
+servos, which answer in microseconds) at 60. Measured:
 
 1. **Fan-out**: ``--subscribers`` clients in one other process, spread over the rigs,
    first as NATS subscribers of ``...<rig>.frame`` for ``--seconds``, then as
@@ -16,7 +18,9 @@ core busy (``--idle`` to leave it). Measured:
    CLOCK_MONOTONIC, so both paths include the tick -> web process hop), p50 / p99.
 2. **Stage e-stop**: every rig armed and running, a random 50-150 ms, then one message on
    ``riderlive.v1.<stage>.estop``; per trial the time until the torque-off packet has
-   arrived on *every* emulated bus (max over rigs), p50 / p99 / max over ``--trials``.
+   arrived on *every* emulated bus (max over rigs), p50 / p99 / max over ``--trials``,
+   split at the rigs' acknowledged latch time (``latched_at``, the same clock): message ->
+   latched by every rig's web process, and latched -> torque off (the tick and the bus).
 3. **Stage heartbeat lost**: every rig running, the heartbeat stops; the time until the
    torque-off packet (after parking) has arrived on every bus.
 """
@@ -33,6 +37,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -153,7 +158,12 @@ def wait_all(lives: list[LiveServer], wanted: str, timeout: float = 20.0) -> Non
     while any(rig_state(live) != wanted for live in lives):
         if time.perf_counter() > deadline:
             devices = [live.get("/api/devices", headers=AUTH).json()["devices"] for live in lives]
-            raise SystemExit(f"rigs are {[rig_state(x) for x in lives]}, wanted {wanted}: {devices}")
+            supervision = [live.get("/api/state", headers=AUTH).json().get("supervision") for live in lives]
+            logs = ["".join(live.log[-15:]) for live in lives]
+            raise SystemExit(
+                f"rigs are {[rig_state(x) for x in lives]}, wanted {wanted}: {devices}\n"
+                f"supervision: {supervision}\n" + "\n".join(logs)
+            )
         time.sleep(0.01)
 
 
@@ -187,10 +197,22 @@ def arm_all(lives: list[LiveServer], faults: list[str]) -> None:
     raise SystemExit(f"the rigs would not run: {[rig_state(x) for x in lives]}; faults: {faults}")
 
 
+@dataclass
+class EstopTrial:
+    """One stage e-stop, seconds from the message sent (max over the rigs)."""
+
+    torque_off: float
+    """Until the torque-off packet arrived on the last bus."""
+    latched: float
+    """Until the last rig's web process latched it (its acknowledgement's ``latched_at``)."""
+    after_latch: float
+    """The longest latch -> torque-off on one rig (the tick and the bus)."""
+
+
 def estop_trials(
     lives: list[LiveServer], emus: list[Emulator], probe: NatsProbe, trials: int
-) -> tuple[list[float], list[str]]:
-    worst: list[float] = []
+) -> tuple[list[EstopTrial], list[str]]:
+    results: list[EstopTrial] = []
     faults: list[str] = []
     for n in range(trials):
         arm_all(lives, faults)
@@ -198,17 +220,28 @@ def estop_trials(
             emu.ask("arrivals")
         time.sleep(random.uniform(0.05, 0.15))
         sent = time.perf_counter()
-        probe.call(stage_estop(probe.transport, STAGE, "bench", 0.0))
+        acks = probe.call(stage_estop(probe.transport, STAGE, "bench", 1.0))
         wait_all(lives, "estop")
-        offs = []
-        for emu in emus:
+        latched_at = {str(a["rig"]): float(a["latched_at"]) for a in acks}
+        offs, after_latch = [], []
+        for i, emu in enumerate(emus):
             after = [t for t in torque_offs(emu.ask("arrivals")) if t > sent]
             if not after:
                 raise SystemExit(f"trial {n}: no torque-off reached a bus")
             offs.append(after[0] - sent)
-        worst.append(max(offs))
+            if f"r{i}" in latched_at:
+                after_latch.append(after[0] - latched_at[f"r{i}"])
+        if len(latched_at) != len(emus):
+            raise SystemExit(f"trial {n}: {len(latched_at)} of {len(emus)} rigs acknowledged the e-stop in 1 s")
+        results.append(EstopTrial(max(offs), max(latched_at.values()) - sent, max(after_latch)))
         reset_all(lives)
-    return worst, faults
+    return results, faults
+
+
+def quantiles_ms(seconds: list[float]) -> str:
+    ms = sorted(s * 1000 for s in seconds)
+    p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
+    return f"p50 {statistics.median(ms):6.2f}  p99 {p99:6.2f}  max {ms[-1]:6.2f} ms"
 
 
 def reset_all(lives: list[LiveServer], timeout: float = 20.0) -> None:
@@ -248,6 +281,11 @@ def main() -> int:
     parser.add_argument("--trials", type=int, default=20)
     parser.add_argument("--rate", type=float, default=120.0)
     parser.add_argument("--idle", action="store_true", help="do not keep the other core busy")
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="ticks at SCHED_FIFO 50 and emulators at 60, as deployed (default: both at normal priority)",
+    )
     args = parser.parse_args()
     sys.setswitchinterval(0.0005)
     with tempfile.TemporaryDirectory() as tmp, Broker() as broker:
@@ -260,13 +298,14 @@ def main() -> int:
             "timeout_margin_ms": 40.0,
         }
         rig = bench_rig(root / "bench3.toml", args.rate, **changes)
-        emus = [Emulator(rig, priority=None) for _ in range(args.rigs)]
+        emus = [Emulator(rig, priority=60 if args.realtime else None) for _ in range(args.rigs)]
         lives: list[LiveServer] = []
         probe: NatsProbe | None = None
         try:
             for i, emu in enumerate(emus):
                 config = (
-                    f'[tick]\nrate = {args.rate}\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
+                    f"[tick]\nrate = {args.rate}\nrealtime_priority = {str(args.realtime).lower()}\n"
+                    f'[security]\ntoken = "{TOKEN}"\n'
                     f'[rig]\nfile = "{root / "bench3.toml"}"\nport = "{emu.port}"\n'
                 )
                 extra = f"heartbeat_timeout = {HEARTBEAT_TIMEOUT}"
@@ -278,7 +317,10 @@ def main() -> int:
             names = [f"r{i % args.rigs}" for i in range(args.subscribers)]
             origin = {name: float(rigs[name]["perf_origin"]) for name in rigs}
             busy = not args.idle
-            print(f"\n{args.rigs} rigs at {args.rate:g} Hz, {args.subscribers} subscribers, other core busy: {busy}")
+            print(
+                f"\n{args.rigs} rigs at {args.rate:g} Hz, {args.subscribers} subscribers, other core busy: {busy}, "
+                f"ticks and emulators at real-time priority: {args.realtime}"
+            )
             with other_core_busy(3600, not args.idle):
                 nats = fan_out("nats", [(n, broker.url, origin[n]) for n in names], args.seconds)
                 ws = fan_out("ws", [(n, lives[int(n[1:])].ws, origin[n]) for n in names], args.seconds)
@@ -286,11 +328,13 @@ def main() -> int:
                     report(label, results)
                 print(f"  p50 ratio NATS / ws/rider: {summarize(nats)[1] / summarize(ws)[1]:.2f}", flush=True)
                 if args.trials:
-                    delays, faults = estop_trials(lives, emus, probe, args.trials)
-                    ms = sorted(d * 1000 for d in delays)
-                    p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
-                    print(f"  stage e-stop -> torque off on every bus ({args.trials} trials, max over the rigs):")
-                    print(f"    p50 {statistics.median(ms):.2f}  p99 {p99:.2f}  max {ms[-1]:.2f} ms", flush=True)
+                    trials, faults = estop_trials(lives, emus, probe, args.trials)
+                    print(f"  stage e-stop ({args.trials} trials, each the max over the rigs):")
+                    print(f"    message -> torque off on every bus  {quantiles_ms([t.torque_off for t in trials])}")
+                    print(f"    message -> latched by every rig     {quantiles_ms([t.latched for t in trials])}")
+                    print(f"    latched -> torque off on its bus    {quantiles_ms([t.after_latch for t in trials])}")
+                    slowest = sorted(round(t.torque_off * 1000, 1) for t in trials)[-5:]
+                    print(f"    slowest trials (ms): {slowest}", flush=True)
                     lost = heartbeat_loss(lives, emus, probe, stop)
                     print(
                         f"  stage heartbeat stopped -> torque off on every bus: {lost * 1000:.0f} ms "

@@ -191,15 +191,11 @@ class Device:
 
     def disarm(self, by: str) -> DeviceState:
         """A controlled stop: ease to park, outputs off, ``parked``. Safe in any state (a
-        no-op where nothing moves)."""
+        no-op where nothing moves: a setup under way goes on and ends disarmed, outputs off,
+        so a stop that meets a restarting tick never leaves a device disconnected for good)."""
         if self.state.armed:
             self.counters["disarms"] += 1
             self._start_move(S.PARKING, "disarmed", by, time.perf_counter())
-        elif self.state is S.CONNECTING:
-            self._setup = None
-            self._quiet_off()
-            self.plug.close()
-            self._go(S.DISCONNECTED, "disarmed while connecting", by)
         return self.state
 
     def reset(self, by: str) -> DeviceState:

@@ -119,6 +119,19 @@ def test_connect_ends_disarmed_with_outputs_off_and_read_back(latch: StopLatch) 
     assert device.state is S.DISARMED and mem.counters["goal_writes"] == 0  # nothing moves unasked
 
 
+def test_disarm_while_connecting_lets_the_setup_end_disarmed(latch: StopLatch) -> None:
+    """A stop (the stage heartbeat lost, a web timeout) that meets a tick just restarted:
+    nothing moves while connecting, so the setup goes on; the device must not be left
+    disconnected, where neither reset nor arm could bring it back."""
+    device, mem = make(latch)
+    device.connect("test")
+    assert device.state is S.CONNECTING
+    assert device.disarm("stage heartbeat lost") is S.CONNECTING
+    until(device, S.DISARMED)
+    assert mem.outputs == [False] * 3 and mem.counters["goal_writes"] == 0
+    assert device.arm("mem", "test") is S.SOFT_START  # an operator can arm it again
+
+
 def test_arm_soft_starts_runs_and_disarm_parks(latch: StopLatch) -> None:
     device, mem = connected(latch)
     assert device.arm("mem", "rest 127.0.0.1 (page)") is S.SOFT_START

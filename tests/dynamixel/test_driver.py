@@ -256,10 +256,12 @@ def test_requests_out_of_turn_are_refused_or_safe(bus_factory: Callable[..., Emu
         device.arm(rig.name, "test")  # not connected yet
     assert refused.value.reason is Refusal.NOT_READY
     drive(device, 2.0, until=lambda s: "configuring" in s.detail)
-    assert device.disarm("test") is S.DISCONNECTED  # during setup: stop it, torque off
+    assert device.disarm("test") is S.CONNECTING  # during setup nothing moves: the setup goes on
+    run = drive(device, 5.0, until=lambda s: s.state is not S.CONNECTING)
+    assert device.state is S.DISARMED, device.fault
+    assert not any(status.wrote for status in run.statuses)  # no goal written
     emu.settle()
     assert all(torque(emu, i) == 0 for i in rig.ids)
-    connect(device)
     with pytest.raises(Refused) as refused:
         device.arm("bench3", "test")  # the name is the confirmation: not this rig
     assert refused.value.reason is Refusal.UNKNOWN_DEVICE
