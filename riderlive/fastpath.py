@@ -241,7 +241,8 @@ def _stream4(  # noqa: PLR0917
 
 
 def _fence() -> None:
-    """Order the streaming stores before whatever follows (x86: they are not ordered by themselves)."""
+    """Order the streaming stores before whatever follows: they are weakly ordered on x86 (compiled: a full
+    fence, ``lock or`` on x86)."""
 
 
 @cache
