@@ -32,11 +32,14 @@ here; the strand physics is written as loops and only ever compiled)::
   overhead, so a loop over frames can vectorise). Python callers get the function
   unchanged.
 - :func:`batch`: turns a scalar function of ``n_in`` floats returning ``n_out``
-  floats into a kernel over columns. It works in blocks of :data:`BLOCK` frames:
-  inputs are gathered into one small buffer, the function runs over the block (LLVM
-  vectorises it across frames: 4 frames per AVX2 instruction), and each output
-  channel is written as one contiguous run. Each distinct function (for the rules:
-  each preset) compiles once, a few seconds, and is then loaded from the cache.
+  floats into a kernel over columns. It works in blocks of :data:`BLOCK` frames: the
+  function runs over the block straight from the input columns (LLVM vectorises it
+  across frames: 4 frames per AVX2 instruction) into one small buffer, one row per
+  output channel, and each row is then copied to its output channel as one contiguous
+  run with streaming stores (x86 ``vmovntpd``: the output's cache lines are written
+  without being read first, and do not evict the block). One pass over the data, at
+  the memory-traffic floor (docs/performance.md). Each distinct function (for the
+  rules: each preset) compiles once, a few seconds, and is then loaded from the cache.
 
 Without numba (a dependency; only a broken install lacks it) the decorators return
 the Python source unchanged and :func:`batch` loops in Python: slow, but the same
@@ -63,8 +66,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 AVAILABLE = find_spec("numba") is not None
 """numba is installed."""
 BLOCK = 1000
-"""Frames per block of :func:`batch`: one block of inputs and outputs stays in L2 (~400 KB for 13 + 37
-channels), and each output run is 8 KB. Not a power of two, so the 50 rows do not compete for cache sets."""
+"""Frames per block of :func:`batch`: the block's outputs stay in L2 (~300 KB for 37 channels), and each
+output run is 8 KB. Not a power of two, so the rows do not compete for cache sets. 250-1000 measure alike;
+2000 and 4000 were ~7% slower (one sweep, N = 10^6)."""
 OPTIONS: dict[str, Any] = {"error_model": "numpy", "nogil": True}
 """numba options of every kernel."""
 
@@ -123,7 +127,7 @@ class BatchKernel:
 
     def __init__(self, fn: Callable[..., tuple[float, ...]], n_in: int, n_out: int, block: int) -> None:
         self.fn, self.n_in, self.n_out, self.block = fn, n_in, n_out, block
-        self._run = _compile_batch(inline(fn), n_in, n_out, block)
+        self._run = _compile_batch(inline(fn), n_out, block)
 
     def __call__(
         self,
@@ -156,7 +160,7 @@ def _vector(values: FloatArray | None, n: int, default: float) -> FloatArray:
     return np.full(n, default) if values is None else np.ascontiguousarray(values, dtype=np.float64).reshape(n)
 
 
-def _compile_batch(one: Callable[..., tuple[float, ...]], n_in: int, n_out: int, block: int) -> Callable[..., None]:
+def _compile_batch(one: Callable[..., tuple[float, ...]], n_out: int, block: int) -> Callable[..., None]:
     """The batch loop around ``one``, compiled: a closure, so numba's cache keys it on ``one``'s code and constants."""
     if AVAILABLE:
         _define_intrinsics()
@@ -165,55 +169,104 @@ def _compile_batch(one: Callable[..., tuple[float, ...]], n_in: int, n_out: int,
         columns: Any, in_gain: Any, out: Any, out_gain: Any, out_offset: Any, affine: bool
     ) -> None:
         n = out.shape[1]
-        work = np.empty((n_in + n_out) * block)  # rows of ``block`` frames: the inputs, then the outputs
+        flat = out.reshape(-1)  # row j, frame i at j * n + i
+        gains = _load_strided(in_gain, 0, 1, columns)  # the input gains as values, not loads in the loop
+        work = np.empty(n_out * block)  # one row of ``block`` frames per output channel
         for start in range(0, n, block):
             m = min(block, n - start)
-            for k, column in enumerate(columns):
-                gain = in_gain[k]
-                for i in range(m):
-                    work[k * block + i] = column[start + i] * gain
             for i in range(m):  # constant row offsets in one buffer: LLVM vectorises this across frames
-                _store_strided(work, n_in * block + i, block, one(*_load_strided(work, i, block, columns)))
+                _store_strided(work, i, block, one(*_load_columns(columns, start + i, gains)))
             for j in range(n_out):
-                row = (n_in + j) * block
-                if affine:
-                    g, o = out_gain[j], out_offset[j]
-                    for i in range(m):
-                        out[j, start + i] = work[row + i] * g + o
-                else:
-                    for i in range(m):
-                        out[j, start + i] = work[row + i]
+                _stream_row(flat, j * n + start, work, j * block, m, out_gain[j], out_offset[j], affine)
+        _fence()
 
     return kernel(batch_kernel) if AVAILABLE else batch_kernel
 
 
+# The Python definitions below are the semantics; :func:`_define_intrinsics` replaces them by numba
+# intrinsics (LLVM IR) for compiled callers. "Streaming" stores bypass the cache (x86: vmovntpd): the
+# output is written once and not read back, so its lines need not be read from memory first.
+
+
+def _stream_row(  # noqa: PLR0917
+    dst: FloatArray, d: int, src: FloatArray, s: int, m: int, gain: float, offset: float, affine: bool
+) -> None:
+    """``dst[d + i] = src[s + i]`` (times ``gain`` plus ``offset`` when ``affine``) for ``i < m``, streamed:
+    single values up to the first 32-byte boundary of ``dst``, then 4 values per store, then the rest."""
+    head = min(m, _to_boundary(dst, d))
+    body = head + (m - head) // 4 * 4
+    for i in range(head):
+        _store_nt(dst, d + i, src[s + i] * gain + offset if affine else src[s + i])
+    for i in range(head, body, 4):
+        _stream4(dst, d + i, src, s + i, gain, offset, affine)
+    for i in range(body, m):
+        _store_nt(dst, d + i, src[s + i] * gain + offset if affine else src[s + i])
+
+
 def _load_strided(work: FloatArray, start: int, step: int, like: Sequence[Any]) -> tuple[float, ...]:
-    """``(work[start], work[start + step], ...)``, as many values as ``like`` has items (in Python)."""
+    """``(work[start], work[start + step], ...)``, as many values as ``like`` has items."""
     return tuple(float(work[start + k * step]) for k in range(len(like)))
 
 
+def _load_columns(columns: Sequence[FloatArray], index: int, gains: Sequence[float]) -> tuple[float, ...]:
+    """``(columns[0][index] * gains[0], columns[1][index] * gains[1], ...)``."""
+    return tuple(float(c[index]) * g for c, g in zip(columns, gains, strict=True))
+
+
 def _store_strided(work: FloatArray, start: int, step: int, values: Sequence[float]) -> None:
-    """``work[start + j * step] = values[j]`` for every item of ``values`` (in Python)."""
+    """``work[start + j * step] = values[j]`` for every item of ``values``."""
     for j, v in enumerate(values):
         work[start + j * step] = v
 
 
+def _to_boundary(array: FloatArray, index: int) -> int:
+    """How many float64 items from ``array[index]`` on precede a 32-byte boundary (0-3; 2**62 when the
+    array is not 8-byte aligned, so it is never reached)."""
+    address = array.ctypes.data + index * 8
+    return (-(address >> 3)) & 3 if address & 7 == 0 else 1 << 62
+
+
+def _store_nt(array: FloatArray, index: int, value: float) -> None:
+    """``array[index] = value``, streamed."""
+    array[index] = value
+
+
+def _stream4(  # noqa: PLR0917
+    dst: FloatArray, d: int, src: FloatArray, s: int, gain: float, offset: float, affine: bool
+) -> None:
+    """``dst[d:d + 4] = src[s:s + 4]`` (times ``gain`` plus ``offset`` when ``affine``) in one streaming
+    store; ``dst[d]`` must lie on a 32-byte boundary."""
+    for k in range(4):
+        dst[d + k] = src[s + k] * gain + offset if affine else src[s + k]
+
+
+def _fence() -> None:
+    """Order the streaming stores before whatever follows: they are weakly ordered on x86 (compiled: a full
+    fence, ``lock or`` on x86)."""
+
+
 @cache
 def _define_intrinsics() -> None:
-    """Replace the two helpers above by numba intrinsics (on first compile: importing numba takes ~0.5 s)."""
+    """Replace the helpers above by numba intrinsics (on first compile: importing numba takes ~0.5 s)."""
+    from llvmlite import ir
     from numba import types as nbtypes
     from numba.core import cgutils
     from numba.extending import intrinsic
 
+    def pointer(context: Any, builder: Any, aryty: Any, ary: Any, index: Any) -> Any:
+        array = context.make_array(aryty)(context, builder, ary)
+        return cgutils.get_item_pointer(context, builder, aryty, array, [index])  # type: ignore[no-untyped-call]
+
     def pointers(context: Any, builder: Any, signature: Any, args: Any, count: int) -> list[Any]:
         """Pointers to ``array[start + k * step]``, k < count, for an intrinsic's (array, start, step, ...)."""
-        aryty = signature.args[0]
-        ary = context.make_array(aryty)(context, builder, args[0])
-        out = []
-        for k in range(count):
-            index = builder.add(args[1], builder.mul(args[2], context.get_constant(nbtypes.intp, k)))
-            out.append(cgutils.get_item_pointer(context, builder, aryty, ary, [index]))  # type: ignore[no-untyped-call]
-        return out
+        step = [builder.mul(args[2], context.get_constant(nbtypes.intp, k)) for k in range(count)]
+        return [pointer(context, builder, signature.args[0], args[0], builder.add(args[1], s)) for s in step]
+
+    i64, quad = ir.IntType(64), ir.VectorType(ir.DoubleType(), 4)
+
+    def streamed(store: Any) -> None:
+        """Mark a store as streaming (LLVM ``!nontemporal``)."""
+        store.set_metadata("nontemporal", store.module.add_metadata([ir.Constant(ir.IntType(32), 1)]))
 
     @intrinsic
     def load_strided(typingctx: Any, array: Any, start: Any, step: Any, like: Any) -> Any:
@@ -226,6 +279,20 @@ def _define_intrinsics() -> None:
         return result(array, start, step, like), codegen
 
     @intrinsic
+    def load_columns(typingctx: Any, columns: Any, index: Any, gains: Any) -> Any:
+        result = nbtypes.UniTuple(columns.dtype.dtype, columns.count)  # type: ignore[no-untyped-call]
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            values = []
+            for k in range(columns.count):
+                column = builder.extract_value(args[0], k)
+                value = builder.load(pointer(context, builder, columns.dtype, column, args[1]))
+                values.append(builder.fmul(value, builder.extract_value(args[2], k)))
+            return context.make_tuple(builder, result, values)
+
+        return result(columns, index, gains), codegen
+
+    @intrinsic
     def store_strided(typingctx: Any, array: Any, start: Any, step: Any, values: Any) -> Any:
         def codegen(context: Any, builder: Any, signature: Any, args: Any) -> None:
             for j, p in enumerate(pointers(context, builder, signature, args, values.count)):
@@ -233,7 +300,60 @@ def _define_intrinsics() -> None:
 
         return nbtypes.void(array, start, step, values), codegen
 
-    globals().update(_load_strided=load_strided, _store_strided=store_strided)
+    @intrinsic
+    def to_boundary(typingctx: Any, array: Any, index: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            address = builder.ptrtoint(pointer(context, builder, signature.args[0], args[0], args[1]), i64)
+            items = builder.and_(builder.neg(builder.lshr(address, i64(3))), i64(3))
+            aligned = builder.icmp_unsigned("==", builder.and_(address, i64(7)), i64(0))
+            return builder.select(aligned, items, i64(1 << 62))
+
+        return nbtypes.intp(array, index), codegen
+
+    @intrinsic
+    def store_nt(typingctx: Any, array: Any, index: Any, value: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            target = pointer(context, builder, signature.args[0], args[0], args[1])
+            streamed(builder.store(context.cast(builder, args[2], signature.args[2], array.dtype), target))
+            return context.get_dummy_value()
+
+        return nbtypes.void(array, index, value), codegen
+
+    @intrinsic
+    def stream4(typingctx: Any, dst: Any, d: Any, src: Any, s: Any, gain: Any, offset: Any, affine: Any) -> Any:  # noqa: PLR0917
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            source, target = (
+                builder.bitcast(pointer(context, builder, signature.args[k], args[k], args[k + 1]), quad.as_pointer())
+                for k in (2, 0)
+            )
+            values = builder.load(source, align=8)
+            g, o = (builder.insert_element(quad(ir.Undefined), x, i64(0)) for x in args[4:6])
+            spread = ir.Constant(ir.VectorType(ir.IntType(32), 4), [0] * 4)  # lane 0 into all four
+            g, o = (builder.shuffle_vector(x, quad(ir.Undefined), spread) for x in (g, o))
+            scaled = builder.fadd(builder.fmul(values, g), o)
+            streamed(builder.store(builder.select(args[6], scaled, values), target, align=32))
+            return context.get_dummy_value()
+
+        return nbtypes.void(dst, d, src, s, nbtypes.float64, nbtypes.float64, nbtypes.boolean), codegen
+
+    @intrinsic
+    def fence(typingctx: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            builder.fence("seq_cst")
+            return context.get_dummy_value()
+
+        return nbtypes.void(), codegen
+
+    globals().update(
+        _load_strided=load_strided,
+        _load_columns=load_columns,
+        _store_strided=store_strided,
+        _to_boundary=to_boundary,
+        _store_nt=store_nt,
+        _stream4=stream4,
+        _fence=fence,
+    )
+    inline(_stream_row)
 
 
 # ----------------------------------------------------------------------------- the disk cache

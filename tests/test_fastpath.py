@@ -86,3 +86,77 @@ def test_batch_checks_its_arguments_before_running() -> None:
         kernel(columns, np.zeros((5, 2)).T)
     with pytest.raises(ValueError, match="5 frames"):
         kernel([np.zeros(5), np.zeros(4)], np.zeros((2, 5)))
+
+
+def mixed(a: float, b: float, c: float) -> tuple[float, ...]:
+    """A scalar function with the operations the rules use (clamps, abs, products): 3 floats in, 5 out."""
+    return (a + b, min(a * c, 2.0), abs(b) * 0.3 - c, max(-1.0, min(1.0, a - c)), (a - 2.0) * -b / 7.0)
+
+
+CASE_FRAMES = (0, 1, 3, 5, 6, 7, 13, fastpath.BLOCK - 1, fastpath.BLOCK, 2 * fastpath.BLOCK + 3)
+GAIN_IN = np.array([2.5, 1.0, -0.5])
+GAIN_OUT, OFFSET_OUT = np.array([1.0, 0.4, -2.0, 3.0, 1.0]), np.array([0.0, 0.25, 1.0, -3.0, 0.5])
+PYTHON_PATH = """
+import sys
+sys.modules["numba"] = None  # as if numba were not installed
+import numpy as np
+from riderlive import fastpath
+from tests.test_fastpath import CASE_FRAMES, GAIN_IN, GAIN_OUT, OFFSET_OUT, case_columns, mixed
+assert not fastpath.AVAILABLE
+for block in (fastpath.BLOCK, 6):
+    run = fastpath.batch(mixed, 3, 5, block=block)
+    for n in CASE_FRAMES:
+        for affine in (False, True):
+            out = np.full((5, n), np.nan)
+            run(case_columns(n), out, GAIN_IN, *((GAIN_OUT, OFFSET_OUT) if affine else ()))
+            np.save(f"{sys.argv[1]}/{block}-{n}-{affine}.npy", out)
+"""
+
+
+def case_columns(n: int) -> list[np.ndarray]:
+    """Three input columns of ``n`` frames, wide enough to reach both sides of every clamp."""
+    return list(np.random.default_rng(n).uniform(-6.0, 6.0, (3, n)))
+
+
+def offset_output(n: int, items: int) -> np.ndarray:
+    """A C-contiguous (5, n) array starting ``items`` float64s past a 64-byte boundary: its rows start at
+    every alignment, so the streaming stores meet unaligned starts and short tails."""
+    buffer = np.full(5 * n + 16, np.nan)
+    skip = (-(buffer.ctypes.data // 8) % 8) + items
+    return buffer[skip : skip + 5 * n].reshape(5, n)
+
+
+@pytest.mark.parametrize("block", [fastpath.BLOCK, 6])
+def test_batch_streams_exactly_the_python_path(block: int, tmp_path: Path) -> None:
+    """The compiled kernel (streaming stores from 32-byte boundaries, single stores before and after) writes
+    exactly what the same source writes interpreted, without numba: for every frame count (none, fewer
+    than a store or a block, block edges), every row alignment, with and without the output gains."""
+    root = Path(__file__).resolve().parents[1]
+    subprocess.run([sys.executable, "-c", PYTHON_PATH, str(tmp_path)], cwd=root, check=True)
+    run = fastpath.batch(mixed, 3, 5, block=block)
+    for n in CASE_FRAMES:
+        columns = case_columns(n)
+        a, b, c = (column * gain for column, gain in zip(columns, GAIN_IN, strict=True))
+        frames = zip(a.tolist(), b.tolist(), c.tolist(), strict=True)
+        direct = np.array([mixed(*frame) for frame in frames]).reshape(n, 5).T  # Python floats
+        for affine in (False, True):
+            python = np.load(tmp_path / f"{block}-{n}-{affine}.npy")
+            expected = direct * GAIN_OUT[:, None] + OFFSET_OUT[:, None] if affine else direct
+            np.testing.assert_array_equal(python, expected)
+            for items in range(4):
+                out = offset_output(n, items)
+                run(columns, out, GAIN_IN, *((GAIN_OUT, OFFSET_OUT) if affine else ()))
+                np.testing.assert_array_equal(out, python, err_msg=f"{n} frames, start +{items}, affine {affine}")
+
+
+def test_batch_writes_an_output_that_is_not_8_byte_aligned() -> None:
+    """No 32-byte boundary is ever reached there: every value is stored singly, and still right."""
+    n = 2 * fastpath.BLOCK + 3
+    raw = bytearray(5 * n * 8 + 4)
+    out = np.frombuffer(raw, dtype=np.float64, count=5 * n, offset=4).reshape(5, n)
+    assert out.flags.c_contiguous and not out.flags.aligned
+    run = fastpath.batch(mixed, 3, 5)
+    run(case_columns(n), out)
+    expected = np.empty((5, n))
+    run(case_columns(n), expected)
+    np.testing.assert_array_equal(out, expected)
