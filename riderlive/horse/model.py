@@ -18,11 +18,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.channels import HORSE, HORSE_NAMES
+from riderlive.channels import HORSE, HORSE_INDEX, HORSE_NAMES
 from riderlive.horse.curves import ARRAY, SCALAR, Ops, Ramp
 from riderlive.horse.gaits import GAIT_TABLE, Gait
 from riderlive.horse.layers import BODY_CHANNELS, BlendLayer, GaitLayer, HaltLayer, Layer, MoveLayer
 from riderlive.horse.moves import MOVE_TABLE, Move
+from riderlive.horse.terrain import Terrain
 
 FloatArray = npt.NDArray[np.float64]
 CHUNK = 8192
@@ -63,12 +64,14 @@ Event = tuple[float, int, Command]
 
 @dataclass(frozen=True)
 class Model:
-    """Static parameters: stride-to-stride variation (fraction, 0 = off) and its seed, blend times (s)."""
+    """Static parameters: stride-to-stride variation (fraction, 0 = off) and its seed, blend times (s),
+    the ground (``terrain``; None: flat and level)."""
 
     variation: float = 0.0
     seed: int = 0
     move_blend: float = 0.3
     resume_blend: float = 0.4
+    terrain: Terrain | None = None
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.variation <= 0.3):
@@ -250,21 +253,32 @@ def to_rig_sides(pose: list[Any]) -> list[Any]:
     return body + pose[BODY_CHANNELS:]
 
 
-def frame(state: State, t: Any, ops: Ops) -> list[Any]:
+_PITCH = HORSE_INDEX["rearPivot.rz"]
+
+
+def frame(state: State, t: Any, ops: Ops, terrain: Terrain | None = None) -> list[Any]:
     """All channels of ``channels.HORSE`` at ``t`` (float or array) from ``state``.
 
     Rig convention (``channels``): right-handed, +X forward, +Y up, +Z to the horse's
     right, so ``tz`` is + right and ``rearPivot.rx`` is + when the horse rolls right.
+    On ``terrain`` (``riderlive.horse.terrain``) the distance travelled is along the
+    ground: ``root.tx`` / ``root.ty`` are its world position, ``ground.rz`` the trunk's
+    ground pitch, added to ``rearPivot.rz`` (the trunk's world pitch), ``ground.ty`` =
+    ``root.ty``; the hooves and the rest of the trunk stay relative to the local ground.
     """
     _, _, x = state.ramp.at(t, ops)
     pose = to_rig_sides(state.layer.pose(t, ops))
-    return [*pose[:BODY_CHANNELS], state.x0 + x, 0.0, 0.0, 0.0, *pose[BODY_CHANNELS:]]
+    if terrain is None:
+        return [*pose[:BODY_CHANNELS], state.x0 + x, 0.0, 0.0, 0.0, *pose[BODY_CHANNELS:], 0.0, 0.0]
+    gx, gy, pitch = terrain.place(state.x0 + x, ops)
+    pose[_PITCH] = pose[_PITCH] + pitch
+    return [*pose[:BODY_CHANNELS], gx, gy, 0.0, 0.0, *pose[BODY_CHANNELS:], pitch, gy]
 
 
 def step(model: Model, state: State, t: float) -> tuple[State, list[float]]:
     """One live tick: the state at ``t`` and its frame (metres, degrees)."""
     state = advance(model, state, t)
-    return state, frame(state, t, SCALAR)
+    return state, frame(state, t, SCALAR, model.terrain)
 
 
 def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, FloatArray]:
@@ -280,7 +294,7 @@ def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, Floa
             stop = max(stop, start + 1)
         for lo in range(start, stop, CHUNK):  # cache-sized pieces: temporaries stay in cache
             hi = min(lo + CHUNK, stop)
-            for column, values in enumerate(frame(state, times[lo:hi], ARRAY)):
+            for column, values in enumerate(frame(state, times[lo:hi], ARRAY, model.terrain)):
                 out[lo:hi, column] = values
         start = stop
     return state, out

@@ -6,6 +6,10 @@ A script (see ``config/shots/*.toml``)::
     seed = 7            # optional: stride-to-stride variation on, reproducibly
     variation = 0.05    # optional fraction (default 0.05 with a seed, else 0 = off)
 
+    [terrain]           # optional: the ground (default flat and level), one of
+    slope = 6.0         # degrees, + uphill, or
+    # profile = [[0, 0], [20, 8], [60, 8], [70, -5]]   # [distance along the ground m, slope deg]
+
     [[segment]]
     gait = "gallop"     # walk, trot, canter, gallop or halt
     seconds = 4         # required for a gait
@@ -33,6 +37,7 @@ from riderlive.framefile import FrameTable
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, Gait, parse_gait
 from riderlive.horse.model import Model, Perform, SetGait, State, evaluate, initial, schedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, parse_move
+from riderlive.horse.terrain import TerrainConfig
 
 DEFAULT_VARIATION = 0.05
 """Stride-to-stride variation (fraction of hoof lift, trunk heave and pitch) when a seed is given."""
@@ -87,6 +92,7 @@ class ShotScript(StrictModel):
     description: str = ""
     seed: int | None = pydantic.Field(default=None, ge=0, lt=2**63)
     variation: float | None = pydantic.Field(default=None, ge=0.0, le=0.3)
+    terrain: TerrainConfig | None = None
     segment: list[Segment] = pydantic.Field(min_length=1, max_length=10_000)
 
     @property
@@ -97,7 +103,8 @@ class ShotScript(StrictModel):
         variation = (
             self.variation if self.variation is not None else (DEFAULT_VARIATION if self.seed is not None else 0.0)
         )
-        return Model(variation=variation, seed=self.seed or 0)
+        terrain = self.terrain.terrain() if self.terrain is not None else None
+        return Model(variation=variation, seed=self.seed or 0, terrain=terrain)
 
     def start(self, model: Model, t0: float = 0.0, state: State | None = None) -> State:
         """Queue the segments from ``t0`` (a fresh steady state unless ``state`` is given)."""
