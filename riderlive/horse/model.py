@@ -34,11 +34,13 @@ SETTLE_RATIO = 4.74
 
 @dataclass(frozen=True, slots=True)
 class SetGait:
-    """Change to ``gait`` (speed in m/s, default the gait's; ``ramp`` s to reach it)."""
+    """Change to ``gait`` (speed in m/s, default the gait's; ``ramp`` s to reach it; ``accel``
+    m/s^2: the ground speed's rate of change stays within it, :func:`bounded_omega`)."""
 
     gait: Gait
     speed: float | None = None
     ramp: float | None = None
+    accel: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +129,36 @@ def _schedule(state: State, at: float, command: Command) -> State:
     return replace(state, events=tuple(events), seq=state.seq + 1)
 
 
+def peak_acceleration(v0: float, a0: float, target: float, omega: float) -> float:
+    """The largest ``|dv/dt|`` (m/s^2) of a :class:`Ramp` from speed ``v0`` and acceleration ``a0``
+    toward ``target`` at ``omega``: ``a(tau) = (a0 - omega c2 tau) exp(-omega tau)``,
+    ``c2 = a0 + omega (v0 - target)``, extreme at ``tau* = (a0 + c2) / (omega c2)``."""
+    c2 = a0 + omega * (v0 - target)
+    peak = abs(a0)
+    if c2 != 0.0:
+        tau = (a0 + c2) / (omega * c2)
+        if tau > 0.0:
+            peak = max(peak, abs(c2) * math.exp(-omega * tau))
+    return peak
+
+
+def bounded_omega(ramp: Ramp, at: float, target: float, omega: float, accel: float) -> float:
+    """The largest rate <= ``omega`` whose ramp from ``ramp``'s state at ``at`` toward ``target``
+    keeps ``|dv/dt|`` within ``accel`` (m/s^2): the acceleration already under way when the
+    command starts is kept (speed stays C1): beyond ``accel`` (after a movement's own ramp) it
+    is the bound until the ramp has let it go."""
+    v0, a0, _ = ramp.at(at, SCALAR)
+    v0, a0 = float(v0), float(a0)
+    bound = max(accel, abs(a0))
+    if peak_acceleration(v0, a0, target, omega) <= bound:
+        return omega
+    lo, hi = 1e-6, omega  # the peak grows with omega: bisect for the fastest ramp within the bound
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if peak_acceleration(v0, a0, target, mid) <= bound else (lo, mid)
+    return lo
+
+
 def _retarget(state: State, at: float, target: float, omega: float) -> State:
     _, _, x = state.ramp.at(at, SCALAR)
     return replace(state, ramp=state.ramp.retarget(at, target, omega), x0=state.x0 + float(x))
@@ -184,6 +216,8 @@ def _set_gait(
     target = target_speed(gait, speed)
     same = gait is state.gait and isinstance(state.layer, GaitLayer)
     omega = SETTLE_RATIO / ramp if ramp else (2.0 if same else 3.0)
+    if cmd.accel is not None:
+        omega = bounded_omega(state.ramp, at, target, omega, cmd.accel)
     state = replace(_retarget(state, at, target, omega), gait=gait, gait_speed=target)
     if gait is Gait.HALT:
         return _blend_to(state, at, HaltLayer(), blend or 0.8)

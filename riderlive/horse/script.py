@@ -14,7 +14,8 @@ A script (see ``config/shots/*.toml``)::
     gait = "gallop"     # walk, trot, canter, gallop or halt
     seconds = 4         # required for a gait
     speed = 12.0        # m/s, within the gait's range (default: the gait's)
-    ramp = 1.5          # optional: seconds to reach the speed
+    ramp = 1.5          # optional: seconds to reach the speed, or
+    # accel = 2.0       # optional: m/s^2, the speed's rate of change bound
 
     [[segment]]
     move = "stop"       # jump, rear, stop or buck; seconds default to the move's length
@@ -51,11 +52,15 @@ class Segment(StrictModel):
     seconds: float | None = pydantic.Field(default=None, gt=0.0, le=3600.0)
     speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
     ramp: float | None = pydantic.Field(default=None, gt=0.0, le=60.0)
+    accel: float | None = pydantic.Field(default=None, gt=0.0, le=20.0)
+    """m/s^2: the ground speed's rate of change stays within it (``model.bounded_omega``)."""
 
     @pydantic.model_validator(mode="after")
     def _one_kind(self) -> Self:
         if (self.gait is None) == (self.move is None):
             raise ValueError("a segment has exactly one of 'gait' or 'move'")
+        if self.ramp is not None and self.accel is not None:
+            raise ValueError("a segment has at most one of 'ramp' (s) or 'accel' (m/s^2)")
         if self.gait is not None:
             if self.gait not in (*GAITS, "halt"):
                 raise ValueError(f"gait must be one of {', '.join((*GAITS, 'halt'))}")
@@ -69,8 +74,8 @@ class Segment(StrictModel):
         else:
             if self.move not in MOVES:
                 raise ValueError(f"move must be one of {', '.join(MOVES)}")
-            if self.speed is not None or self.ramp is not None:
-                raise ValueError("a move sets its own speed: no 'speed' or 'ramp'")
+            if self.speed is not None or self.ramp is not None or self.accel is not None:
+                raise ValueError("a move sets its own speed: no 'speed', 'ramp' or 'accel'")
         return self
 
     @property
@@ -81,23 +86,18 @@ class Segment(StrictModel):
 
     def command(self) -> SetGait | Perform:
         if self.gait is not None:
-            return SetGait(parse_gait(self.gait), self.speed, self.ramp)
+            return SetGait(parse_gait(self.gait), self.speed, self.ramp, self.accel)
         return Perform(parse_move(str(self.move)))
 
 
-class ShotScript(StrictModel):
-    """A scripted take: segments played back to back."""
+class TakeHeader(StrictModel):
+    """What every scripted take has besides its plan: name, variation, ground."""
 
     name: str = ""
     description: str = ""
     seed: int | None = pydantic.Field(default=None, ge=0, lt=2**63)
     variation: float | None = pydantic.Field(default=None, ge=0.0, le=0.3)
     terrain: TerrainConfig | None = None
-    segment: list[Segment] = pydantic.Field(min_length=1, max_length=10_000)
-
-    @property
-    def duration(self) -> float:
-        return sum(s.duration for s in self.segment)
 
     def model(self) -> Model:
         variation = (
@@ -105,6 +105,16 @@ class ShotScript(StrictModel):
         )
         terrain = self.terrain.terrain() if self.terrain is not None else None
         return Model(variation=variation, seed=self.seed or 0, terrain=terrain)
+
+
+class ShotScript(TakeHeader):
+    """A scripted take: segments played back to back."""
+
+    segment: list[Segment] = pydantic.Field(min_length=1, max_length=10_000)
+
+    @property
+    def duration(self) -> float:
+        return sum(s.duration for s in self.segment)
 
     def start(self, model: Model, t0: float = 0.0, state: State | None = None) -> State:
         """Queue the segments from ``t0`` (a fresh steady state unless ``state`` is given)."""
