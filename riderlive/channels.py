@@ -88,16 +88,27 @@ HORSE: tuple[Channel, ...] = _table(
         ("horseNeck.rz", "neck up (+) / down at the withers, relative to the trunk (optional)"),
         ("horseNeck.ry", "neck to the horse's left (+) / right, relative to the trunk (optional)"),
         ("horseHead.rz", "head nose up (+) / down at the poll, relative to the neck (optional)"),
+        ("ground.rz", "the ground's pitch under the horse, + rising ahead, degrees (optional; 0: flat)"),
+        ("ground.ty", "the ground's height under the horse (optional; 0: flat)"),
     )
 )
 """Every horse input channel, in the canonical column order of files and arrays.
 
-The last three (neck and head, ``docs/horse.md``) are optional in every input: a
-stream or file without them leaves them 0, the neck and head at rest on the trunk,
-which is how every horse moved before they existed."""
+The last five are optional in every input: a stream or file without them leaves
+them 0. The neck and head (``docs/horse.md``) then rest on the trunk, and the ground
+(``ground.*``, thesis section 10) is flat and level, which is how every horse moved
+before they existed. On sloping ground ``rearPivot.rz`` is the trunk's pitch in the
+world (the ground's pitch included); the hooves, ``rearPivot.t*`` and ``backMid.rz``
+stay relative to the local ground (``riderlive.rules.terrain``)."""
 
 HORSE_NECK_HEAD: tuple[str, ...] = ("horseNeck.rz", "horseNeck.ry", "horseHead.rz")
-"""The optional horse channels (neck and head): absent means 0, at rest on the trunk."""
+"""The optional horse channels of the neck and head: absent means 0, at rest on the trunk."""
+
+HORSE_GROUND: tuple[str, ...] = ("ground.rz", "ground.ty")
+"""The optional ground under the horse (pitch in degrees, + rising ahead; height): absent means 0, flat."""
+
+HORSE_OPTIONAL: tuple[str, ...] = (*HORSE_NECK_HEAD, *HORSE_GROUND)
+"""Every optional horse channel, the last ones of ``HORSE`` in this order."""
 
 SADDLE: tuple[Channel, ...] = _table(
     (

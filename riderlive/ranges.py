@@ -47,13 +47,16 @@ CHANNEL_DEFAULTS: dict[str, Range] = {
     "saddle.r*": (-90.0, 90.0),
     "root.t*": (-1e5, 1e5),
     "root.ry": (-1e6, 1e6),
+    "ground.rz": (-45.0, 45.0),
+    "ground.ty": (-1e5, 1e5),
     "tail_*.t*": (-1e5, 1e5),
     "braid_*.t*": (-1e5, 1e5),
     "*_cloth_*.t*": (-1e5, 1e5),
     "tail_ref.t*": (-1e5, 1e5),
 }
 """The horse's hooves and pivots are relative to its body; ``root`` is its world
-position (100 km) and heading (turns accumulate); the simulated tail, braid and cloth flaps are
+position (100 km) and heading (turns accumulate), ``ground`` the slope under it (a
+horse climbs no steeper than 45 degrees) and its height; the simulated tail, braid and cloth flaps are
 world positions too."""
 
 

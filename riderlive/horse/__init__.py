@@ -5,7 +5,8 @@
   engage in the jump and the rear (``docs/horse.md``).
 - ``GAITS`` (walk, trot, canter, gallop) and ``MOVES`` (jump, rear, stop, buck); the
   API takes names (strings) and also accepts ``halt`` (standing).
-- ``ProceduralHorse(gait="trot", speed=None, seed=None)``: a live source.
+- ``ProceduralHorse(gait="trot", speed=None, seed=None, terrain=None)``: a live source
+  (``terrain``: a :class:`Terrain`, the ground it runs on; None: flat and level).
   ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres, degrees) for
   ``t`` in seconds, non-decreasing; ``set_gait(gait, speed=None)`` changes gait or
   speed at any time, ``perform(move)`` starts a movement from the current state,
@@ -20,7 +21,10 @@ Frames: hoof ``tx`` forward (+) of the hoof's square-standing spot, ``ty`` heigh
 the ground, ``tz`` side (+ to the horse's right: the rig is right-handed, +X forward,
 +Y up); ``rearPivot.t*`` the hips' displacement from standing, ``rearPivot.rz`` pitch
 (+ nose up), ``rx`` roll (+ rolling right), ``ry`` yaw (+ left); ``backMid.rz`` the
-back's bend; ``root.tx`` distance travelled, ``root.ty/tz/ry`` 0 (straight, flat ground).
+back's bend; ``root.tx`` distance travelled, ``root.tz/ry`` 0 (a straight path). On flat
+ground ``root.ty`` and ``ground.*`` are 0; on a :class:`Terrain` ``root.tx/ty`` are the
+world position, ``ground.rz`` the ground's pitch (in ``rearPivot.rz`` too) and ``ground.ty``
+its height (``riderlive.horse.terrain``).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse
 from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, target_speed, unschedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
+from riderlive.horse.terrain import Terrain, TerrainConfig
 
 DEFAULT_SCALE = 25.0
 """Thesis rig units per metre (a 1.6 m horse is 40 units tall at the withers)."""
@@ -46,6 +51,8 @@ __all__ = [
     "Move",
     "ProceduralHorse",
     "ShotScript",
+    "Terrain",
+    "TerrainConfig",
     "gait_speed",
     "generate",
     "generate_gait",
@@ -70,11 +77,16 @@ class ProceduralHorse:
     """A live horse source: one frame per :meth:`sample`; commands take effect at the last sample's time."""
 
     def __init__(
-        self, gait: str = "trot", speed: float | None = None, seed: int | None = None, variation: float | None = None
+        self,
+        gait: str = "trot",
+        speed: float | None = None,
+        seed: int | None = None,
+        variation: float | None = None,
+        terrain: Terrain | None = None,
     ) -> None:
         if variation is None:
             variation = DEFAULT_VARIATION if seed is not None else 0.0
-        self.model = Model(variation=variation, seed=seed or 0)
+        self.model = Model(variation=variation, seed=seed or 0, terrain=terrain)
         self._start = (parse_gait(gait), speed)
         initial(self.model, *self._start)  # validates gait and speed now
         self._state: State | None = None

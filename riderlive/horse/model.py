@@ -18,11 +18,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.channels import HORSE, HORSE_NAMES
+from riderlive.channels import HORSE, HORSE_INDEX, HORSE_NAMES
 from riderlive.horse.curves import ARRAY, SCALAR, Ops, Ramp
 from riderlive.horse.gaits import GAIT_TABLE, Gait
 from riderlive.horse.layers import BODY_CHANNELS, BlendLayer, GaitLayer, HaltLayer, Layer, MoveLayer
 from riderlive.horse.moves import MOVE_TABLE, Move
+from riderlive.horse.terrain import Terrain
 
 FloatArray = npt.NDArray[np.float64]
 CHUNK = 8192
@@ -33,11 +34,13 @@ SETTLE_RATIO = 4.74
 
 @dataclass(frozen=True, slots=True)
 class SetGait:
-    """Change to ``gait`` (speed in m/s, default the gait's; ``ramp`` s to reach it)."""
+    """Change to ``gait`` (speed in m/s, default the gait's; ``ramp`` s to reach it; ``accel``
+    m/s^2: the ground speed's rate of change stays within it, :func:`bounded_omega`)."""
 
     gait: Gait
     speed: float | None = None
     ramp: float | None = None
+    accel: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,12 +66,14 @@ Event = tuple[float, int, Command]
 
 @dataclass(frozen=True)
 class Model:
-    """Static parameters: stride-to-stride variation (fraction, 0 = off) and its seed, blend times (s)."""
+    """Static parameters: stride-to-stride variation (fraction, 0 = off) and its seed, blend times (s),
+    the ground (``terrain``; None: flat and level)."""
 
     variation: float = 0.0
     seed: int = 0
     move_blend: float = 0.3
     resume_blend: float = 0.4
+    terrain: Terrain | None = None
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.variation <= 0.3):
@@ -122,6 +127,36 @@ def _schedule(state: State, at: float, command: Command) -> State:
     events = list(state.events)
     heapq.heappush(events, (at, state.seq, command))
     return replace(state, events=tuple(events), seq=state.seq + 1)
+
+
+def peak_acceleration(v0: float, a0: float, target: float, omega: float) -> float:
+    """The largest ``|dv/dt|`` (m/s^2) of a :class:`Ramp` from speed ``v0`` and acceleration ``a0``
+    toward ``target`` at ``omega``: ``a(tau) = (a0 - omega c2 tau) exp(-omega tau)``,
+    ``c2 = a0 + omega (v0 - target)``, extreme at ``tau* = (a0 + c2) / (omega c2)``."""
+    c2 = a0 + omega * (v0 - target)
+    peak = abs(a0)
+    if c2 != 0.0:
+        tau = (a0 + c2) / (omega * c2)
+        if tau > 0.0:
+            peak = max(peak, abs(c2) * math.exp(-omega * tau))
+    return peak
+
+
+def bounded_omega(ramp: Ramp, at: float, target: float, omega: float, accel: float) -> float:
+    """The largest rate <= ``omega`` whose ramp from ``ramp``'s state at ``at`` toward ``target``
+    keeps ``|dv/dt|`` within ``accel`` (m/s^2): the acceleration already under way when the
+    command starts is kept (speed stays C1): beyond ``accel`` (after a movement's own ramp) it
+    is the bound until the ramp has let it go."""
+    v0, a0, _ = ramp.at(at, SCALAR)
+    v0, a0 = float(v0), float(a0)
+    bound = max(accel, abs(a0))
+    if peak_acceleration(v0, a0, target, omega) <= bound:
+        return omega
+    lo, hi = 1e-6, omega  # the peak grows with omega: bisect for the fastest ramp within the bound
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if peak_acceleration(v0, a0, target, mid) <= bound else (lo, mid)
+    return lo
 
 
 def _retarget(state: State, at: float, target: float, omega: float) -> State:
@@ -181,6 +216,8 @@ def _set_gait(
     target = target_speed(gait, speed)
     same = gait is state.gait and isinstance(state.layer, GaitLayer)
     omega = SETTLE_RATIO / ramp if ramp else (2.0 if same else 3.0)
+    if cmd.accel is not None:
+        omega = bounded_omega(state.ramp, at, target, omega, cmd.accel)
     state = replace(_retarget(state, at, target, omega), gait=gait, gait_speed=target)
     if gait is Gait.HALT:
         return _blend_to(state, at, HaltLayer(), blend or 0.8)
@@ -250,21 +287,32 @@ def to_rig_sides(pose: list[Any]) -> list[Any]:
     return body + pose[BODY_CHANNELS:]
 
 
-def frame(state: State, t: Any, ops: Ops) -> list[Any]:
+_PITCH = HORSE_INDEX["rearPivot.rz"]
+
+
+def frame(state: State, t: Any, ops: Ops, terrain: Terrain | None = None) -> list[Any]:
     """All channels of ``channels.HORSE`` at ``t`` (float or array) from ``state``.
 
     Rig convention (``channels``): right-handed, +X forward, +Y up, +Z to the horse's
     right, so ``tz`` is + right and ``rearPivot.rx`` is + when the horse rolls right.
+    On ``terrain`` (``riderlive.horse.terrain``) the distance travelled is along the
+    ground: ``root.tx`` / ``root.ty`` are its world position, ``ground.rz`` the trunk's
+    ground pitch, added to ``rearPivot.rz`` (the trunk's world pitch), ``ground.ty`` =
+    ``root.ty``; the hooves and the rest of the trunk stay relative to the local ground.
     """
     _, _, x = state.ramp.at(t, ops)
     pose = to_rig_sides(state.layer.pose(t, ops))
-    return [*pose[:BODY_CHANNELS], state.x0 + x, 0.0, 0.0, 0.0, *pose[BODY_CHANNELS:]]
+    if terrain is None:
+        return [*pose[:BODY_CHANNELS], state.x0 + x, 0.0, 0.0, 0.0, *pose[BODY_CHANNELS:], 0.0, 0.0]
+    gx, gy, pitch = terrain.place(state.x0 + x, ops)
+    pose[_PITCH] = pose[_PITCH] + pitch
+    return [*pose[:BODY_CHANNELS], gx, gy, 0.0, 0.0, *pose[BODY_CHANNELS:], pitch, gy]
 
 
 def step(model: Model, state: State, t: float) -> tuple[State, list[float]]:
     """One live tick: the state at ``t`` and its frame (metres, degrees)."""
     state = advance(model, state, t)
-    return state, frame(state, t, SCALAR)
+    return state, frame(state, t, SCALAR, model.terrain)
 
 
 def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, FloatArray]:
@@ -280,7 +328,7 @@ def evaluate(model: Model, state: State, times: FloatArray) -> tuple[State, Floa
             stop = max(stop, start + 1)
         for lo in range(start, stop, CHUNK):  # cache-sized pieces: temporaries stay in cache
             hi = min(lo + CHUNK, stop)
-            for column, values in enumerate(frame(state, times[lo:hi], ARRAY)):
+            for column, values in enumerate(frame(state, times[lo:hi], ARRAY, model.terrain)):
                 out[lo:hi, column] = values
         start = stop
     return state, out

@@ -6,11 +6,16 @@ A script (see ``config/shots/*.toml``)::
     seed = 7            # optional: stride-to-stride variation on, reproducibly
     variation = 0.05    # optional fraction (default 0.05 with a seed, else 0 = off)
 
+    [terrain]           # optional: the ground (default flat and level), one of
+    slope = 6.0         # degrees, + uphill, or
+    # profile = [[0, 0], [20, 8], [60, 8], [70, -5]]   # [distance along the ground m, slope deg]
+
     [[segment]]
     gait = "gallop"     # walk, trot, canter, gallop or halt
     seconds = 4         # required for a gait
     speed = 12.0        # m/s, within the gait's range (default: the gait's)
-    ramp = 1.5          # optional: seconds to reach the speed
+    ramp = 1.5          # optional: seconds to reach the speed, or
+    # accel = 2.0       # optional: m/s^2, the speed's rate of change bound
 
     [[segment]]
     move = "stop"       # jump, rear, stop or buck; seconds default to the move's length
@@ -33,6 +38,7 @@ from riderlive.framefile import FrameTable
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, Gait, parse_gait
 from riderlive.horse.model import Model, Perform, SetGait, State, evaluate, initial, schedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, parse_move
+from riderlive.horse.terrain import TerrainConfig
 
 DEFAULT_VARIATION = 0.05
 """Stride-to-stride variation (fraction of hoof lift, trunk heave and pitch) when a seed is given."""
@@ -46,11 +52,15 @@ class Segment(StrictModel):
     seconds: float | None = pydantic.Field(default=None, gt=0.0, le=3600.0)
     speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
     ramp: float | None = pydantic.Field(default=None, gt=0.0, le=60.0)
+    accel: float | None = pydantic.Field(default=None, gt=0.0, le=20.0)
+    """m/s^2: the ground speed's rate of change stays within it (``model.bounded_omega``)."""
 
     @pydantic.model_validator(mode="after")
     def _one_kind(self) -> Self:
         if (self.gait is None) == (self.move is None):
             raise ValueError("a segment has exactly one of 'gait' or 'move'")
+        if self.ramp is not None and self.accel is not None:
+            raise ValueError("a segment has at most one of 'ramp' (s) or 'accel' (m/s^2)")
         if self.gait is not None:
             if self.gait not in (*GAITS, "halt"):
                 raise ValueError(f"gait must be one of {', '.join((*GAITS, 'halt'))}")
@@ -64,8 +74,8 @@ class Segment(StrictModel):
         else:
             if self.move not in MOVES:
                 raise ValueError(f"move must be one of {', '.join(MOVES)}")
-            if self.speed is not None or self.ramp is not None:
-                raise ValueError("a move sets its own speed: no 'speed' or 'ramp'")
+            if self.speed is not None or self.ramp is not None or self.accel is not None:
+                raise ValueError("a move sets its own speed: no 'speed', 'ramp' or 'accel'")
         return self
 
     @property
@@ -76,28 +86,35 @@ class Segment(StrictModel):
 
     def command(self) -> SetGait | Perform:
         if self.gait is not None:
-            return SetGait(parse_gait(self.gait), self.speed, self.ramp)
+            return SetGait(parse_gait(self.gait), self.speed, self.ramp, self.accel)
         return Perform(parse_move(str(self.move)))
 
 
-class ShotScript(StrictModel):
-    """A scripted take: segments played back to back."""
+class TakeHeader(StrictModel):
+    """What every scripted take has besides its plan: name, variation, ground."""
 
     name: str = ""
     description: str = ""
     seed: int | None = pydantic.Field(default=None, ge=0, lt=2**63)
     variation: float | None = pydantic.Field(default=None, ge=0.0, le=0.3)
-    segment: list[Segment] = pydantic.Field(min_length=1, max_length=10_000)
-
-    @property
-    def duration(self) -> float:
-        return sum(s.duration for s in self.segment)
+    terrain: TerrainConfig | None = None
 
     def model(self) -> Model:
         variation = (
             self.variation if self.variation is not None else (DEFAULT_VARIATION if self.seed is not None else 0.0)
         )
-        return Model(variation=variation, seed=self.seed or 0)
+        terrain = self.terrain.terrain() if self.terrain is not None else None
+        return Model(variation=variation, seed=self.seed or 0, terrain=terrain)
+
+
+class ShotScript(TakeHeader):
+    """A scripted take: segments played back to back."""
+
+    segment: list[Segment] = pydantic.Field(min_length=1, max_length=10_000)
+
+    @property
+    def duration(self) -> float:
+        return sum(s.duration for s in self.segment)
 
     def start(self, model: Model, t0: float = 0.0, state: State | None = None) -> State:
         """Queue the segments from ``t0`` (a fresh steady state unless ``state`` is given)."""

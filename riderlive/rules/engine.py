@@ -9,6 +9,11 @@ applies in output units. Both paths evaluate the same rule source
 :meth:`RiderModel.evaluate_batch` either on NumPy arrays in cache-sized chunks or, from
 :data:`COMPILED_FROM` frames, as the same scalar source compiled into a batch kernel
 (:func:`riderlive.fastpath.batch`), which runs at the memory-traffic floor.
+
+On sloping ground (``ground.rz`` not 0, thesis section 10) every path reads the horse
+relative to the ground and adds the preset's ``[terrain]`` lean to ``lower_back.rz``
+before the animator layer (:mod:`riderlive.rules.terrain`); a frame without the ground
+channels, or with ``ground.rz`` 0, takes the flat path unchanged.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from riderlive.channels import HORSE, HORSE_INDEX, RIDER, Kind
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.kuhnel2003 import ARRAY_OPS, RULE_INPUTS, SCALAR_OPS, RuleFunction, make_rules
 from riderlive.rules.params import RuleParams
+from riderlive.rules.terrain import GROUND_PITCH, LEAN_OUTPUT, PITCH_ARGUMENT, lean
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -70,7 +76,14 @@ class RiderModel:
             args = [horse[i] for i in _INPUT_COLUMNS]
         else:
             args = [horse[i] * g for i, g in zip(_INPUT_COLUMNS, self._in_gain, strict=True)]  # type: ignore[attr-defined]
-        out = rules(*args)
+        ground = horse[GROUND_PITCH] if len(horse) > GROUND_PITCH else 0.0  # terrain.ground_pitch, inlined
+        if ground:  # sloping ground: the rules read the horse relative to it, the rider leans
+            args[PITCH_ARGUMENT] -= ground
+            leaned = list(rules(*args))
+            leaned[LEAN_OUTPUT] += lean(self.params.terrain, ground)
+            out: Sequence[float] = leaned
+        else:
+            out = rules(*args)
         pairs = self._out_pairs  # type: ignore[attr-defined]
         if pairs is None:
             return list(out)
@@ -84,17 +97,29 @@ class RiderModel:
         horse = np.asarray(horse, dtype=np.float64)
         if horse.ndim != 2 or horse.shape[1] != len(HORSE):
             raise ValueError(f"expected an (N, {len(HORSE)}) array, got {horse.shape}")
-        return self._batch([horse[:, i] for i in _INPUT_COLUMNS], horse.shape[0], compiled)
+        ground = horse[:, GROUND_PITCH]
+        return self._batch([horse[:, i] for i in _INPUT_COLUMNS], horse.shape[0], compiled, ground)
 
     def evaluate_columns(
         self, columns: Mapping[str, FloatArray], frames: int, compiled: bool | None = None
     ) -> FloatArray:
         """:meth:`evaluate_batch` on named horse columns of ``frames`` values (absent channels are zero)."""
         zero = np.zeros(frames)
-        return self._batch([columns.get(name, zero) for name in RULE_INPUTS], frames, compiled)
+        ground = columns.get("ground.rz")
+        return self._batch([columns.get(name, zero) for name in RULE_INPUTS], frames, compiled, ground)
 
-    def _batch(self, inputs: list[FloatArray], n: int, compiled: bool | None) -> FloatArray:
-        """The rules on ``inputs`` (RULE_INPUTS order); (N, len(RIDER)), each channel contiguous."""
+    def _batch(
+        self, inputs: list[FloatArray], n: int, compiled: bool | None, ground: FloatArray | None = None
+    ) -> FloatArray:
+        """The rules on ``inputs`` (RULE_INPUTS order) over ground pitch ``ground`` (deg; None: flat);
+        (N, len(RIDER)), each channel contiguous."""
+        if ground is not None and ground.any():  # sloping ground somewhere (see the module docstring)
+            ground = np.asarray(ground, dtype=np.float64)
+            inputs = list(inputs)
+            inputs[PITCH_ARGUMENT] = np.asarray(inputs[PITCH_ARGUMENT], dtype=np.float64) - ground
+            out = self._batch(inputs, n, compiled)
+            out[:, LEAN_OUTPUT] += self._out_gain[LEAN_OUTPUT] * lean(self.params.terrain, ground)  # type: ignore[attr-defined]
+            return out
         if compiled is None:
             compiled = fastpath.AVAILABLE and n >= COMPILED_FROM
         by_channel = np.empty((len(RIDER), n), dtype=np.float64)

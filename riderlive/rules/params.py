@@ -195,6 +195,21 @@ class FollowThrough(StrictModel):
     damping_ratio: float = pydantic.Field(default=0.4, ge=0.05, le=0.95)
 
 
+class Terrain(StrictModel):
+    """Section 10: the rider's own answer to sloping ground (``riderlive.rules.terrain``).
+
+    The rules read the horse relative to the ground; then ``lower_back.rz`` gets
+    ``(upright + lean) * ground.rz``, ``lean`` = ``uphill_lean`` on a rise (+ forward)
+    and ``downhill_lean`` on a descent (the product is then negative: back). With
+    ``upright`` 1 the rider's trunk keeps its flat-ground attitude in the world (the
+    horse's pitch by the ground taken out), plus the lean; 0 tilts her with the horse.
+    """
+
+    upright: float = pydantic.Field(default=1.0, ge=0.0, le=1.0)
+    uphill_lean: float = pydantic.Field(default=0.5, ge=0.0, le=1.0)  # deg forward per deg of rise
+    downhill_lean: float = pydantic.Field(default=0.1, ge=0.0, le=1.0)  # deg back per deg of descent
+
+
 class Errata(StrictModel):
     """Where Appendix B contradicts itself: numbers that select a reading.
 
@@ -234,6 +249,7 @@ class RuleParams(StrictModel):
     arms: Arms = Arms()
     stirrups: Stirrups = Stirrups()
     follow_through: FollowThrough = FollowThrough()
+    terrain: Terrain = Terrain()
 
     def with_values(self, changes: dict[str, float]) -> RuleParams:
         """Return a copy with dotted keys (``"head.lift_gain"``) changed, validated."""

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.channels import HORSE
+from riderlive.channels import HORSE, HORSE_OPTIONAL
 from riderlive.horse.curves import SCALAR as HORSE_SCALAR
 from riderlive.horse.model import to_rig_sides
 from riderlive.saddle.estimator import Model, State, estimate, step
@@ -36,8 +36,8 @@ from riderlive.saddle.track import Track
 
 FloatArray = npt.NDArray[np.float64]
 BODY = 19
-_NECK_AT_REST = (0.0, 0.0, 0.0)
-"""``channels.HORSE_NECK_HEAD``: a saddle stream says nothing of them, so they stay at rest."""
+_OPTIONAL_AT_REST = (0.0,) * len(HORSE_OPTIONAL)
+"""``channels.HORSE_OPTIONAL``: a saddle stream says nothing of the neck, head or ground: at rest, flat."""
 HOOVES = 12
 BEND = 18
 DRIFTING = (True, True, True, False, True, False)
@@ -111,7 +111,7 @@ def horse_frame(model: Model, state: State, t: float) -> list[float]:
     saddle = measured_saddle(model, state, t, tr.pose.at(t) * fade)
     trunk = trunk_from_saddle(saddle, body[BEND], model.point, SCALAR)
     distance = _distance(model, state, t)
-    frame = [*body[:HOOVES], *trunk, body[BEND], distance, 0.0, 0.0, 0.0, *_NECK_AT_REST]
+    frame = [*body[:HOOVES], *trunk, body[BEND], distance, 0.0, 0.0, 0.0, *_OPTIONAL_AT_REST]
     assert len(frame) == len(HORSE)
     return frame
 

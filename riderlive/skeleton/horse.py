@@ -12,6 +12,12 @@ horse's right; ``rearPivot.t*`` displace the hips from standing (``tz`` + right)
 right), so every channel drives its axis with a positive sign. The neck turns at the
 withers by ``Ry(horseNeck.ry) Rz(horseNeck.rz)``, the head at the poll by
 ``Rz(horseHead.rz)``; both are optional channels (0: at rest on the trunk).
+
+On sloping ground (the optional ``ground.rz``, thesis section 10) the root turns by
+``Ry(root.ry) Rz(ground.rz)``: the legs' targets (the hooves, in the root's frame) and
+the hips' offsets lie along the local ground, as the channels measure them. The rear
+pivot turns by ``Rz(-ground.rz)`` on top of its own drives, so its world pitch is
+``rearPivot.rz``, the trunk's pitch in the world (the ground's included).
 """
 
 from __future__ import annotations
@@ -82,10 +88,12 @@ HORSE_RIG = Rig(
     bones=BONES,
     neutral=HORSE_NEUTRAL,
     rotations=(
+        Drive("ground.rz", "root", Z),  # first: the root turns by Ry(root.ry) Rz(ground.rz)
         Drive("root.ry", "root", Y),
         Drive("rearPivot.rx", "rearPivot", X),
         Drive("rearPivot.rz", "rearPivot", Z),
         Drive("rearPivot.ry", "rearPivot", Y),
+        Drive("ground.rz", "rearPivot", Z, -1.0),  # last: rearPivot.rz is the trunk's world pitch
         Drive("backMid.rz", "backMid", Z),
         Drive("horseNeck.rz", "neck", Z),
         Drive("horseNeck.ry", "neck", Y),

@@ -30,7 +30,7 @@ from typing import Any
 
 import orjson
 
-from riderlive.channels import HORSE_NAMES, HORSE_NECK_HEAD, RIDER_NAMES
+from riderlive.channels import HORSE_GROUND, HORSE_NAMES, HORSE_OPTIONAL, RIDER_NAMES
 from riderlive.names import check_name
 
 COLUMNS: tuple[str, ...] = ("t", *HORSE_NAMES, *RIDER_NAMES)
@@ -111,9 +111,9 @@ def recover_take(path: Path) -> bool:
     return True
 
 
-_NECK_AT_REST = [0.0] * len(HORSE_NECK_HEAD)
-_BEFORE_NECK = len(HORSE_NAMES) - len(HORSE_NECK_HEAD)
-"""Horse frames of this length lack the optional neck and head (``channels.HORSE_NECK_HEAD``)."""
+_BEFORE_OPTIONAL = (len(HORSE_NAMES) - len(HORSE_OPTIONAL), len(HORSE_NAMES) - len(HORSE_GROUND))
+"""Horse frames of these lengths lack the optional channels (``channels.HORSE_OPTIONAL``): from
+before the neck and head, or before the ground. They are recorded at rest (0: on the trunk, flat)."""
 
 
 class TakeRecorder:
@@ -171,8 +171,8 @@ class TakeRecorder:
             if monotonic:
                 self.meta["monotonic_t0"] = monotonic
         horse = list(horse)
-        if len(horse) == _BEFORE_NECK:  # a frame from before the optional neck and head: at rest
-            horse += _NECK_AT_REST
+        if len(horse) in _BEFORE_OPTIONAL:  # a frame from before the optional channels: at rest
+            horse += [0.0] * (len(HORSE_NAMES) - len(horse))
         row = [engine_t - self._t0, *horse, *rider]
         self._lines.append(",".join(map(repr, map(float, row))))
         self.rows += 1

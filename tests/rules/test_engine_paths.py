@@ -77,7 +77,8 @@ def test_compiled_batch_with_scale_animator_and_block_edges(preset: str) -> None
     np.testing.assert_allclose(scalar, batch, rtol=0.0, atol=1e-12)
     assert batch.shape == (2 * BLOCK + 3, len(RIDER)) and batch[:, 0].flags.c_contiguous  # one row per channel
     assert model.evaluate_batch(horse[:0], compiled=True).shape == (0, len(RIDER))
-    without_mid = {n: horse[:, HORSE_INDEX[n]] for n in RULE_INPUTS if n != "backMid.rz"}
+    read = (*RULE_INPUTS, "ground.rz")  # the rules' inputs and the ground's pitch (rules/terrain.py)
+    without_mid = {n: horse[:, HORSE_INDEX[n]] for n in read if n != "backMid.rz"}
     zeroed = horse.copy()
     zeroed[:, HORSE_INDEX["backMid.rz"]] = 0.0
     np.testing.assert_array_equal(
@@ -124,7 +125,7 @@ def test_clamps_hold_for_any_frame(frame: list[float]) -> None:
     # wrist forward: the lower back enters at most as +-17 * 0.0001
     h = dict(zip([c.name for c in HORSE], frame, strict=True))
     front_x = h["rearPivot.tx"] - (h["lfHoof.tx"] + h["rfHoof.tx"]) / 2
-    pitch_term = front_x * abs(h["rearPivot.rz"]) * 0.008
+    pitch_term = front_x * abs(h["rearPivot.rz"] - h["ground.rz"]) * 0.008  # the pitch relative to the ground
     assert abs(out[RIDER_INDEX["lf_wrist.tz"]] + pitch_term) <= 17 * 0.0001 + 1e-9
     np.testing.assert_allclose(out, model.evaluate_batch(np.array([frame]))[0], rtol=0, atol=1e-9)
 

@@ -107,7 +107,8 @@ def test_every_moving_channel_drives_the_skeleton() -> None:
 
     rider_moving = {c.name for c in RIDER if c.kind is not Kind.ATTRIBUTE}
     assert driven(rider_rig()) == rider_moving
-    assert driven(HORSE_RIG) == set(HORSE_NAMES)
+    # ground.ty is the ground's height under the horse: root.ty places the horse (docs/horse.md, Terrain)
+    assert driven(HORSE_RIG) == set(HORSE_NAMES) - {"ground.ty"}
 
 
 def test_neutral_values_give_the_rest_pose() -> None:
