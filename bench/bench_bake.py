@@ -8,7 +8,10 @@ a temporary file, then times ``riderlive bake IN -o OUT --timings`` in a child
 process (wall clock, from start-up to exit; peak memory is the child's max RSS), and
 prints the bake's own account of where its time went. The baseline, measured in the
 same run, is the I/O floor: a child that only reads the same file and writes the
-same number of cells back with the same library (polars) and the same options.
+same number of cells back with the same library (polars) and the same options
+(Parquet: no compression, statistics, row groups of ``ROW_GROUP``). For Parquet a
+second floor streams the same copy (``scan_parquet`` .. ``sink_parquet``, no Python
+per chunk), as the bake streams; the whole-frame floor reads it all, then writes.
 Before timing, one child builds the rules kernel, so a cold numba cache (the first
 bake with a preset compiles it, seconds) is not counted.
 
@@ -30,6 +33,7 @@ import polars as pl
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.framefile import PARQUET_COMPRESSION
+from riderlive.parquetstream import ROW_GROUP
 
 FLOOR = """
 import sys, numpy as np, polars as pl
@@ -43,7 +47,15 @@ columns = {f"c{i}": data[:, i % data.shape[1]] for i in range(width)}
 if fmt == "csv":
     pl.DataFrame(columns).write_csv(out)
 else:
-    pl.DataFrame(columns).write_parquet(out, compression=sys.argv[5])
+    pl.DataFrame(columns).write_parquet(out, compression=sys.argv[5], row_group_size=int(sys.argv[6]))
+"""
+
+STREAMED_FLOOR = """
+import sys, polars as pl
+src, out, width, compression, row_group = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
+names = pl.read_parquet_schema(src)
+cols = [pl.col(list(names)[i % len(names)]).alias(f"c{i}") for i in range(width)]
+pl.scan_parquet(src).select(cols).sink_parquet(out, compression=compression, statistics=True, row_group_size=row_group)
 """
 
 WARM = """
@@ -87,15 +99,28 @@ def main() -> None:
         if ext == "csv":
             frame.write_csv(src)
         else:
-            frame.write_parquet(src, compression=PARQUET_COMPRESSION)
+            frame.write_parquet(src, compression=PARQUET_COMPRESSION, row_group_size=ROW_GROUP)
         del frame, columns
         print(f"input: {args.frames:,} frames, {src.stat().st_size / 1e6:.0f} MB {ext}")
         width = str(len(RIDER_NAMES) + 1)
-        floor_args = [sys.executable, "-c", FLOOR, str(src), str(floor_out), width, ext, PARQUET_COMPRESSION]
+        group = str(ROW_GROUP)
+        floor_args = [sys.executable, "-c", FLOOR, str(src), str(floor_out), width, ext, PARQUET_COMPRESSION, group]
+        streamed_args = [
+            sys.executable,
+            "-c",
+            STREAMED_FLOOR,
+            str(src),
+            str(floor_out),
+            width,
+            PARQUET_COMPRESSION,
+            group,
+        ]
         bake_args = [sys.executable, "-m", "riderlive", "bake", str(src), "-o", str(out), "--timings"]
-        floors, bakes = [], []
+        floors, streamed, bakes = [], [], []
         for _ in range(args.rounds):
             floors.append(timed_child(floor_args))
+            if ext == "parquet":
+                streamed.append(timed_child(streamed_args))
             bakes.append(timed_child(bake_args))
         floor_s, floor_mb, _ = min(floors)
         bake_s, bake_mb, account = min(bakes)
@@ -104,9 +129,15 @@ def main() -> None:
         print(f"  its own account: {account.removeprefix('riderlive bake: ')}")
         print(f"  (the rest, {bake_s - _accounted(account):.2f} s, is start-up: interpreter, imports, kernel load)")
         print(
-            f"  baseline read+write floor: {floor_s:.2f} s ({args.frames / floor_s / 1e6:.2f} M frames/s), "
+            f"  whole-frame read+write floor: {floor_s:.2f} s ({args.frames / floor_s / 1e6:.2f} M frames/s), "
             f"peak RSS {floor_mb:.0f} MB; ratio bake/floor = {bake_s / floor_s:.2f}"
         )
+        if streamed:
+            s_s, s_mb, _ = min(streamed)
+            print(
+                f"  streamed read+write floor: {s_s:.2f} s ({args.frames / s_s / 1e6:.2f} M frames/s), "
+                f"peak RSS {s_mb:.0f} MB; ratio bake/floor = {bake_s / s_s:.2f}"
+            )
         print(f"output: {out.stat().st_size / 1e6:.0f} MB")
 
 

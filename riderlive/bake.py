@@ -1,9 +1,12 @@
 """Offline baking: a horse take in, the rider's channels out (``riderlive bake``).
 
 ``--timings`` prints where the time went: reading (parsing and checking the file),
-the rules, writing. Parquet in and out (``.parquet``) skips text parsing and
-formatting; a take of 10^6 frames or more runs the compiled rules
-(:data:`riderlive.rules.engine.COMPILED_FROM`).
+the rules (of which the smoothing filters, when on), writing. Parquet in and out
+(``.parquet``) skips text parsing and formatting, and streams: a horse take goes
+through in chunks of :data:`riderlive.parquetstream.CHUNK` frames (read, rules,
+filters carrying their state, written), so memory stays small and is reused; reading
+and writing then overlap the rules, and ``write`` is the time left over. A take of
+10^6 frames or more runs the compiled rules (:data:`riderlive.rules.engine.COMPILED_FROM`).
 """
 
 from __future__ import annotations
@@ -11,17 +14,20 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FORMATS, FrameFileError, FrameTable, read_frames, write_frames
-from riderlive.frameunits import resolve_scale
-from riderlive.rules.animator import AnimatorLayer, damp_series, spring_series
-from riderlive.rules.engine import RiderModel
+from riderlive.framefile import FORMATS, FrameFileError, FrameTable, file_format, read_frames, write_frames
+from riderlive.frameunits import HOOF_HEIGHTS, recorded_scale, resolve_scale
+from riderlive.parquetstream import ParquetTake, open_parquet, read_chunks, read_columns, write_chunks
+from riderlive.rules.animator import AnimatorLayer, SeriesState, damp_rows, spring_rows
+from riderlive.rules.engine import COMPILED_FROM, RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.rules.params import load_preset
 from riderlive.rules.parts import RiderParts
@@ -49,12 +55,7 @@ def bake_table(
     columns = {name: table.column(name) for name in table.names if name in HORSE_INDEX}
     rider = model.evaluate_columns(columns, len(table))  # (N, C), each channel contiguous
     times = table.times(rate)
-    tau = model.params.smoothing.time_constant
-    if tau > 0.0:
-        rider = damp_series(np.ascontiguousarray(rider), times, tau)
-    follow = model.params.follow_through
-    if follow.frequency > 0.0:
-        rider = spring_series(np.ascontiguousarray(rider), times, follow.frequency, follow.damping_ratio)
+    Filters(model).run(rider.T, times)
     if channels and any(name in RIDER_PART_NAMES for name in channels):  # the rider parts, asked for by name
         horse = np.zeros((len(table), len(HORSE_INDEX)))
         for name, column in columns.items():
@@ -75,21 +76,71 @@ def with_saddle(rider: FrameTable, saddle: FrameTable) -> FrameTable:
     return FrameTable(rider.names + saddle.names, np.column_stack([rider.values, saddle.values]), rider.t)
 
 
+class Filters:
+    """The preset's smoothing and follow-through over rows of frames, piece by piece (state carried)."""
+
+    def __init__(self, model: RiderModel) -> None:
+        self.time_constant = model.params.smoothing.time_constant
+        self.follow = model.params.follow_through
+        self.damper: SeriesState | None = None
+        self.spring: SeriesState | None = None
+        self.seconds = 0.0
+
+    def run(self, rows: np.ndarray, times: np.ndarray) -> None:
+        """Filter ``rows`` (C, n; C-contiguous) in place, the frames after those of the previous call."""
+        if self.time_constant <= 0.0 and self.follow.frequency <= 0.0:
+            return
+        start = time.perf_counter()
+        if self.time_constant > 0.0:
+            self.damper = damp_rows(rows, times, self.time_constant, self.damper)
+        if self.follow.frequency > 0.0:
+            self.spring = spring_rows(rows, times, self.follow.frequency, self.follow.damping_ratio, self.spring)
+        self.seconds += time.perf_counter() - start
+
+
+def bake_chunks(  # noqa: PLR0917
+    chunks: Iterable[FrameTable],
+    model: RiderModel,
+    names: Sequence[str],
+    rate: float,
+    compiled: bool,
+    filters: Filters | None = None,
+) -> Iterator[dict[str, np.ndarray]]:
+    """:func:`bake_table` piece by piece: ``t`` and the rider channels ``names`` of each chunk of frames.
+
+    ``compiled``: the compiled rules kernel (as :func:`bake_table` picks for the whole take's length).
+    """
+    filters, first = filters or Filters(model), 0
+    for table in chunks:
+        n = len(table)
+        columns = {name: table.column(name) for name in table.names if name in HORSE_INDEX}
+        rows = model.evaluate_columns(columns, n, compiled).T  # (C, n), C-contiguous
+        times = table.t if table.t is not None else np.arange(first, first + n, dtype=np.float64) / rate
+        filters.run(rows, times)
+        first += n
+        yield {"t": times} | {name: rows[RIDER_INDEX[name]] for name in names}
+
+
 @dataclass(frozen=True)
 class Timings:
-    """Seconds spent reading (parsing and checking), in the rules, and writing, for ``frames`` frames."""
+    """Seconds spent reading (parsing and checking), in the rules, and writing, for ``frames`` frames.
+
+    ``smoothing``: the part of ``rules`` spent in the smoothing filters (0 when off).
+    """
 
     frames: int
     read: float
     rules: float
     write: float
+    smoothing: float = 0.0
 
     def __str__(self) -> str:
         total = self.read + self.rules + self.write
         rate = self.frames / total / 1e6 if total > 0.0 else 0.0
+        filters = f" (smoothing {self.smoothing:.2f} s)" if self.smoothing > 0.0 else ""
         return (
             f"{self.frames:,} frames in {total:.2f} s ({rate:.2f} M frames/s): "
-            f"read {self.read:.2f} s, rules {self.rules:.2f} s, write {self.write:.2f} s"
+            f"read {self.read:.2f} s, rules {self.rules:.2f} s{filters}, write {self.write:.2f} s"
         )
 
 
@@ -120,6 +171,13 @@ def run(args: argparse.Namespace) -> int:
         animator = AnimatorLayer.load(args.offsets) if args.offsets else AnimatorLayer()
         params = load_preset(args.preset)
         started = time.perf_counter()
+        take = _streamable(args, channels)
+        if take is not None:
+            scale = _scale_of(args, take)
+            timings = _bake_streamed(args, take, RiderModel(params=params, scale=scale, animator=animator), started)
+            if args.timings:
+                print(f"riderlive bake: {timings}", file=sys.stderr)
+            return 0
         table = read_frames(args.input, fmt=args.format)
         read = time.perf_counter()
         saddle = None
@@ -152,6 +210,85 @@ def run(args: argparse.Namespace) -> int:
     if args.timings:
         print(f"riderlive bake: {timings}", file=sys.stderr)
     return 0
+
+
+def _streamable(args: argparse.Namespace, channels: Sequence[str] | None) -> ParquetTake | None:
+    """The input as a horse take to stream (Parquet file to Parquet file, rider channels only), or None."""
+    if "-" in (args.input, args.output) or args.saddle or any(n in RIDER_PART_NAMES for n in channels or ()):
+        return None
+    if file_format(args.input, args.format) != "parquet" or file_format(args.output, args.format) != "parquet":
+        return None
+    from riderlive.saddle.takes import is_saddle_take
+
+    take = open_parquet(args.input)
+    if is_saddle_take(FrameTable(take.channels, np.empty((0, len(take.channels))))):
+        return None  # the horse is rebuilt from the whole saddle take
+    missing = [name for name in RULE_INPUTS if name not in take.names]
+    if missing:
+        raise FrameFileError(args.input, f"missing required channel(s): {', '.join(missing)}", line=1)
+    return take
+
+
+def _scale_of(args: argparse.Namespace, take: ParquetTake) -> float:
+    """As :func:`resolve_scale` (which reads the hoof heights only when nothing else says)."""
+    unrecorded = args.scale is None and recorded_scale(args.input) is None
+    evidence = read_columns(take, HOOF_HEIGHTS) if unrecorded else FrameTable((), np.empty((0, 0)))
+    scale, warning = resolve_scale(args.input, evidence, args.scale)
+    if warning:
+        print(f"riderlive bake: warning: {warning}", file=sys.stderr)
+    return scale
+
+
+def _bake_streamed(args: argparse.Namespace, take: ParquetTake, model: RiderModel, started: float) -> Timings:
+    """Stream ``take`` through the rules into ``args.output``; the time spent in each stage."""
+    from riderlive import fastpath
+
+    names = [c.strip() for c in args.channels.split(",")] if args.channels else list(RIDER_NAMES)
+    compiled = fastpath.AVAILABLE and take.frames >= COMPILED_FROM
+    filters = Filters(model)
+    reading = _Stage(read_chunks(take))
+    rules = _Stage(bake_chunks(reading, model, names, args.rate, compiled, filters))
+    opened = time.perf_counter()
+    with _progress(take.frames) as bar:
+        write_chunks(args.output, ["t", *names], rules, progress=bar)
+    total = time.perf_counter() - opened
+    # the rules stage pulls the read stage through: its time holds the reading's
+    return Timings(
+        take.frames,
+        opened - started + reading.seconds,
+        rules.seconds - reading.seconds,
+        total - rules.seconds,
+        smoothing=filters.seconds,
+    )
+
+
+T = TypeVar("T")
+
+
+class _Stage(Iterator[T]):
+    """An iterator that adds up the seconds spent producing its items."""
+
+    def __init__(self, items: Iterable[T]) -> None:
+        self.items, self.seconds = iter(items), 0.0
+
+    def __next__(self) -> T:
+        begin = time.perf_counter()
+        try:
+            return next(self.items)
+        finally:
+            self.seconds += time.perf_counter() - begin
+
+
+@contextmanager
+def _progress(frames: int) -> Iterator[Callable[[int], object] | None]:
+    """A progress bar's update on a terminal for a long take, else None."""
+    if not sys.stderr.isatty() or frames < 100_000:
+        yield None
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=frames, unit="frames", unit_scale=True, desc="baking", file=sys.stderr) as bar:
+        yield bar.update
 
 
 def _saddle_columns(table: FrameTable) -> FrameTable:

@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Final
+from typing import IO, TYPE_CHECKING, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -33,12 +33,16 @@ import orjson
 
 from riderlive.channels import is_known
 
+if TYPE_CHECKING:
+    import polars as pl
+
 FloatArray = npt.NDArray[np.float64]
 TIME = "t"
 FORMATS = ("csv", "jsonl", "parquet")
 """The frame file formats (``--format`` choices)."""
-PARQUET_COMPRESSION: Final = "lz4"
-"""Parquet compression on write: lz4 is fast both ways; motion channels barely compress anyway."""
+PARQUET_COMPRESSION: Final = "uncompressed"
+"""Parquet compression on write: none. float64 motion channels barely compress (lz4: 2 % smaller on a
+random take) while lz4 costs ~0.15 s per GB each way; every Parquet reader reads uncompressed pages."""
 
 
 class FrameFileError(ValueError):
@@ -216,6 +220,20 @@ def _read_parquet(source: str, data: bytes | Path, required: Iterable[str]) -> F
     import polars as pl
 
     raw = io.BytesIO(data) if isinstance(data, bytes) else data
+    names = parquet_names(source, raw, required)
+    if isinstance(raw, io.BytesIO):
+        raw.seek(0)
+    try:
+        frame = pl.read_parquet(raw)
+    except Exception as exc:  # a damaged file: its metadata read, its data did not
+        raise FrameFileError(source, f"unreadable Parquet data ({type(exc).__name__}: {exc})") from None
+    return parquet_table(source, frame, names)
+
+
+def parquet_names(source: str, raw: IO[bytes] | Path, required: Iterable[str]) -> list[str]:
+    """The column names of a Parquet file, checked: known channels, no duplicates, numbers only."""
+    import polars as pl
+
     try:
         schema = pl.read_parquet_schema(raw)
     except Exception as exc:  # polars raises its own error types for a file that is not Parquet
@@ -225,26 +243,27 @@ def _read_parquet(source: str, data: bytes | Path, required: Iterable[str]) -> F
     for name, dtype in schema.items():
         if not (dtype.is_float() or dtype.is_integer()):
             raise FrameFileError(source, f"not numbers: the column holds {dtype}", column=name)
-    if isinstance(raw, io.BytesIO):
-        raw.seek(0)
-    try:
-        frame = pl.read_parquet(raw)
-    except Exception as exc:  # a damaged file: its metadata read, its data did not
-        raise FrameFileError(source, f"unreadable Parquet data ({type(exc).__name__}: {exc})") from None
+    return names
+
+
+def parquet_table(source: str, frame: pl.DataFrame, names: Sequence[str], first_row: int = 1) -> FrameTable:
+    """``frame`` (the rows from ``first_row`` on, 1 = the file's first) as a table, or the first bad cell named."""
+    import polars as pl
+
     for name, nulls in zip(names, frame.null_count().row(0), strict=True):
         if nulls:
-            row = int(frame[name].is_null().arg_true()[0]) + 1
+            row = int(frame[name].is_null().arg_true()[0]) + first_row
             raise FrameFileError(source, "empty cell", row=row, column=name)
     channels = [n for n in names if n != TIME]
     values = frame.select(pl.col(channels).cast(pl.Float64)).to_numpy(order="fortran")
     times = frame[TIME].cast(pl.Float64).to_numpy() if TIME in names else None
     del frame
     for name, column in ([(TIME, times)] if times is not None else []) + list(zip(channels, values.T, strict=True)):
-        _check_finite(source, name, column)
+        _check_finite(source, name, column, first_row)
     return FrameTable(tuple(channels), values, times)
 
 
-def _check_finite(source: str, name: str, column: FloatArray) -> None:
+def _check_finite(source: str, name: str, column: FloatArray, first_row: int = 1) -> None:
     """Raise naming the first row that is NaN or inf. The sum is finite only if every value is (fast path;
     a sum that overflows is then checked value by value)."""
     with np.errstate(over="ignore", invalid="ignore"):
@@ -252,7 +271,7 @@ def _check_finite(source: str, name: str, column: FloatArray) -> None:
             return
     bad = np.flatnonzero(~np.isfinite(column))
     if len(bad):
-        raise FrameFileError(source, f"not finite: {column[bad[0]]}", row=int(bad[0]) + 1, column=name)
+        raise FrameFileError(source, f"not finite: {column[bad[0]]}", row=int(bad[0]) + first_row, column=name)
 
 
 def read_frames(path: str, required: Iterable[str] = (), fmt: str | None = None) -> FrameTable:
@@ -275,7 +294,7 @@ def _umask() -> int:
 
 
 @contextmanager
-def _atomic_path(path: str) -> Iterator[Path]:
+def atomic_path(path: str) -> Iterator[Path]:
     """Yield the path of a file beside ``path`` that replaces it only on success."""
     target = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent or ".")
@@ -296,7 +315,7 @@ def _atomic_binary(path: str) -> Iterator[IO[bytes]]:
         yield sys.stdout.buffer
         sys.stdout.buffer.flush()
         return
-    with _atomic_path(path) as tmp, tmp.open("wb") as fh:
+    with atomic_path(path) as tmp, tmp.open("wb") as fh:
         yield fh
 
 
@@ -345,5 +364,5 @@ def _write_parquet(path: str, columns: dict[str, FloatArray]) -> None:
         sys.stdout.buffer.write(buffer.getvalue())
         sys.stdout.buffer.flush()
         return
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         frame.write_parquet(tmp, compression=PARQUET_COMPRESSION)

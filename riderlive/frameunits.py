@@ -28,7 +28,8 @@ METRES = 25.0
 """``length_scale`` of a file in metres (``riderlive.horse.DEFAULT_SCALE``)."""
 RIG_UNITS = 1.0
 """``length_scale`` of a file in thesis rig units: the default when nothing is recorded."""
-_HOOF_HEIGHTS = ("lfHoof.ty", "rfHoof.ty", "lbHoof.ty", "rbHoof.ty")
+HOOF_HEIGHTS = ("lfHoof.ty", "rfHoof.ty", "lbHoof.ty", "rbHoof.ty")
+"""The channels that tell a take in metres (:func:`looks_like_metres`)."""
 
 
 def sidecar_of(path: str) -> Path | None:
@@ -64,7 +65,7 @@ def record_scale(path: str, length_scale: float, **meta: object) -> None:
 
 def looks_like_metres(table: FrameTable) -> bool:
     """Hoof heights that stay within -0.05..2 and rise above 1 cm: a horse in metres."""
-    columns = [table.column(name) for name in _HOOF_HEIGHTS if name in table.names]
+    columns = [table.column(name) for name in HOOF_HEIGHTS if name in table.names]
     if not columns or len(table) == 0:
         return False
     heights = np.concatenate(columns)

@@ -6,6 +6,13 @@ critically damped filter then smooths each channel; its time constant lives in t
 preset (``[smoothing]``), 0 switches it off. An optional follow-through (section 9.3's
 "loosened up") follows: an underdamped spring per channel, natural frequency and damping
 ratio in the preset (``[follow_through]``), 0 Hz switches it off (the thesis).
+
+Each filter's step is written once, as arithmetic that works on floats and arrays
+(:func:`damp_exact`, :func:`spring_exact`): :func:`damper_step` and :func:`spring_step`
+run it on a frame's channel vector (the live tick), and a whole take runs it compiled
+(:func:`riderlive.fastpath.kernel`) channel by channel over rows of frames, in place and
+in pieces that carry the filter's state (:func:`damp_rows`, :func:`spring_rows`; a
+streamed bake filters one chunk at a time).
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +28,7 @@ import pydantic
 
 from riderlive.channels import RIDER_NAMES
 from riderlive.configfile import ConfigError, StrictModel, read_toml, validate
+from riderlive.fastpath import inline, kernel
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -91,26 +100,86 @@ def damper_step(state: DamperState, target: FloatArray, dt: float, time_constant
     if time_constant <= 0.0 or dt <= 0.0:
         return DamperState(value=np.array(target, dtype=np.float64), velocity=state.velocity * 0.0)
     omega = 1.0 / time_constant
-    decay = math.exp(-omega * dt)
-    delta = state.value - target
-    drive = state.velocity + omega * delta
-    return DamperState(
-        value=target + (delta + drive * dt) * decay,
-        velocity=(state.velocity - omega * drive * dt) * decay,
-    )
+    value, velocity = damp_exact(state.value, state.velocity, target, dt, omega, math.exp(-omega * dt))
+    return DamperState(value=value, velocity=velocity)
+
+
+@inline
+def damp_exact(  # noqa: PLR0917
+    value: Any, velocity: Any, target: Any, dt: float, omega: float, decay: float
+) -> tuple[Any, Any]:
+    """One follower step (floats or arrays): ``(value, velocity)`` after ``dt`` s; ``decay = exp(-omega dt)``."""
+    delta = value - target
+    drive = velocity + omega * delta
+    return target + (delta + drive * dt) * decay, (velocity - omega * drive * dt) * decay
+
+
+@dataclass(frozen=True, slots=True)
+class SeriesState:
+    """Where a filter over rows of frames stopped: each channel's value and velocity, and that frame's time (s)."""
+
+    value: FloatArray
+    velocity: FloatArray
+    time: float
+
+
+def damp_rows(
+    rows: FloatArray, times: FloatArray, time_constant: float, state: SeriesState | None = None
+) -> SeriesState | None:
+    """Smooth ``rows`` (C, N; C-contiguous, one row per channel) in place; ``times`` is (N,) seconds.
+
+    ``state``: where the previous piece of the take stopped (None: start at rest on the first
+    frame). Returns the state after the last frame (None for an empty piece with no state).
+    ``time_constant`` <= 0: the rows pass unchanged.
+    """
+    if time_constant <= 0.0:
+        return _rest(rows, times, state)
+    if rows.shape[1] == 0:
+        return state
+    value, velocity, last = _start(rows, times, state)
+    _damp_kernel(rows, np.ascontiguousarray(times, dtype=np.float64), last, 1.0 / time_constant, value, velocity)
+    return SeriesState(value, velocity, float(times[-1]))
+
+
+@kernel
+def _damp_kernel(  # noqa: PLR0917
+    rows: FloatArray, times: FloatArray, last: float, omega: float, value: FloatArray, velocity: FloatArray
+) -> None:
+    for i in range(times.shape[0]):  # frame by frame, the channels side by side (independent, so they overlap)
+        dt = times[i] - (last if i == 0 else times[i - 1])
+        if dt > 0.0:
+            decay = math.exp(-omega * dt)
+            for c in range(rows.shape[0]):
+                value[c], velocity[c] = damp_exact(value[c], velocity[c], rows[c, i], dt, omega, decay)
+                rows[c, i] = value[c]
+        else:
+            for c in range(rows.shape[0]):
+                value[c], velocity[c] = rows[c, i], 0.0
+
+
+def _start(rows: FloatArray, times: FloatArray, state: SeriesState | None) -> tuple[FloatArray, FloatArray, float]:
+    """The state's arrays (copied) and time, or at rest on the first frame."""
+    if not (rows.flags.c_contiguous and rows.dtype == np.float64 and rows.ndim == 2):
+        raise ValueError("rows must be a C-contiguous (C, N) float64 array")
+    if len(times) != rows.shape[1]:
+        raise ValueError(f"{rows.shape[1]} frames but {len(times)} times")
+    if state is None:
+        return rows[:, 0].copy(), np.zeros(rows.shape[0]), float(times[0])
+    return state.value.copy(), state.velocity.copy(), state.time
+
+
+def _rest(rows: FloatArray, times: FloatArray, state: SeriesState | None) -> SeriesState | None:
+    """A filter that is off: at rest on the last frame."""
+    if rows.shape[1] == 0:
+        return state
+    return SeriesState(rows[:, -1].copy(), np.zeros(rows.shape[0]), float(times[-1]))
 
 
 def damp_series(values: FloatArray, times: FloatArray, time_constant: float) -> FloatArray:
-    """Run the follower over a whole take: ``values`` is (N, C), ``times`` is (N,)."""
-    out = np.empty_like(values)
-    if len(values) == 0:
-        return out
-    state = damper_start(values[0])
-    out[0] = state.value
-    for i in range(1, len(values)):
-        state = damper_step(state, values[i], float(times[i] - times[i - 1]), time_constant)
-        out[i] = state.value
-    return out
+    """Run the follower over a whole take: ``values`` is (N, C), ``times`` is (N,); a new (N, C) array."""
+    rows = np.array(values.T, dtype=np.float64, order="C")
+    damp_rows(rows, times, time_constant)
+    return rows.T
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,27 +200,84 @@ def spring_step(state: SpringState, target: FloatArray, dt: float, frequency: fl
     """
     if frequency <= 0.0 or dt <= 0.0:
         return SpringState(value=np.array(target, dtype=np.float64), velocity=state.velocity * 0.0)
-    omega = 2.0 * math.pi * frequency
-    decay_rate = damping * omega
-    omega_d = omega * math.sqrt(1.0 - damping * damping)
+    omega, decay_rate, omega_d = _spring_rates(frequency, damping)
     decay = math.exp(-decay_rate * dt)
     c, s = math.cos(omega_d * dt), math.sin(omega_d * dt)
-    delta = state.value - target
-    b = (state.velocity + decay_rate * delta) / omega_d
-    return SpringState(
-        value=target + decay * (delta * c + b * s),
-        velocity=decay * (state.velocity * c - (decay_rate * state.velocity + omega * omega * delta) / omega_d * s),
+    value, velocity = spring_exact(state.value, state.velocity, target, omega, decay_rate, omega_d, decay, c, s)
+    return SpringState(value=value, velocity=velocity)
+
+
+def _spring_rates(frequency: float, damping: float) -> tuple[float, float, float]:
+    """(natural angular frequency, decay rate, damped angular frequency), rad/s and 1/s."""
+    omega = 2.0 * math.pi * frequency
+    return omega, damping * omega, omega * math.sqrt(1.0 - damping * damping)
+
+
+@inline
+def spring_exact(  # noqa: PLR0917
+    value: Any,
+    velocity: Any,
+    target: Any,
+    omega: float,
+    decay_rate: float,
+    omega_d: float,
+    decay: float,
+    c: float,
+    s: float,
+) -> tuple[Any, Any]:
+    """One spring step (floats or arrays): ``decay = exp(-decay_rate dt)``, ``c, s = cos, sin(omega_d dt)``."""
+    delta = value - target
+    b = (velocity + decay_rate * delta) / omega_d
+    return (
+        target + decay * (delta * c + b * s),
+        decay * (velocity * c - (decay_rate * velocity + omega * omega * delta) / omega_d * s),
     )
 
 
+def spring_rows(
+    rows: FloatArray, times: FloatArray, frequency: float, damping: float, state: SeriesState | None = None
+) -> SeriesState | None:
+    """The follow-through on ``rows`` (C, N) in place, in pieces like :func:`damp_rows`; 0 Hz: unchanged."""
+    if frequency <= 0.0:
+        return _rest(rows, times, state)
+    if rows.shape[1] == 0:
+        return state
+    value, velocity, last = _start(rows, times, state)
+    omega, decay_rate, omega_d = _spring_rates(frequency, damping)
+    _spring_kernel(
+        rows, np.ascontiguousarray(times, dtype=np.float64), last, omega, decay_rate, omega_d, value, velocity
+    )
+    return SeriesState(value, velocity, float(times[-1]))
+
+
+@kernel
+def _spring_kernel(  # noqa: PLR0917
+    rows: FloatArray,
+    times: FloatArray,
+    last: float,
+    omega: float,
+    decay_rate: float,
+    omega_d: float,
+    value: FloatArray,
+    velocity: FloatArray,
+) -> None:
+    for i in range(times.shape[0]):  # frame by frame, the channels side by side
+        dt = times[i] - (last if i == 0 else times[i - 1])
+        if dt > 0.0:
+            decay = math.exp(-decay_rate * dt)
+            c, s = math.cos(omega_d * dt), math.sin(omega_d * dt)
+            for j in range(rows.shape[0]):
+                value[j], velocity[j] = spring_exact(
+                    value[j], velocity[j], rows[j, i], omega, decay_rate, omega_d, decay, c, s
+                )
+                rows[j, i] = value[j]
+        else:
+            for j in range(rows.shape[0]):
+                value[j], velocity[j] = rows[j, i], 0.0
+
+
 def spring_series(values: FloatArray, times: FloatArray, frequency: float, damping: float) -> FloatArray:
-    """Run the follow-through over a whole take: ``values`` is (N, C), ``times`` is (N,)."""
-    out = np.empty_like(values)
-    if len(values) == 0:
-        return out
-    state = SpringState(np.array(values[0], dtype=np.float64), np.zeros(values.shape[1]))
-    out[0] = state.value
-    for i in range(1, len(values)):
-        state = spring_step(state, values[i], float(times[i] - times[i - 1]), frequency, damping)
-        out[i] = state.value
-    return out
+    """Run the follow-through over a whole take: ``values`` is (N, C), ``times`` is (N,); a new (N, C) array."""
+    rows = np.array(values.T, dtype=np.float64, order="C")
+    spring_rows(rows, times, frequency, damping)
+    return rows.T
