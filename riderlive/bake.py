@@ -26,8 +26,9 @@ from riderlive.configfile import ConfigError
 from riderlive.framefile import FORMATS, FrameFileError, FrameTable, file_format, read_frames, write_frames
 from riderlive.frameunits import HOOF_HEIGHTS, recorded_scale, resolve_scale
 from riderlive.parquetstream import ParquetTake, open_parquet, read_chunks, read_columns, write_chunks
-from riderlive.rules.animator import AnimatorLayer, SeriesState, damp_rows, spring_rows
+from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import COMPILED_FROM, RiderModel
+from riderlive.rules.filters import SeriesState, damp_rows, spring_rows
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.rules.params import load_preset
 from riderlive.rules.parts import RiderParts

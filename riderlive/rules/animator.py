@@ -9,10 +9,9 @@ ratio in the preset (``[follow_through]``), 0 Hz switches it off (the thesis).
 
 Each filter's step is written once, as arithmetic that works on floats and arrays
 (:func:`damp_exact`, :func:`spring_exact`): :func:`damper_step` and :func:`spring_step`
-run it on a frame's channel vector (the live tick), and a whole take runs it compiled
-(:func:`riderlive.fastpath.kernel`) channel by channel over rows of frames, in place and
-in pieces that carry the filter's state (:func:`damp_rows`, :func:`spring_rows`; a
-streamed bake filters one chunk at a time).
+run it on a frame's channel vector (the live tick), and a whole take runs the same
+functions compiled (:mod:`riderlive.rules.filters`, which imports numba only when a take
+is filtered).
 """
 
 from __future__ import annotations
@@ -28,7 +27,6 @@ import pydantic
 
 from riderlive.channels import RIDER_NAMES
 from riderlive.configfile import ConfigError, StrictModel, read_toml, validate
-from riderlive.fastpath import inline, kernel
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -104,7 +102,6 @@ def damper_step(state: DamperState, target: FloatArray, dt: float, time_constant
     return DamperState(value=value, velocity=velocity)
 
 
-@inline
 def damp_exact(  # noqa: PLR0917
     value: Any, velocity: Any, target: Any, dt: float, omega: float, decay: float
 ) -> tuple[Any, Any]:
@@ -112,74 +109,6 @@ def damp_exact(  # noqa: PLR0917
     delta = value - target
     drive = velocity + omega * delta
     return target + (delta + drive * dt) * decay, (velocity - omega * drive * dt) * decay
-
-
-@dataclass(frozen=True, slots=True)
-class SeriesState:
-    """Where a filter over rows of frames stopped: each channel's value and velocity, and that frame's time (s)."""
-
-    value: FloatArray
-    velocity: FloatArray
-    time: float
-
-
-def damp_rows(
-    rows: FloatArray, times: FloatArray, time_constant: float, state: SeriesState | None = None
-) -> SeriesState | None:
-    """Smooth ``rows`` (C, N; C-contiguous, one row per channel) in place; ``times`` is (N,) seconds.
-
-    ``state``: where the previous piece of the take stopped (None: start at rest on the first
-    frame). Returns the state after the last frame (None for an empty piece with no state).
-    ``time_constant`` <= 0: the rows pass unchanged.
-    """
-    if time_constant <= 0.0:
-        return _rest(rows, times, state)
-    if rows.shape[1] == 0:
-        return state
-    value, velocity, last = _start(rows, times, state)
-    _damp_kernel(rows, np.ascontiguousarray(times, dtype=np.float64), last, 1.0 / time_constant, value, velocity)
-    return SeriesState(value, velocity, float(times[-1]))
-
-
-@kernel
-def _damp_kernel(  # noqa: PLR0917
-    rows: FloatArray, times: FloatArray, last: float, omega: float, value: FloatArray, velocity: FloatArray
-) -> None:
-    for i in range(times.shape[0]):  # frame by frame, the channels side by side (independent, so they overlap)
-        dt = times[i] - (last if i == 0 else times[i - 1])
-        if dt > 0.0:
-            decay = math.exp(-omega * dt)
-            for c in range(rows.shape[0]):
-                value[c], velocity[c] = damp_exact(value[c], velocity[c], rows[c, i], dt, omega, decay)
-                rows[c, i] = value[c]
-        else:
-            for c in range(rows.shape[0]):
-                value[c], velocity[c] = rows[c, i], 0.0
-
-
-def _start(rows: FloatArray, times: FloatArray, state: SeriesState | None) -> tuple[FloatArray, FloatArray, float]:
-    """The state's arrays (copied) and time, or at rest on the first frame."""
-    if not (rows.flags.c_contiguous and rows.dtype == np.float64 and rows.ndim == 2):
-        raise ValueError("rows must be a C-contiguous (C, N) float64 array")
-    if len(times) != rows.shape[1]:
-        raise ValueError(f"{rows.shape[1]} frames but {len(times)} times")
-    if state is None:
-        return rows[:, 0].copy(), np.zeros(rows.shape[0]), float(times[0])
-    return state.value.copy(), state.velocity.copy(), state.time
-
-
-def _rest(rows: FloatArray, times: FloatArray, state: SeriesState | None) -> SeriesState | None:
-    """A filter that is off: at rest on the last frame."""
-    if rows.shape[1] == 0:
-        return state
-    return SeriesState(rows[:, -1].copy(), np.zeros(rows.shape[0]), float(times[-1]))
-
-
-def damp_series(values: FloatArray, times: FloatArray, time_constant: float) -> FloatArray:
-    """Run the follower over a whole take: ``values`` is (N, C), ``times`` is (N,); a new (N, C) array."""
-    rows = np.array(values.T, dtype=np.float64, order="C")
-    damp_rows(rows, times, time_constant)
-    return rows.T
 
 
 @dataclass(frozen=True, slots=True)
@@ -200,20 +129,19 @@ def spring_step(state: SpringState, target: FloatArray, dt: float, frequency: fl
     """
     if frequency <= 0.0 or dt <= 0.0:
         return SpringState(value=np.array(target, dtype=np.float64), velocity=state.velocity * 0.0)
-    omega, decay_rate, omega_d = _spring_rates(frequency, damping)
+    omega, decay_rate, omega_d = spring_rates(frequency, damping)
     decay = math.exp(-decay_rate * dt)
     c, s = math.cos(omega_d * dt), math.sin(omega_d * dt)
     value, velocity = spring_exact(state.value, state.velocity, target, omega, decay_rate, omega_d, decay, c, s)
     return SpringState(value=value, velocity=velocity)
 
 
-def _spring_rates(frequency: float, damping: float) -> tuple[float, float, float]:
+def spring_rates(frequency: float, damping: float) -> tuple[float, float, float]:
     """(natural angular frequency, decay rate, damped angular frequency), rad/s and 1/s."""
     omega = 2.0 * math.pi * frequency
     return omega, damping * omega, omega * math.sqrt(1.0 - damping * damping)
 
 
-@inline
 def spring_exact(  # noqa: PLR0917
     value: Any,
     velocity: Any,
@@ -232,52 +160,3 @@ def spring_exact(  # noqa: PLR0917
         target + decay * (delta * c + b * s),
         decay * (velocity * c - (decay_rate * velocity + omega * omega * delta) / omega_d * s),
     )
-
-
-def spring_rows(
-    rows: FloatArray, times: FloatArray, frequency: float, damping: float, state: SeriesState | None = None
-) -> SeriesState | None:
-    """The follow-through on ``rows`` (C, N) in place, in pieces like :func:`damp_rows`; 0 Hz: unchanged."""
-    if frequency <= 0.0:
-        return _rest(rows, times, state)
-    if rows.shape[1] == 0:
-        return state
-    value, velocity, last = _start(rows, times, state)
-    omega, decay_rate, omega_d = _spring_rates(frequency, damping)
-    _spring_kernel(
-        rows, np.ascontiguousarray(times, dtype=np.float64), last, omega, decay_rate, omega_d, value, velocity
-    )
-    return SeriesState(value, velocity, float(times[-1]))
-
-
-@kernel
-def _spring_kernel(  # noqa: PLR0917
-    rows: FloatArray,
-    times: FloatArray,
-    last: float,
-    omega: float,
-    decay_rate: float,
-    omega_d: float,
-    value: FloatArray,
-    velocity: FloatArray,
-) -> None:
-    for i in range(times.shape[0]):  # frame by frame, the channels side by side
-        dt = times[i] - (last if i == 0 else times[i - 1])
-        if dt > 0.0:
-            decay = math.exp(-decay_rate * dt)
-            c, s = math.cos(omega_d * dt), math.sin(omega_d * dt)
-            for j in range(rows.shape[0]):
-                value[j], velocity[j] = spring_exact(
-                    value[j], velocity[j], rows[j, i], omega, decay_rate, omega_d, decay, c, s
-                )
-                rows[j, i] = value[j]
-        else:
-            for j in range(rows.shape[0]):
-                value[j], velocity[j] = rows[j, i], 0.0
-
-
-def spring_series(values: FloatArray, times: FloatArray, frequency: float, damping: float) -> FloatArray:
-    """Run the follow-through over a whole take: ``values`` is (N, C), ``times`` is (N,); a new (N, C) array."""
-    rows = np.array(values.T, dtype=np.float64, order="C")
-    spring_rows(rows, times, frequency, damping)
-    return rows.T

@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 
 from riderlive.channels import HORSE, RIDER_INDEX
 from riderlive.configfile import ConfigError
-from riderlive.rules.animator import AnimatorLayer, damp_series, damper_start, damper_step
+from riderlive.rules.animator import AnimatorLayer, damper_start, damper_step
 from riderlive.rules.engine import RiderModel
+from riderlive.rules.filters import damp_series
 
 
 def test_gain_then_offset_in_output_units() -> None:

@@ -12,7 +12,8 @@ from riderlive.horse import ProceduralHorse
 from riderlive.ranges import DEFAULT_RANGES
 from riderlive.realtime.core import TickCore, Timing
 from riderlive.rules import RiderModel
-from riderlive.rules.animator import SpringState, spring_series, spring_step
+from riderlive.rules.animator import SpringState, spring_step
+from riderlive.rules.filters import spring_series
 from riderlive.rules.params import load_preset
 
 

@@ -7,16 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from riderlive.rules.animator import (
-    DamperState,
-    SpringState,
-    damp_rows,
-    damp_series,
-    damper_step,
-    spring_rows,
-    spring_series,
-    spring_step,
-)
+from riderlive.rules.animator import DamperState, SpringState, damper_step, spring_step
+from riderlive.rules.filters import damp_rows, damp_series, spring_rows, spring_series
 
 
 def take(n: int, channels: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,3 +84,13 @@ def test_off_passes_through_and_rows_must_be_c_contiguous() -> None:
         damp_rows(np.asfortranarray(values.T), times, 0.1)
     with pytest.raises(ValueError, match="20 frames but 19 times"):
         damp_rows(rows, times[:-1], 0.1)
+
+
+def test_importing_the_rules_does_not_import_numba() -> None:
+    """The web process and the CLI load the rules; numba (about a second) only with a whole-take filter."""
+    import subprocess
+    import sys
+
+    code = "import sys, riderlive.rules, riderlive.rules.animator; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
