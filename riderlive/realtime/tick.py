@@ -262,19 +262,19 @@ class TickLoop:
         return saddle_estimate(core.saddle.state, source_t).as_dict()
 
     def _phase_status(self) -> dict[str, Any] | None:
-        """The phase lock (docs/performance.md): locked, margin and lead in seconds, counts; None when off."""
+        """The phase lock as of its last lock or loss (None when off); the live lead, margin and
+        slews are counters (``/metrics``, ``/api/latency``)."""
         if self.phase_model is None:
             return None
         p = self.phase
-        lead = phase.lead(self.phase_model, p)
         return {
             "locked": p.locked,
-            "margin": None if math.isnan(p.margin) else p.margin,
-            "lead": None if math.isnan(lead) else lead,
             "harmonic": p.harmonic,
-            "slews": p.slews,
+            "resultant": p.resultant,
+            "drift": p.drift,
             "locks": p.locks,
             "losses": p.losses,
+            "lost": p.lost or None,
         }
 
     def _follow_phase(self, clock: DeadlineClock, now: float, arrivals: list[float], values: Any) -> None:

@@ -93,17 +93,29 @@ def test_a_divisor_rate_locks_and_a_multiple_locks_on_its_harmonic() -> None:
     assert np.quantile(newest, 0.99) < 0.002
 
 
+def test_follows_a_producer_clock_a_little_off_ours_but_not_one_far_off() -> None:
+    """500 ppm (a cheap crystal is within 100): locked, the arrival phase followed as it
+    drifts, so the frames still wait about the margin; 2000 ppm is more than ``max_drift``."""
+    near = simulate(stream(TICK * (1.0 - 5e-4), 8.0, 0.0002), 8.0)
+    assert near.state.locked and near.state.drift == pytest.approx(5e-4 * P * TICK, rel=0.3)
+    assert np.quantile(waits_after(near, 4.0), 0.99) < 0.0015
+    far = simulate(stream(TICK * (1.0 - 2e-3), 8.0, 0.0002), 8.0)
+    assert not any(s.locked for s in far.states) and far.state.offset == 0.0
+
+
 def test_holds_its_phase_when_the_input_stops() -> None:
     run = simulate(stream(120.0, 4.0, 0.0002), 6.0)
     locked_at = next(i for i, s in enumerate(run.states) if s.locked)
     stopped = next(i for i, d in enumerate(run.deadlines) if d > 4.0)
     assert locked_at < stopped
-    after = run.states[stopped + 5 :]
+    assert run.states[stopped + 10].locked, "a stall shorter than the gap (0.25 s) keeps the lock"
+    gone = stopped + int(run.model.gap / P) + 2
+    after = run.states[gone:]
     assert all(not s.locked for s in after) and run.state.losses == 1
     assert all(s.shift == 0.0 and s.offset == after[0].offset for s in after)
     assert run.state.times == ()
     # The deadlines stay a period apart, in the phase they had.
-    gaps = np.diff(run.deadlines[stopped + 5 :])
+    gaps = np.diff(run.deadlines[gone:])
     assert np.allclose(gaps, P, rtol=0, atol=1e-12)
 
 

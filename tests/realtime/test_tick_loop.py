@@ -100,4 +100,5 @@ def test_the_phase_lock_follows_horse_frames_of_the_driver_only_and_moves_the_cl
     assert loop.phase.offset % period == pytest.approx(0.004 + loop.setup.phase_margin, abs=2e-5)
     assert values[index["phase_lead"]] == pytest.approx(loop.setup.phase_margin, abs=2e-5)
     status = loop.status()["phase_lock"]
-    assert status["locked"] and status["slews"] == values[index["phase_slews"]] > 0
+    assert status["locked"] and status["locks"] == 1 and status["harmonic"] == 1 and status["resultant"] > 0.99
+    assert values[index["phase_slews"]] == loop.phase.slews > 0
