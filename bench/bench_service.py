@@ -13,7 +13,7 @@ Starts the real ``riderlive serve`` on a loopback port, once per *variant* and r
   to see what the lock alone changes;
 - ``thread`` (``--thread``): the tick in a thread of the web process (``tick.isolation``).
 
-Each run: one producer streams horse frames at ``--producer-rate``; ``--clients``
+Each run: one producer (a process of its own) streams horse frames at ``--producer-rate``; ``--clients``
 websocket clients subscribe at ``--client-rate`` (binary, two channels); halfway through,
 one extra client stops reading. With ``--rig``, a 3-servo rig on the emulated bus
 (wire timing, ``bench/rig_fixtures.py``) is armed and driven by the tick.
@@ -43,6 +43,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import httpx
 import msgpack
@@ -209,7 +210,11 @@ async def subscriber(port: int, rate: float, stats: ClientStats, stop: asyncio.E
     transport.close()
 
 
-async def producer(url: str, rate: float, stop: asyncio.Event) -> None:
+class Flag(Protocol):
+    def is_set(self) -> bool: ...
+
+
+async def producer(url: str, rate: float, stop: Flag) -> None:
     async with connect(url + "/ws/horse") as ws:
         await ws.recv()
         t0 = time.perf_counter()
@@ -219,6 +224,13 @@ async def producer(url: str, rate: float, stop: asyncio.Event) -> None:
             await asyncio.sleep(max(0.0, t0 + n / rate - time.perf_counter()))
             t = time.perf_counter() - t0
             await ws.send(msgpack.packb({"t": t, "values": {"rearPivot.rz": 3.0 * (t % 1.0), "lfHoof.ty": 0.1}}))
+
+
+def producer_main(url: str, rate: float, stop: Flag) -> None:
+    """The producer in a process of its own, as a real producer is another program: in the
+    bench's event loop its sends would wait behind the 100 clients' reads (a jitter of
+    milliseconds that is the bench's, not the service's, and that no phase lock can follow)."""
+    asyncio.run(producer(url, rate, stop))
 
 
 def stalled_client(port: int) -> socket.socket:
@@ -259,7 +271,10 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     stop = asyncio.Event()
     stats = [ClientStats() for _ in range(args.clients)]
     tasks = [asyncio.create_task(subscriber(port, args.client_rate, s, stop)) for s in stats]
-    tasks.append(asyncio.create_task(producer(url, args.producer_rate, stop)))
+    spawn = multiprocessing.get_context("spawn")
+    producer_stop = spawn.Event()
+    producing = spawn.Process(target=producer_main, args=(url, args.producer_rate, producer_stop), daemon=True)
+    producing.start()
     await asyncio.sleep(2.0)  # everyone connected and subscribed
     async with httpx.AsyncClient(timeout=60.0, headers=AUTH) as client:
         before_latency = await asyncio.to_thread(latency_now, http)
@@ -281,7 +296,7 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
         state = (await client.get(http + "/api/state")).json()
         phase = (await client.get(http + "/api/latency")).json()["phase_lock"]
     if phase is not None:
-        print(f"  phase lock at the end: {phase}", flush=True)
+        print(f"  phase lock at the end: {phase}; at its last change: {state['tick'].get('phase_lock')}", flush=True)
     sent = sorted(c["sent"] for c in state["clients"])
     dropped = sorted(c["dropped"] for c in state["clients"])
     if sent:
@@ -290,6 +305,8 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     if rig:
         print(f"  rig at the end: {rig['state']} {rig.get('fault') or ''}", flush=True)
     stop.set()
+    producer_stop.set()
+    producing.join(10.0)
     for task in tasks:
         task.cancel()
     await asyncio.gather(*tasks, return_exceptions=True)

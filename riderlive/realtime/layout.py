@@ -94,6 +94,7 @@ COUNTERS: tuple[str, ...] = (
     "phase_locked",
     "phase_lead",
     "phase_margin",
+    "phase_resultant",
     "phase_slews",
     "phase_locks",
     "phase_losses",

@@ -19,7 +19,8 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   divisor rate: every m-th tick takes a frame) gives harmonic ``k`` = 1; about
   ``period / k`` (a multiple rate, ``k`` frames per tick) gives harmonic ``k``. Any
   other rate has no fixed phase against the tick: no lock, nor one whose phase drifts
-  more than ``max_drift`` (seconds per second, between the window's halves). The arrival
+  more than ``max_drift`` (seconds per second, between the window's halves; a lock is
+  kept up to ``keep_drift``), and the expected arrival follows the drift measured. The arrival
   phase is the circular mean of ``k * t / period`` (turns), its spread the resultant
   length ``R`` (1: every frame at the same phase, about 1/sqrt(n) for a random stream);
   the expected arrival is the median phase around that mean (a few frames late by
@@ -32,7 +33,7 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   machine, where that still beats a miss (:func:`best_margin`).
 - **Lock.** Locked when ``R >= lock_resultant`` over at least ``min_samples`` frames at a
   rate that fits; let go (the deadlines keep the phase they have: *hold*) when ``R``
-  falls below ``unlock_resultant``, the rate stops fitting, the producer changes, or no
+  falls below ``unlock_resultant``, the rate stops fitting (``lost`` says why), the producer changes, or no
   frame came for ``gap`` seconds (the window is then emptied; the tick's driver leaves
   the input at about the same time, ``input.hold``).
 - **Slew.** While locked each step moves the deadlines by ``gain`` x the phase error,
@@ -79,8 +80,11 @@ class Model:
     rate_tolerance: float = 0.02
     """Relative difference of the mean interval from a whole multiple (or fraction) of the period."""
     max_drift: float = 0.001
-    """Seconds per second the arrival phase may move (the producer's clock against ours, 1000 ppm):
-    the most the lock changes the tick's mean rate by."""
+    """Seconds per second the arrival phase may move for a lock (the producer's clock against
+    ours, 1000 ppm) ..."""
+    keep_drift: float = 0.003
+    """... and to keep one (the estimate is noisy when the arrivals are): the most the lock
+    changes the tick's mean rate by."""
     max_harmonic: int = 8
     """Up to this many frames per tick still have a phase (a faster producer: no lock)."""
     max_ratio: int = 8
@@ -155,7 +159,7 @@ class Analysis(NamedTuple):
     harmonic: int
     interval: float
     fits: bool
-    """The rate has a phase against the tick: a whole multiple or fraction of it, drifting at most ``max_drift``."""
+    """The rate has a phase against the tick: a whole multiple or fraction of it (``drift`` aside)."""
     resultant: float
     arrival: float
     at: float
@@ -188,7 +192,6 @@ def analyse(model: Model, times: Sequence[float]) -> Analysis:
     turned = complex(np.mean(z[half:])) * complex(np.mean(z[:half])).conjugate()
     drift = math.atan2(turned.imag, turned.real) / (2.0 * math.pi) * span
     drift /= max(float(np.mean(rel[half:]) - np.mean(rel[:half])), 1e-9)
-    fits = fits and abs(drift) <= model.max_drift
     centre = float(np.mean(rel))
     turns -= drift * (rel - centre) / span  # every phase as of the window's mean time
     mean_z = complex(np.mean(np.exp(2j * math.pi * turns)))
@@ -254,12 +257,15 @@ def step(model: Model, state: State, now: float, producer: int, arrivals: Sequen
 
 def _analysed(model: Model, state: State, now: float) -> State:
     a = analyse(model, state.times)
-    threshold = model.unlock_resultant if state.locked else model.lock_resultant
-    locked = a.fits and a.resultant >= threshold
+    threshold, drift = (
+        (model.unlock_resultant, model.keep_drift) if state.locked else (model.lock_resultant, model.max_drift)
+    )
+    fits = a.fits and abs(a.drift) <= drift
+    locked = fits and a.resultant >= threshold
     if state.locked and (not locked or a.harmonic != state.harmonic):
         why = "irregular" if a.resultant < threshold else "another rate" if a.harmonic == state.harmonic else ""
         state = _let_go(state, why or "another harmonic")
-        locked = a.fits and a.resultant >= model.lock_resultant
+        locked = a.fits and abs(a.drift) <= model.max_drift and a.resultant >= model.lock_resultant
     return state._replace(
         locked=locked,
         locks=state.locks + (locked and not state.locked),

@@ -290,6 +290,7 @@ class TickLoop:
         values[index["phase_locked"]] = float(self.phase.locked)
         values[index["phase_lead"]] = lead if math.isfinite(lead) else -1.0
         values[index["phase_margin"]] = self.phase.margin if math.isfinite(self.phase.margin) else -1.0
+        values[index["phase_resultant"]] = self.phase.resultant
         values[index["phase_slews"]] = self.phase.slews
         values[index["phase_locks"]] = self.phase.locks
         values[index["phase_losses"]] = self.phase.losses

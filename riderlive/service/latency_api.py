@@ -16,7 +16,7 @@ what the page shows), its ``total`` since the service started, and with
 ``bounds``) so that a client can subtract two answers and take exact quantiles of
 any span (``bench/bench_service.py`` does). ``goal`` is the issue-18 target, one tick
 period + 1 ms. ``phase_lock`` is the tick's phase lock (None when off): ``locked``,
-``lead`` and ``margin`` in seconds (None: no phase known), ``slews``.
+``lead`` and ``margin`` in seconds (None: no phase known), ``resultant``, ``slews``.
 """
 
 from __future__ import annotations
@@ -82,6 +82,7 @@ def phase_lock(service: Service) -> dict[str, Any] | None:
         "locked": counters.get("phase_locked", 0.0) > 0.0,
         "lead": seconds("phase_lead"),
         "margin": seconds("phase_margin"),
+        "resultant": counters.get("phase_resultant", 0.0),
         "slews": int(counters.get("phase_slews", 0)),
     }
 

@@ -80,6 +80,7 @@ PHASE_GAUGES: tuple[tuple[str, str], ...] = (
     ("locked", "1 while the tick's deadlines are phase-locked to the driving producer's frames."),
     ("lead", "Seconds from the expected arrival of a frame to the deadline after it (-1: no phase known)."),
     ("margin", "Seconds of lead the phase lock aims at: tick.phase_margin or the arrival jitter (-1: none)."),
+    ("resultant", "How regular the driving producer's arrival phase is: 1 steady, ~0 irregular or another rate."),
 )
 PHASE_COUNTERS: tuple[tuple[str, str], ...] = (
     ("slews", "Ticks whose deadlines the phase lock moved (by at most 2 % of a period each)."),
