@@ -18,13 +18,13 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   about a whole multiple ``m`` of the period (``m`` = 1 the same rate, ``m`` > 1 a
   divisor rate: every m-th tick takes a frame) gives harmonic ``k`` = 1; about
   ``period / k`` (a multiple rate, ``k`` frames per tick) gives harmonic ``k``. Any
-  other rate has no fixed phase against the tick: no lock, nor one whose phase drifts
+  other rate has no fixed phase against the tick: no lock, nor for a phase that drifts
   more than ``max_drift`` (seconds per second, between the window's halves; a lock is
-  kept up to ``keep_drift``), and the expected arrival follows the drift measured. The arrival
-  phase is the circular mean of ``k * t / period`` (turns), its spread the resultant
-  length ``R`` (1: every frame at the same phase, about 1/sqrt(n) for a random stream);
-  the expected arrival is the median phase around that mean (a few frames late by
-  milliseconds pull the mean, not the median).
+  kept up to ``keep_drift``). The arrival phase is the circular mean of
+  ``k * t / period`` (turns), its spread the resultant length ``R`` (1: every frame at
+  the same phase, about 1/sqrt(n) for a random stream); the expected arrival is the
+  median phase around that mean (a few frames late by milliseconds pull the mean, not
+  the median), moved on by the drift measured from step to step.
 - **Margin.** The time after the expected arrival for the deadline whose waits (arrival
   to deadline) over the window have the least ``quantile``, at least ``margin``. A frame
   later than its deadline waits a whole span more, so with the default 0.998 (the worst
@@ -33,14 +33,14 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   machine, where that still beats a miss (:func:`best_margin`).
 - **Lock.** Locked when ``R >= lock_resultant`` over at least ``min_samples`` frames at a
   rate that fits; let go (the deadlines keep the phase they have: *hold*) when ``R``
-  falls below ``unlock_resultant``, the rate stops fitting (``lost`` says why), the producer changes, or no
+  falls below ``unlock_resultant``, the rate stops fitting, the producer changes, or no
   frame came for ``gap`` seconds (the window is then emptied; the tick's driver leaves
-  the input at about the same time, ``input.hold``).
+  the input at about the same time, ``input.hold``); ``lost`` says why.
 - **Slew.** While locked each step moves the deadlines by ``gain`` x the phase error,
   at most ``slew`` x period: consecutive deadlines stay between ``(1 - slew)`` and
   ``(1 + slew)`` periods apart, so the rate the bus, the physics' fixed step and the
   dead-man see is unchanged, only the phase moves (following a producer whose clock
-  runs a fraction of a per mille off moves the tick's mean rate by as much).
+  runs a few hundred ppm off moves the tick's mean rate by as much; ``keep_drift`` at most).
 
 Without input (``producer`` -1, or no frames) nothing moves: the deadlines are
 ``start + n * period``, as without the lock.

@@ -338,9 +338,12 @@ class TickLoop:
                 rx = float(record[L.IN_RECEIVED])
                 kind = L.InputKind(int(record[L.IN_KIND]))
                 producer = int(record[L.IN_PRODUCER])
+                handover = producer != self.core.producer
                 if self.core.push_input(producer, float(record[L.IN_T]), rx, values_list, kind):
                     values[index["input_frames"]] += 1
-                    if producer == self.core.producer and kind is L.InputKind.HORSE:
+                    if handover:  # only the new driver's frames count for the phase lock
+                        arrivals.clear()
+                    if kind is L.InputKind.HORSE:
                         arrivals.append(rx)
                 else:
                     values[index["input_out_of_order"]] += 1
