@@ -1,16 +1,19 @@
 """The whole service under load: latency, delivery and CPU with 100 clients and the other core busy.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_service.py --rates 120 500 --seconds 30 [--rig] [--thread]
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_service.py --rates 120 500 --seconds 30 [--rig] [--unlocked] [--thread]
 
 Starts the real ``riderlive serve`` on a loopback port, once per *variant* and rate:
 
 - ``design``: the tick in its own process, the web process at SCHED_FIFO 10
-  (``server.realtime_priority``, below the tick's 50) on uvloop (``server.loop``);
-- ``today``: the same code with the web process as it ran before issue 18 (normal
-  scheduling, the asyncio loop): the baseline, measured in the same run;
+  (``server.realtime_priority``, below the tick's 50) on uvloop (``server.loop``), the
+  tick phase-locked to the producer (``tick.phase_lock``, the default);
+- ``today``: the same code with the web process and the tick as they ran before issue 18
+  (normal scheduling, the asyncio loop, no phase lock): the baseline, measured in the same run;
+- ``unlocked`` (``--unlocked``): ``design`` without the phase lock (``tick.phase_lock = false``),
+  to see what the lock alone changes;
 - ``thread`` (``--thread``): the tick in a thread of the web process (``tick.isolation``).
 
-Each run: one producer streams horse frames at ``--producer-rate``; ``--clients``
+Each run: one producer (a process of its own) streams horse frames at ``--producer-rate``; ``--clients``
 websocket clients subscribe at ``--client-rate`` (binary, two channels); halfway through,
 one extra client stops reading. With ``--rig``, a 3-servo rig on the emulated bus
 (wire timing, ``bench/rig_fixtures.py``) is armed and driven by the tick.
@@ -40,6 +43,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import httpx
 import msgpack
@@ -56,11 +60,12 @@ COALESCED = "riderlive_ticks_coalesced_total"
 TOKEN = "bench-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 VARIANTS: dict[str, dict[str, object]] = {
-    "design": {"isolation": "process", "realtime_priority": 10, "loop": "auto"},
-    "today": {"isolation": "process", "realtime_priority": 0, "loop": "asyncio"},
-    "thread": {"isolation": "thread", "realtime_priority": 0, "loop": "asyncio"},
+    "design": {"isolation": "process", "realtime_priority": 10, "loop": "auto", "phase_lock": "true"},
+    "today": {"isolation": "process", "realtime_priority": 0, "loop": "asyncio", "phase_lock": "false"},
+    "unlocked": {"isolation": "process", "realtime_priority": 10, "loop": "auto", "phase_lock": "false"},
+    "thread": {"isolation": "thread", "realtime_priority": 0, "loop": "asyncio", "phase_lock": "false"},
 }
-HISTOGRAMS = ("ingest_to_send", "ingest_to_wire", "tick_lateness")
+HISTOGRAMS = ("ingest_to_send", "ingest_to_wire", "ingest_to_tick", "tick_lateness")
 
 
 def start_server(
@@ -71,7 +76,7 @@ def start_server(
     config.write_text(
         f'[server]\nlog_level = "warning"\nnice = {nice}\nrealtime_priority = {settings["realtime_priority"]}\n'
         f'loop = "{settings["loop"]}"\n[security]\ntoken = "{TOKEN}"\n'
-        f'[tick]\nrate = {rate}\nisolation = "{settings["isolation"]}"\n'
+        f'[tick]\nrate = {rate}\nisolation = "{settings["isolation"]}"\nphase_lock = {settings["phase_lock"]}\n'
         "[publish]\nsend_timeout = 2.0\nmax_clients = 1000\n" + rig
     )
     return serving.start_server(config, min_ticks=rate, timeout=60.0)
@@ -205,7 +210,11 @@ async def subscriber(port: int, rate: float, stats: ClientStats, stop: asyncio.E
     transport.close()
 
 
-async def producer(url: str, rate: float, stop: asyncio.Event) -> None:
+class Flag(Protocol):
+    def is_set(self) -> bool: ...
+
+
+async def producer(url: str, rate: float, stop: Flag) -> None:
     async with connect(url + "/ws/horse") as ws:
         await ws.recv()
         t0 = time.perf_counter()
@@ -215,6 +224,13 @@ async def producer(url: str, rate: float, stop: asyncio.Event) -> None:
             await asyncio.sleep(max(0.0, t0 + n / rate - time.perf_counter()))
             t = time.perf_counter() - t0
             await ws.send(msgpack.packb({"t": t, "values": {"rearPivot.rz": 3.0 * (t % 1.0), "lfHoof.ty": 0.1}}))
+
+
+def producer_main(url: str, rate: float, stop: Flag) -> None:
+    """The producer in a process of its own, as a real producer is another program: in the
+    bench's event loop its sends would wait behind the 100 clients' reads (a jitter of
+    milliseconds that is the bench's, not the service's, and that no phase lock can follow)."""
+    asyncio.run(producer(url, rate, stop))
 
 
 def stalled_client(port: int) -> socket.socket:
@@ -255,7 +271,10 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     stop = asyncio.Event()
     stats = [ClientStats() for _ in range(args.clients)]
     tasks = [asyncio.create_task(subscriber(port, args.client_rate, s, stop)) for s in stats]
-    tasks.append(asyncio.create_task(producer(url, args.producer_rate, stop)))
+    spawn = multiprocessing.get_context("spawn")
+    producer_stop = spawn.Event()
+    producing = spawn.Process(target=producer_main, args=(url, args.producer_rate, producer_stop), daemon=True)
+    producing.start()
     await asyncio.sleep(2.0)  # everyone connected and subscribed
     async with httpx.AsyncClient(timeout=60.0, headers=AUTH) as client:
         before_latency = await asyncio.to_thread(latency_now, http)
@@ -275,6 +294,9 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
         after_latency = await asyncio.to_thread(latency_now, http)
         after = (await client.get(http + "/metrics")).text
         state = (await client.get(http + "/api/state")).json()
+        phase = (await client.get(http + "/api/latency")).json()["phase_lock"]
+    if phase is not None:
+        print(f"  phase lock at the end: {phase}; at its last change: {state['tick'].get('phase_lock')}", flush=True)
     sent = sorted(c["sent"] for c in state["clients"])
     dropped = sorted(c["dropped"] for c in state["clients"])
     if sent:
@@ -283,6 +305,8 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     if rig:
         print(f"  rig at the end: {rig['state']} {rig.get('fault') or ''}", flush=True)
     stop.set()
+    producer_stop.set()
+    producing.join(10.0)
     for task in tasks:
         task.cancel()
     await asyncio.gather(*tasks, return_exceptions=True)
@@ -305,6 +329,7 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
         "coalesced": metric(after, COALESCED) - metric(before, COALESCED),
         "web_cpu": (cpu_after[0] - cpu_before[0]) / (t_end - t_start),
         "tick_cpu": sum(a - b for a, b in zip(cpu_after[1:], cpu_before[1:], strict=True)) / (t_end - t_start),
+        "phase_locked": float(bool(phase and phase["locked"])),
     }
     for name in HISTOGRAMS:
         window = after_latency[name].since(before_latency[name])
@@ -347,6 +372,9 @@ ROWS = (
     ("ingest->wire p99 (ms)", "ingest_to_wire_p99", "{:.2f}"),
     ("ingest->wire max (ms)", "ingest_to_wire_max", "{:.2f}"),
     ("inputs measured (send / wire)", "inputs", "{}"),
+    ("received->tick deadline p50 (ms)", "ingest_to_tick_p50", "{:.2f}"),
+    ("received->tick deadline p99 (ms)", "ingest_to_tick_p99", "{:.2f}"),
+    ("tick phase-locked at the end", "phase_locked", "{:.0f}"),
     ("tick lateness p99 (ms)", "tick_lateness_p99", "{:.3f}"),
     ("tick lateness max (ms)", "tick_lateness_max", "{:.3f}"),
     ("skipped ticks", "skipped", "{:.0f}"),
@@ -368,11 +396,12 @@ def main() -> None:
     parser.add_argument("--producer-rate", type=float, default=120.0)
     parser.add_argument("--rig", action="store_true", help="drive a 3-servo rig on the emulated bus (ingest->wire)")
     parser.add_argument("--thread", action="store_true", help="also the tick-in-a-thread baseline")
+    parser.add_argument("--unlocked", action="store_true", help="also the design without the phase lock")
     parser.add_argument("--no-burner", action="store_true")
     parser.add_argument("--nice", type=int, default=0, help="server.nice of the service (e.g. -10)")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-service-"))
-    variants = ["design", "today", *(["thread"] if args.thread else [])]
+    variants = ["design", "today", *(["unlocked"] if args.unlocked else []), *(["thread"] if args.thread else [])]
     burner = None
     if not args.no_burner:
         total = len(variants) * len(args.rates) * (args.seconds + 40)

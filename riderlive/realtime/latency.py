@@ -9,7 +9,7 @@ the same samples); the maximum and the sum are kept exactly.
 
 The counts live in a flat float64 array of :data:`SLOTS` values (``count``, ``sum``,
 ``max``, then the buckets), which may be a view of shared memory: the tick process
-fills tick lateness and ingest-to-wire there, and the web process reads them for
+fills tick lateness, ingest-to-wire and ingest-to-tick there, and the web process reads them for
 ``/metrics`` and ``/api/latency``. One writer per histogram; a reader may see a count
 a few observations behind the buckets, never a torn float.
 """
@@ -141,7 +141,7 @@ def _upper(k: int) -> float:
     return BOUNDS[k] if k < N_BOUNDS else math.inf
 
 
-TICK_HISTOGRAMS = ("tick_lateness", "ingest_to_wire")
+TICK_HISTOGRAMS = ("tick_lateness", "ingest_to_wire", "ingest_to_tick")
 """Histograms the tick process fills (in this order in its shared block)."""
 
 

@@ -91,6 +91,13 @@ COUNTERS: tuple[str, ...] = (
     "saddle_locks",
     "saddle_losses",
     "saddle_stale",
+    "phase_locked",
+    "phase_lead",
+    "phase_margin",
+    "phase_resultant",
+    "phase_slews",
+    "phase_locks",
+    "phase_losses",
     *(f"lateness_bucket_{i}" for i in range(len(LATENESS_BUCKETS) + 1)),
 )
 """Tick counters in shared memory (written by the tick process only)."""

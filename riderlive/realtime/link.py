@@ -41,7 +41,7 @@ class TickLink:
         self.counters = SharedCounters(L.COUNTERS)
         self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS))
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
-        """Filled by the tick: ``tick_lateness``, ``ingest_to_wire`` (:mod:`riderlive.realtime.latency`)."""
+        """Filled by the tick: ``tick_lateness``, ``ingest_to_wire``, ``ingest_to_tick`` (``realtime.latency``)."""
         self.status_blob = SharedBlob()
         self.latch = StopLatch()
         self.board = SafetyBoard()

@@ -40,6 +40,7 @@ from riderlive.horse import ProceduralHorse
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import latency
 from riderlive.realtime import layout as L
+from riderlive.realtime import phase_lock as phase
 from riderlive.realtime.core import Driver, Mode, TickCore, TickResult, Timing
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
@@ -104,6 +105,10 @@ class TickSetup:
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
     saddle_point: SaddlePoint = field(default_factory=SaddlePoint)
     """Where the published saddle pose is taken, and where a saddle input's samples are from."""
+    phase_lock: bool = True
+    """Move the deadlines to just after the driving producer's frames arrive (``realtime/phase_lock.py``)."""
+    phase_margin: float = 0.0003
+    """Seconds: the least time from a frame's expected arrival to the deadline that takes it."""
 
 
 class TickLoop:
@@ -137,6 +142,9 @@ class TickLoop:
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
         self._unsent_rx = -1.0
         """Receive time of the newest input taken but not yet in a goal written to a device (or -1)."""
+        self.phase_model = phase.Model(1.0 / setup.rate, setup.phase_margin) if setup.phase_lock else None
+        self.phase = phase.State()
+        """The phase lock's state (started with the clock in :meth:`run`); no model: off."""
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
@@ -241,6 +249,7 @@ class TickLoop:
             **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
             "saddle": self._saddle_status(),
+            "phase_lock": self._phase_status(),
             "events": list(self.events),
         }
 
@@ -251,6 +260,41 @@ class TickLoop:
             return None
         source_t = core.saddle.source_time(time.perf_counter() - self.setup.start)
         return saddle_estimate(core.saddle.state, source_t).as_dict()
+
+    def _phase_status(self) -> dict[str, Any] | None:
+        """The phase lock as of its last lock or loss (None when off); the live lead, margin and
+        slews are counters (``/metrics``, ``/api/latency``)."""
+        if self.phase_model is None:
+            return None
+        p = self.phase
+        return {
+            "locked": p.locked,
+            "harmonic": p.harmonic,
+            "resultant": p.resultant,
+            "drift": p.drift,
+            "locks": p.locks,
+            "losses": p.losses,
+            "lost": p.lost or None,
+        }
+
+    def _follow_phase(self, clock: DeadlineClock, now: float, arrivals: list[float], values: Any) -> None:
+        """Step the phase lock with the driving producer's frames taken this tick; move the clock."""
+        assert self.phase_model is not None
+        core = self.core
+        driving = core.driver is Driver.INPUT and core.input_kind is L.InputKind.HORSE
+        was = self.phase.locked
+        self.phase = phase.step(self.phase_model, self.phase, now, core.producer if driving else -1, arrivals)
+        clock.start += self.phase.shift  # |shift| <= slew * period: the next deadline is that much nearer or later
+        index = self.counters.index
+        lead = phase.lead(self.phase_model, self.phase)
+        values[index["phase_locked"]] = float(self.phase.locked)
+        values[index["phase_lead"]] = lead if math.isfinite(lead) else -1.0
+        values[index["phase_margin"]] = self.phase.margin if math.isfinite(self.phase.margin) else -1.0
+        values[index["phase_resultant"]] = self.phase.resultant
+        values[index["phase_slews"]] = self.phase.slews
+        values[index["phase_locks"]] = self.phase.locks
+        values[index["phase_losses"]] = self.phase.losses
+        self._status_dirty |= self.phase.locked is not was
 
     def _publish_status(self) -> None:
         self.status_blob.write(orjson.dumps(self.status()))
@@ -264,6 +308,8 @@ class TickLoop:
         bucket0 = index["lateness_bucket_0"]
         spin = setup.spin if setup.spin is not None else (0.00025 if self.realtime == "fifo" else 0.001)
         clock = DeadlineClock(period=1.0 / setup.rate, start=time.perf_counter(), spin=spin)
+        self.phase = phase.start(clock.start - setup.start)
+        arrivals: list[float] = []
         status_every = max(1, round(setup.rate / 30.0))
         values[index["realtime"]] = 1.0 if self.realtime == "fifo" else 0.0
         values[index["alive"]] = 1.0
@@ -286,16 +332,25 @@ class TickLoop:
                 devices.act_on_stop(deadline)
             self._poll_commands(now)
             newest_rx = -1.0
+            arrivals.clear()
             for record in self.inputs.read_new():
                 values_list = record[L.IN_VALUES :].tolist()
                 rx = float(record[L.IN_RECEIVED])
                 kind = L.InputKind(int(record[L.IN_KIND]))
-                if self.core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), rx, values_list, kind):
+                producer = int(record[L.IN_PRODUCER])
+                handover = producer != self.core.producer
+                if self.core.push_input(producer, float(record[L.IN_T]), rx, values_list, kind):
                     values[index["input_frames"]] += 1
+                    if handover:  # only the new driver's frames count for the phase lock
+                        arrivals.clear()
+                    if kind is L.InputKind.HORSE:
+                        arrivals.append(rx)
                 else:
                     values[index["input_out_of_order"]] += 1
                 newest_rx = max(newest_rx, rx)
             values[index["input_lapped"]] = self.inputs.lapped
+            if newest_rx >= 0.0:
+                self.histograms["ingest_to_tick"].observe(now - newest_rx)
             result = self._step(now, values, index)
             if self.core.faults:
                 self.events.extend(self.core.faults)
@@ -344,6 +399,8 @@ class TickLoop:
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):
                 os.write(self.notify_fd, b"\x01")
+            if self.phase_model is not None:  # after the output is out: never on the latency path
+                self._follow_phase(clock, now, arrivals, values)
             if result.driver is not last_driver:
                 last_driver = result.driver
                 self._status_dirty = True

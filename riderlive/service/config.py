@@ -79,6 +79,21 @@ class TickSection(StrictModel):
     SCHED_FIFO tick is late by ~10 ms now and then on a busy 2-core machine."""
     restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
     """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
+    phase_lock: bool = True
+    """Move the tick's deadlines (by at most 2 % of a period a tick, the rate unchanged) to
+    just after the driving producer's frames arrive, when they come steadily at the tick's
+    rate or a whole multiple or fraction of it (``realtime/phase_lock.py``, docs/performance.md)."""
+    phase_margin: float = pydantic.Field(default=0.0003, ge=0.0, le=0.005)
+    """Seconds: the least time from a frame's expected arrival to the deadline that takes it
+    (the measured arrival jitter when larger); less than half a period."""
+
+    @pydantic.field_validator("phase_margin")
+    @classmethod
+    def _margin_within_period(cls, value: float, info: pydantic.ValidationInfo) -> float:
+        rate = info.data.get("rate")
+        if rate is not None and value >= 0.5 / rate:
+            raise ValueError(f"must be less than half a period: 0 <= phase_margin < {0.5 / rate:.6f} s at {rate:g} Hz")
+        return value
 
 
 class InputSection(StrictModel):

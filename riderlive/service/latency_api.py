@@ -6,14 +6,17 @@ Three histograms (:mod:`riderlive.realtime.latency`, seconds):
 - ``ingest_to_send``: a horse frame decoded by the web process to the first rider
   frame computed from it written to every client due that tick (the web process);
 - ``ingest_to_wire``: the same frame to the first device goal computed from it handed
-  to the device's port (the tick process; only with a device that is moving).
+  to the device's port (the tick process; only with a device that is moving);
+- ``ingest_to_tick``: the same frame to the deadline of the tick that took it (the
+  tick process): the wait for the tick, which the phase lock shortens.
 
 The answer has each one's ``window`` (about the last ``window`` seconds, default 10:
 what the page shows), its ``total`` since the service started, and with
 ``buckets=true`` the total's non-empty buckets (``{index: count}``, bounds in
 ``bounds``) so that a client can subtract two answers and take exact quantiles of
 any span (``bench/bench_service.py`` does). ``goal`` is the issue-18 target, one tick
-period + 1 ms.
+period + 1 ms. ``phase_lock`` is the tick's phase lock (None when off): ``locked``,
+``lead`` and ``margin`` in seconds (None: no phase known), ``resultant``, ``slews``.
 """
 
 from __future__ import annotations
@@ -65,6 +68,25 @@ def sparse(buckets: np.ndarray) -> dict[str, int]:
     return {str(i): int(c) for i, c in enumerate(buckets) if c}
 
 
+def phase_lock(service: Service) -> dict[str, Any] | None:
+    """The tick's phase lock from its counters (None when ``tick.phase_lock`` is off)."""
+    if not service.config.tick.phase_lock:
+        return None
+    counters = service.link.counters.snapshot()
+
+    def seconds(key: str) -> float | None:
+        value = counters.get(key, -1.0)
+        return None if value < 0.0 else value
+
+    return {
+        "locked": counters.get("phase_locked", 0.0) > 0.0,
+        "lead": seconds("phase_lead"),
+        "margin": seconds("phase_margin"),
+        "resultant": counters.get("phase_resultant", 0.0),
+        "slews": int(counters.get("phase_slews", 0)),
+    }
+
+
 def add_latency_routes(app: FastAPI, service: Service, dependencies: Sequence[Depends]) -> None:
     history = LatencyHistory()
 
@@ -78,6 +100,7 @@ def add_latency_routes(app: FastAPI, service: Service, dependencies: Sequence[De
             "goal": period + 0.001,
             "window_seconds": covered,
             "histograms": {name: {"window": windows[name], "total": snap.summary()} for name, snap in current.items()},
+            "phase_lock": phase_lock(service),
         }
         if buckets:
             answer["bounds"] = list(latency.BOUNDS)

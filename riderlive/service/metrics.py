@@ -12,6 +12,7 @@ from riderlive.realtime.latency import LatencyHistogram, LatencySnapshot
 TICK_LATENESS = "How late each tick started after its deadline."
 INGEST_TO_SEND = "Horse frame received to the first rider frame computed from it written to every client due that tick."
 INGEST_TO_WIRE = "Horse frame received to the first device goal computed from it handed to the device's port."
+INGEST_TO_TICK = "Horse frame received to the deadline of the tick that took it (the wait the phase lock shortens)."
 MAX_PRODUCER_LABELS = 32
 """Producer names with their own ``riderlive_frames_in_total`` series; older ones are added to ``other``."""
 OTHER = "other"
@@ -75,6 +76,19 @@ SADDLE_COUNTERS: tuple[tuple[str, str], ...] = (
 )
 """The tick's ``saddle_*`` counters (``riderlive.realtime.saddle_input``), as ``riderlive_saddle_*_total``."""
 
+PHASE_GAUGES: tuple[tuple[str, str], ...] = (
+    ("locked", "1 while the tick's deadlines are phase-locked to the driving producer's frames."),
+    ("lead", "Seconds from the expected arrival of a frame to the deadline after it (-1: no phase known)."),
+    ("margin", "Seconds of lead the phase lock aims at: tick.phase_margin or the arrival jitter (-1: none)."),
+    ("resultant", "How regular the driving producer's arrival phase is: 1 steady, ~0 irregular or another rate."),
+)
+PHASE_COUNTERS: tuple[tuple[str, str], ...] = (
+    ("slews", "Ticks whose deadlines the phase lock moved (by at most 2 % of a period each)."),
+    ("locks", "Phase locks gained."),
+    ("losses", "Phase locks let go (input stopped, irregular, another rate or producer); the phase is held."),
+)
+"""The tick's ``phase_*`` values (``riderlive.realtime.phase_lock``), as ``riderlive_tick_phase_*``."""
+
 
 def render(
     metrics: ServiceMetrics,
@@ -100,6 +114,7 @@ def render(
         ("riderlive_tick_lateness_seconds", latency.get("tick_lateness"), TICK_LATENESS),
         ("riderlive_ingest_to_send_seconds", latency.get("ingest_to_send"), INGEST_TO_SEND),
         ("riderlive_ingest_to_wire_seconds", latency.get("ingest_to_wire"), INGEST_TO_WIRE),
+        ("riderlive_ingest_to_tick_seconds", latency.get("ingest_to_tick"), INGEST_TO_TICK),
     ):
         if histogram is not None:
             out.extend(histogram.prometheus(name, help_text))
@@ -133,6 +148,12 @@ def render(
         "1 when the tick runs at SCHED_FIFO.",
         [f"riderlive_tick_realtime {int(tick.get('realtime', 0))}"],
     )
+    for key, help_text in PHASE_GAUGES:
+        name = f"riderlive_tick_phase_{key}"
+        metric(name, "gauge", help_text, [f"{name} {tick.get(f'phase_{key}', 0.0)}"])
+    for key, help_text in PHASE_COUNTERS:
+        name = f"riderlive_tick_phase_{key}_total"
+        metric(name, "counter", help_text, [f"{name} {int(tick.get(f'phase_{key}', 0))}"])
     metric(
         "riderlive_clients_connected",
         "gauge",

@@ -81,6 +81,8 @@ def make_setup(
         extra_channels=extra_channels,
         rider_bounds=(tuple(low), tuple(high)),
         saddle_point=config.saddle,
+        phase_lock=config.tick.phase_lock,
+        phase_margin=config.tick.phase_margin,
     )
 
 

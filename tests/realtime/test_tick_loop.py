@@ -62,3 +62,43 @@ def test_a_non_finite_rider_never_leaves_the_tick(loop: TickLoop) -> None:
     first = loop._step(0.0, values, index)
     assert first.driver is Driver.NEUTRAL and first.rider == loop.core.neutral_rider
     assert values[index["nonfinite_outputs"]] == 1
+
+
+def test_the_phase_lock_follows_horse_frames_of_the_driver_only_and_moves_the_clock(loop: TickLoop) -> None:
+    """The tick's edge of ``realtime/phase_lock.py``: the driving producer's horse frames lock
+    the clock's phase; a saddle input never does, and without input the clock is untouched."""
+    from riderlive.realtime import phase_lock
+    from riderlive.realtime.layout import InputKind
+    from riderlive.realtime.pacing import DeadlineClock
+
+    period = 1.0 / loop.setup.rate
+    values = loop.counters.values
+    index = loop.counters.index
+
+    def run(kind: InputKind, driver: Driver, seconds: float = 3.0) -> DeadlineClock:
+        clock = DeadlineClock(period=period, start=loop.setup.start)
+        loop.phase = phase_lock.start(0.0)
+        loop.core.input_kind, loop.core.driver, loop.core.producer = kind, driver, 5
+        frame = 0  # frame k arrives at k * period + 4 ms (engine seconds), taken by the first deadline after it
+        for n in range(1, int(seconds / period)):
+            deadline = clock.deadline(n) - loop.setup.start
+            taken = []
+            while frame * period + 0.004 <= deadline:
+                taken.append(frame * period + 0.004)
+                frame += 1
+            loop._follow_phase(clock, deadline, taken, values)
+        return clock
+
+    clock = run(InputKind.SADDLE, Driver.INPUT)
+    assert clock.start == loop.setup.start and not loop.phase.locked and values[index["phase_slews"]] == 0
+    clock = run(InputKind.HORSE, Driver.NEUTRAL)  # frames of a producer that does not drive
+    assert clock.start == loop.setup.start and not loop.phase.locked
+    clock = run(InputKind.HORSE, Driver.INPUT)
+    assert loop.phase.locked and values[index["phase_locked"]] == 1.0 and values[index["phase_locks"]] == 1
+    assert clock.start - loop.setup.start == pytest.approx(loop.phase.offset, abs=1e-9)
+    # Frames arrive 4 ms into each 10 ms period: the deadlines moved to 4 ms + the margin.
+    assert loop.phase.offset % period == pytest.approx(0.004 + loop.setup.phase_margin, abs=2e-5)
+    assert values[index["phase_lead"]] == pytest.approx(loop.setup.phase_margin, abs=2e-5)
+    status = loop.status()["phase_lock"]
+    assert status["locked"] and status["locks"] == 1 and status["harmonic"] == 1 and status["resultant"] > 0.99
+    assert values[index["phase_slews"]] == loop.phase.slews > 0

@@ -31,6 +31,9 @@ def test_the_example_file_loads_and_matches_the_defaults() -> None:
         ("[ranges]\nchannels = { 'lfhoof.ty' = [0.0, 1.0] }\n", "ranges.channels"),
         ("[input]\nclock_jump = 0.0\n", "input.clock_jump"),
         ("[source]\ngait = 'walk'\nspeed = 4.0\n", "source.speed"),
+        ("[tick]\nrate = 1000.0\nphase_margin = 0.0005\n", "tick.phase_margin"),
+        ("[tick]\nphase_margin = -0.001\n", "tick.phase_margin"),
+        ("[tick]\nphase_lock = 'sometimes'\n", "tick.phase_lock"),
     ],
 )
 def test_errors_name_the_file_and_key(tmp_path: Path, text: str, key: str) -> None:
@@ -62,3 +65,13 @@ def test_a_gait_alone_runs_at_its_own_speed_and_a_speed_must_suit_its_gait(tmp_p
         load_config(path)
     path.write_text("[source]\ngait = 'gallop'\nspeed = 9.0\n")
     assert load_config(path).source.speed == 9.0
+
+
+def test_the_phase_margin_must_be_less_than_half_a_period(tmp_path: Path) -> None:
+    path = tmp_path / "margin.toml"
+    path.write_text("[tick]\nrate = 1000.0\nphase_margin = 0.0005\n")
+    with pytest.raises(ConfigError, match=r"0 <= phase_margin < 0\.000500 s at 1000 Hz"):
+        load_config(path)
+    path.write_text("[tick]\nrate = 1000.0\nphase_margin = 0.0004\n")
+    assert load_config(path).tick.phase_margin == 0.0004
+    assert ServiceConfig().tick.phase_lock is True

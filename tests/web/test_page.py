@@ -80,6 +80,9 @@ def test_latency_panel_shows_the_service_histograms(live_page: PageUnderTest) ->
     assert shown["ingest_to_wire"][0], "no rig: its row is hidden"
     goal = live_page.page.locator("#latency-goal").inner_text()
     assert goal == f"goal p99 ≤ {(answer['tick_period'] + 0.001) * 1e3:.2f} ms"
+    lock = answer["phase_lock"]  # on by default; the page's test server has no producer
+    assert lock is not None and not lock["locked"]
+    assert live_page.page.locator("#latency-phase").inner_text() == "· tick not locked"
 
 
 def _wait_estop(server: Server, engaged: bool, what: str) -> None:
