@@ -100,7 +100,7 @@ async function start() {
     skeletons = sk;
     horseRig = compileRig(sk.horse);
     riderRig = riderOf(sk);
-    if (view) view.renderer.dispose();
+    if (view) view.dispose();
     const canvas = $("scene").cloneNode(false);
     $("scene").replaceWith(canvas);
     view = makeView(sk);
@@ -127,6 +127,7 @@ async function start() {
     for (const b of document.querySelectorAll("[data-view]")) b.classList.toggle("on", b.dataset.view === name);
   };
   page.setView(DEFAULT_VIEW);
+  Object.defineProperty(page, "view", { get: () => view }); // the View (diagnostics: bench/trace_page.py)
   Object.defineProperty(page, "camera", { get: () => (view ? view.camera.position.toArray() : null) });
   $("camera").addEventListener("change", () => view && view.setFollow($("camera").value === "follow"));
   $("exaggeration").addEventListener("input", () => {

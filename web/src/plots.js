@@ -2,7 +2,9 @@
 // LANE_MIN px tall (the box scrolls when they do not fit), a time axis in seconds before
 // now, each lane's unit, a selectable window (up to MAX_WINDOW s), and lanes scaled to
 // their own range or sharing one range per unit. Every channel's history is kept, so a
-// newly chosen channel shows its past at once.
+// newly chosen channel shows its past at once. draw() repaints only when a frame came or
+// a setting or the size changed, with 1 px (hairline) traces: a software 2D canvas strokes
+// those several times faster than wider ones (docs/performance.md, "Previs page").
 
 export const WINDOWS = [2, 5, 10, 30];
 export const MAX_WINDOW = 30;
@@ -29,6 +31,12 @@ export class Plots {
     this.chosen = [];
     this.window = 10;
     this.ownScale = true;
+    this.drawn = null; // what the canvas shows: see draw()
+    // The box's size, kept by a ResizeObserver (no forced layout in draw()).
+    const box = canvas.parentElement;
+    this.boxSize = [box.clientWidth, box.clientHeight];
+    if (typeof ResizeObserver !== "undefined")
+      new ResizeObserver(() => (this.boxSize = [box.clientWidth, box.clientHeight])).observe(box);
   }
 
   push(t, values) {
@@ -92,10 +100,12 @@ export class Plots {
 
   draw() {
     const c = this.canvas;
-    const box = c.parentElement;
-    const w = box.clientWidth;
+    const [w, boxH] = this.boxSize;
     const lanes = Math.max(1, this.chosen.length);
-    const h = Math.max(box.clientHeight, lanes * LANE_MIN + AXIS_H);
+    const h = Math.max(boxH, lanes * LANE_MIN + AXIS_H);
+    const key = `${this.head} ${this.count} ${w} ${h} ${this.window} ${this.ownScale} ${this.chosen.join(",")} ${Object.keys(this.units).length}`;
+    if (key === this.drawn) return;
+    this.drawn = key;
     if (c.width !== w || c.height !== h) {
       c.width = w;
       c.height = h;
@@ -140,7 +150,6 @@ export class Plots {
       hi += pad;
       const yOf = (v) => top + laneH - ((v - lo) / (hi - lo)) * laneH;
       ctx.strokeStyle = this.color(name);
-      ctx.lineWidth = 1.5;
       ctx.beginPath();
       let started = false;
       for (let k = this.count - 1; k >= 0; k--) {
@@ -153,7 +162,6 @@ export class Plots {
         started = true;
       }
       ctx.stroke();
-      ctx.lineWidth = 1;
       const unit = this.units[name] ? ` ${this.units[name]}` : "";
       ctx.textAlign = "right";
       ctx.fillStyle = "#8a939d";

@@ -60,18 +60,26 @@ export class SaddlePanel {
     const pose = frame.saddle.map((v, i) => (i < 3 ? v * this.toMetres : v));
     this.page.saddle = { pose, estimate: frame.estimate || null, values: frame.values }; // values: the frame shown
     AXES.forEach(([name, , unit], i) => {
-      this.cells[name].textContent = unit === "m" ? pose[i].toFixed(3) : pose[i].toFixed(1);
+      const text = unit === "m" ? pose[i].toFixed(3) : pose[i].toFixed(1);
+      if (this.cells[name].textContent !== text) this.cells[name].textContent = text;
     });
     const e = frame.estimate;
     if (!e) {
-      this.estimateRow.innerHTML = `<span class="muted">estimate: the input is not a saddle</span>`;
+      this.setEstimate(`<span class="muted">estimate: the input is not a saddle</span>`);
       return;
     }
     const gait = e.gait || "–";
     const hz = e.stride_hz > 0 ? `${e.stride_hz.toFixed(2)} Hz` : "–";
     const age = e.age === null ? "" : ` · ${(e.age * 1000).toFixed(0)} ms old`;
-    this.estimateRow.innerHTML = `<span class="pill ${e.lock === "locked" ? "live" : "connecting"}" data-lock="${e.lock}">${
+    this.setEstimate(`<span class="pill ${e.lock === "locked" ? "live" : "connecting"}" data-lock="${e.lock}">${
       LOCK_TEXT[e.lock] || e.lock
-    }</span><span data-gait="${gait}">gait ${gait}</span><span>stride ${hz}</span><span class="muted">phase ${e.phase.toFixed(2)}${age}</span>`;
+    }</span><span data-gait="${gait}">gait ${gait}</span><span>stride ${hz}</span><span class="muted">phase ${e.phase.toFixed(2)}${age}</span>`);
+  }
+
+  /** Replace the estimate line only when its text changed (no DOM work, style or layout otherwise). */
+  setEstimate(html) {
+    if (html === this.estimateHtml) return;
+    this.estimateHtml = html;
+    this.estimateRow.innerHTML = html;
   }
 }

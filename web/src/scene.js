@@ -8,14 +8,14 @@ import {
   Color,
   DirectionalLight,
   HemisphereLight,
+  LinearMipmapNearestFilter,
   Mesh,
   MeshBasicMaterial,
-  MeshLambertMaterial,
   PerspectiveCamera,
   PlaneGeometry,
   RepeatWrapping,
   Scene,
-  SRGBColorSpace,
+  ShaderMaterial,
   Vector3,
   WebGLRenderer,
 } from "three";
@@ -40,7 +40,11 @@ export const DEFAULT_VIEW = "perspective";
 export const WRAP = 24;
 const SEGMENT = 0.07;
 
-function groundTexture() {
+const toLinear = (c) => (c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4);
+const toSRGB = (c) => (c <= 0.0031308 ? c * 12.92 : 1.055 * c ** (1 / 2.4) - 0.055);
+
+/** The dirt texture (2 m square), lit by `light` (linear RGB per unit albedo) and sRGB-encoded: drawn as is. */
+function groundTexture(light) {
   const c = document.createElement("canvas");
   c.width = c.height = 256;
   const g = c.getContext("2d");
@@ -56,10 +60,30 @@ function groundTexture() {
   g.fillStyle = "rgba(40,32,24,0.5)"; // a line every metre (the texture is 2 m)
   g.fillRect(0, 0, 256, 2);
   g.fillRect(0, 128, 256, 2);
+  const img = g.getImageData(0, 0, 256, 256);
+  const lut = [light.r, light.g, light.b].map((k) => Uint8Array.from({ length: 256 }, (_, v) => Math.round(255 * toSRGB(Math.min(1, k * toLinear(v / 255))))));
+  for (let i = 0; i < img.data.length; i += 4) for (let k = 0; k < 3; k++) img.data[i + k] = lut[k][img.data[i + k]];
+  g.putImageData(img, 0, 0);
   const t = new CanvasTexture(c);
   t.wrapS = t.wrapT = RepeatWrapping;
-  t.colorSpace = SRGBColorSpace;
+  t.minFilter = LinearMipmapNearestFilter; // one mip level per pixel: half the texture reads of trilinear
   return t;
+}
+
+/**
+ * The ground's material: the lit, sRGB-encoded texture drawn as is. A flat, unshadowed
+ * ground's lighting is one colour (baked into the texture, see flatLight), and skipping the
+ * lighting and the per-pixel sRGB encoding halves what the ground costs a software
+ * rasteriser (SwiftShader), the page's largest single cost there (docs/performance.md).
+ */
+function groundMaterial(tex) {
+  return new ShaderMaterial({
+    uniforms: { map: { value: tex }, uvTransform: { value: tex.matrix } },
+    vertexShader: `uniform mat3 uvTransform; varying vec2 vUv;
+      void main() { vUv = (uvTransform * vec3(uv, 1.0)).xy; gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }`,
+    fragmentShader: `uniform sampler2D map; varying vec2 vUv;
+      void main() { gl_FragColor = vec4(texture2D(map, vUv).rgb, 1.0); }`,
+  });
 }
 
 function blobTexture() {
@@ -103,6 +127,19 @@ class ContactShadows {
   }
 }
 
+/**
+ * The colour a Lambert surface facing `normal` (unit, world) reflects per unit albedo
+ * under the hemisphere light `sky` and the directional light `sun` (no shadows), in the
+ * working (linear) colour space: (hemisphere + sun * cos) / pi, as three.js' Lambert does.
+ */
+export function flatLight(sky, sun, normal) {
+  const up = 0.5 * (normal[0] * sky.position.x + normal[1] * sky.position.y + normal[2] * sky.position.z) / sky.position.length() + 0.5;
+  const hemi = sky.groundColor.clone().lerp(sky.color, up).multiplyScalar(sky.intensity);
+  const d = sun.position.clone().sub(sun.target.position).normalize();
+  const cos = Math.max(0, normal[0] * d.x + normal[1] * d.y + normal[2] * d.z);
+  return hemi.add(sun.color.clone().multiplyScalar(sun.intensity * cos)).multiplyScalar(1 / Math.PI);
+}
+
 export class View {
   constructor(canvas, horseRig, riderRig, { render = "mesh" } = {}) {
     this.canvas = canvas;
@@ -114,13 +151,15 @@ export class View {
     this.camera = new PerspectiveCamera(40, 1, 0.05, 120);
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.enableDamping = false;
-    this.scene.add(new HemisphereLight(0xdfe8ff, 0x4a3c2c, 1.6));
+    const sky = new HemisphereLight(0xdfe8ff, 0x4a3c2c, 1.6);
+    this.scene.add(sky);
     const sun = new DirectionalLight(0xffffff, 1.7);
     sun.position.set(2, 6, -3);
     this.scene.add(sun);
-    this.groundTex = groundTexture();
+    this.groundTex = groundTexture(flatLight(sky, sun, [0, 1, 0]));
     this.groundTex.repeat.set(40, 40);
-    const ground = new Mesh(new PlaneGeometry(80, 80).rotateX(-Math.PI / 2), new MeshLambertMaterial({ map: this.groundTex }));
+    this.groundTex.updateMatrix();
+    const ground = new Mesh(new PlaneGeometry(80, 80).rotateX(-Math.PI / 2), groundMaterial(this.groundTex));
     this.scene.add(ground);
     this.ground = ground;
     this.shadows = new ContactShadows(this.scene, 6);
@@ -135,7 +174,21 @@ export class View {
     this.cloth = new Tubes(this.scene, 2, 12, 0x2b3a55, (s, t) => 0.03 + 0.03 * t);
     this.follow = true;
     this.setView(DEFAULT_VIEW);
+    // The canvas' CSS size, kept by a ResizeObserver: reading clientWidth every frame
+    // would force a style and layout pass each animation frame.
+    this.cssSize = [canvas.clientWidth, canvas.clientHeight];
+    this.observer = typeof ResizeObserver === "undefined" ? null : new ResizeObserver(() => {
+      this.cssSize = [canvas.clientWidth, canvas.clientHeight];
+      this.resize();
+    });
+    if (this.observer) this.observer.observe(canvas);
     this.resize();
+  }
+
+  /** Free the GL context and stop watching the canvas' size. */
+  dispose() {
+    if (this.observer) this.observer.disconnect();
+    this.renderer.dispose();
   }
 
   setView(name) {
@@ -167,8 +220,8 @@ export class View {
 
   resize() {
     const scale = this.scale || 1;
-    const w = Math.round((this.canvas.clientWidth || 640) * scale);
-    const h = Math.round((this.canvas.clientHeight || 360) * scale);
+    const w = Math.round((this.cssSize[0] || 640) * scale);
+    const h = Math.round((this.cssSize[1] || 360) * scale);
     if (this.canvas.width !== w || this.canvas.height !== h) {
       this.renderer.setSize(w, h, false);
       this.camera.aspect = w / h;
@@ -210,7 +263,7 @@ export class View {
     this.shadows.update(spots);
     // A following camera keeps its place relative to the horse; the ground scrolls by the travel.
     this.groundTex.offset.x = this.follow ? (((travel / 2) % 1) + 1) % 1 : 0;
-    this.resize();
+    this.groundTex.updateMatrix();
     this.renderer.render(this.scene, this.camera);
   }
 }
