@@ -304,6 +304,10 @@ async def drive(port: int, args: argparse.Namespace, rate: float, pid: int) -> d
     rig = state["tick"].get("rig")
     if rig:
         print(f"  rig at the end: {rig['state']} {rig.get('fault') or ''}", flush=True)
+    supervision = state.get("supervision") or {}
+    if supervision.get("restarts"):
+        keys = ("restarts", "hangs", "deaths", "last_exit")
+        print(f"  tick restarted (the rig then waits, disarmed): {[supervision.get(k) for k in keys]}", flush=True)
     stop.set()
     producer_stop.set()
     producing.join(10.0)

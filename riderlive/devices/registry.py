@@ -36,6 +36,8 @@ class DeviceInfo:
     """A few lines for the start-up log: the wire budget per tick."""
     input: Literal["rider", "horse"] = "rider"
     """Which frame of the tick the device is driven from (the rig: the rider; a platform: the horse)."""
+    longest_wait_s: float = 0.0
+    """The longest one tick may block in this device's calls (s; a reply awaited to its ceiling)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,8 @@ class DeviceSpec:
     """``rider`` or ``horse``: the frame the tick passes to the device."""
     options: dict[str, Any] = field(default_factory=dict)
     """Kind-specific settings for ``make_plug`` (JSON values), from the service configuration."""
+    longest_wait_s: float = 0.0
+    """:attr:`DeviceInfo.longest_wait_s`: the supervisor does not call a tick hung sooner."""
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -95,7 +99,9 @@ def plan(
                 f"{message}: set tick.rate <= {info.validated_hz:g} (or {section}.rate_policy = 'divide')"
             )
         lines.append(f"{message}: driving it every {divider} ticks ({tick_hz / divider:g} ticks/s)")
-    spec = DeviceSpec(kind, file, port, info.name, divider, divider / tick_hz, info.input, dict(options or {}))
+    spec = DeviceSpec(
+        kind, file, port, info.name, divider, divider / tick_hz, info.input, dict(options or {}), info.longest_wait_s
+    )
     return spec, "\n".join(lines)
 
 

@@ -35,7 +35,7 @@ from riderlive.devices.plug import Motion, Move, Steps, ramp
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
 from riderlive.dynamixel.bringup import arm_watchdog, bring_up, first_spec, read_present, torque_on_here
 from riderlive.dynamixel.readback import Readback, raise_hardware_error
-from riderlive.dynamixel.rig import RigConfig, ServoMap, deg_to_pulses, load_rig, wire_budget
+from riderlive.dynamixel.rig import RigConfig, ServoMap, deg_to_pulses, load_rig, longest_tick_wait_s, wire_budget
 from riderlive.dynamixel.sdkbus import SdkBus
 from riderlive.dynamixel.tables import Item
 
@@ -319,7 +319,7 @@ def describe(file: str, port: str | None) -> DeviceInfo:
     rig = load_rig(file)
     if port:
         rig = rig.with_port(port)
-    return DeviceInfo(rig.name, rig.bus.tick_hz, wire_budget(rig))
+    return DeviceInfo(rig.name, rig.bus.tick_hz, wire_budget(rig), longest_wait_s=longest_tick_wait_s(rig))
 
 
 def make_plug(spec: DeviceSpec) -> RigPlug:

@@ -292,6 +292,16 @@ def read_tick_seconds(rig: RigConfig) -> float:
     return wire + 2.0 * rig.bus.latency_timer_ms / 1000.0
 
 
+def longest_tick_wait_s(rig: RigConfig) -> float:
+    """The longest one tick may legitimately block on this bus (s): a tick with a read
+    whose reply never comes, waited for to the allowance's ceiling (``max_reply_wait_ms``,
+    or ``timeout_margin_ms`` where that is larger) past the expected time. (The next tick
+    drains the line for at most as long, but beats first.) The supervisor's hang detector
+    adds it, so a tick waiting out one lost reply is not a hang."""
+    allowance_ms = max(rig.bus.max_reply_wait_ms, rig.bus.timeout_margin_ms)
+    return read_tick_seconds(rig) + (allowance_ms + 2.0 * rig.bus.latency_timer_ms) / 1000.0
+
+
 def load_rig(path: str | Path) -> RigConfig:
     """Read and validate a rig map; a bare name is looked up in ``config/rigs``."""
     path = Path(path)

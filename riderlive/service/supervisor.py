@@ -9,8 +9,11 @@ The web process supervises the tick process it spawned:
   ``hang_ticks`` periods (SIGSTOP, a loop stuck in a call), but never sooner than
   ``tick.hang_floor_realtime`` (30 ms: up to 150 ticks/s that is within 5 ticks) when
   the tick runs at real-time priority, ``tick.hang_floor`` (0.25 s) when it does not (a
-  loaded machine stalls a normal process for tens of ms: no false restarts). A hung
-  tick is killed (SIGKILL) before anything else touches its bus.
+  loaded machine stalls a normal process for tens of ms: no false restarts), nor sooner
+  than a device's longest legitimate wait plus those periods (``DeviceSpec.longest_wait_s``:
+  a servo reply awaited to its ceiling, 27.5 ms for the default rig bus; before, a tick
+  at 500 Hz waiting out one lost reply was killed as hung at 30 ms).
+  A hung tick is killed (SIGKILL) before anything else touches its bus.
 
 Then the guardian (when devices are configured) parks the devices and releases their
 buses; the supervisor waits for that, then starts the next tick generation after a
@@ -84,6 +87,8 @@ class TickSupervisor:
         """Heartbeat reads of 0 after the generation's first beat (should stay 0; see ``_watch``)."""
         self.period = 1.0 / config.tick.rate
         self.hang_s = (config.tick.hang_ticks - 1.0) * self.period
+        self.device_wait_s = max((d.longest_wait_s for d in link.setup.devices), default=0.0)
+        """The longest a tick may block in a device's call (s): the hang threshold adds it."""
         self.up = True
         self.stopping = False
         self.restarts = 0
@@ -207,7 +212,8 @@ class TickSupervisor:
         """Seconds without a heartbeat that make a tick hung (see the module docstring)."""
         tick = self.config.tick
         realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
-        threshold = max(self.hang_s, tick.hang_floor_realtime if realtime else tick.hang_floor)
+        floor = tick.hang_floor_realtime if realtime else tick.hang_floor
+        threshold = max(self.hang_s + self.device_wait_s, floor)
         first = self._first_beat
         if (first is None or time.perf_counter() - first < WARMUP_S) and not self._a_device_moves():
             threshold = max(threshold, WARMUP_HANG_S)

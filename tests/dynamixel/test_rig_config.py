@@ -19,6 +19,7 @@ from riderlive.dynamixel.rig import (
     ServoMap,
     deg_to_pulses,
     load_rig,
+    longest_tick_wait_s,
     profile_acceleration,
     profile_velocity,
     pulses_to_deg,
@@ -153,6 +154,14 @@ def test_wire_budget_matches_the_protocol() -> None:
     full = load_rig(FULL)  # 24 servos, 1 Mbps, read every 4 ticks: 134 + 502 / 4 bytes
     assert wire_seconds_per_tick(full) == pytest.approx(259.5e-5)
     assert read_tick_seconds(full) == pytest.approx(636e-5 + 2e-3)  # all 636 bytes + 2 x 1 ms latency
+
+
+def test_longest_tick_wait_is_a_read_tick_plus_one_missed_reply() -> None:
+    full = load_rig(FULL)  # max_reply_wait_ms 25 (default) above timeout_margin_ms 2: 25 + 2 x 1 ms latency
+    assert longest_tick_wait_s(full) == pytest.approx(636e-5 + 2e-3 + 27e-3)
+    data = read_toml(FULL)
+    data["bus"]["timeout_margin_ms"] = 40.0  # a floor above the ceiling: the floor is the allowance
+    assert longest_tick_wait_s(rig_from_dict(data)) == pytest.approx(636e-5 + 2e-3 + 42e-3)
 
 
 def test_profile_units() -> None:

@@ -9,6 +9,10 @@ import signal
 import time
 from collections.abc import Callable
 
+import pytest
+
+from riderlive.devices.registry import DeviceSpec
+from riderlive.dynamixel.rig import load_rig, longest_tick_wait_s
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink
 from riderlive.rules import load_preset
@@ -59,6 +63,25 @@ async def _crash_then_start_as_configured() -> None:
         await supervisor.stop()
         link.stop(5.0)
         link.close()
+
+
+def test_the_hang_threshold_waits_out_a_devices_longest_legitimate_wait() -> None:
+    """A tick at 500 Hz waiting out one lost servo reply (30 ms for bench3) is not hung:
+    the threshold is the hang periods plus that wait (the floors set to 0 to see the sum)."""
+    config = ServiceConfig.model_validate(
+        {"tick": {"rate": 500.0, "hang_ticks": 5.0, "hang_floor": 0.0, "hang_floor_realtime": 0.0}}
+    )
+    rig = load_rig("bench3")
+    spec = DeviceSpec("dynamixel", "bench3", None, rig.name, 1, 0.002, longest_wait_s=longest_tick_wait_s(rig))
+    for devices, expected in (((), 4 * 0.002), ((spec,), 4 * 0.002 + longest_tick_wait_s(rig))):
+        link = TickLink(make_setup(config, load_preset(config.tick.preset), devices=devices))
+        try:
+            supervisor = TickSupervisor(link, config, link.drain_notify, lambda status: None)
+            supervisor._first_beat = time.perf_counter() - 60.0  # past the start-up grace
+            assert supervisor.hang_threshold() == pytest.approx(expected)
+        finally:
+            link.close()
+    assert longest_tick_wait_s(rig) > 0.025, "more than the real-time floor of 30 ms minus the hang periods"
 
 
 def test_a_setting_that_kills_the_tick_at_start_is_dropped_not_crash_looped() -> None:
