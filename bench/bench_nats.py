@@ -335,6 +335,11 @@ def main() -> int:
                     print(f"    latched -> torque off on its bus    {quantiles_ms([t.after_latch for t in trials])}")
                     slowest = sorted(round(t.torque_off * 1000, 1) for t in trials)[-5:]
                     print(f"    slowest trials (ms): {slowest}", flush=True)
+                    for live in lives:
+                        sup = live.get("/api/state", headers=AUTH).json().get("supervision") or {}
+                        if sup.get("restarts"):
+                            keys = ("restarts", "hangs", "deaths", "last_exit")
+                            print(f"    a tick restarted (a trial then waits for it): {[sup.get(k) for k in keys]}")
                     lost = heartbeat_loss(lives, emus, probe, stop)
                     print(
                         f"  stage heartbeat stopped -> torque off on every bus: {lost * 1000:.0f} ms "
