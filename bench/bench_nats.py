@@ -135,7 +135,12 @@ def summarize(results: list[dict[str, Any]]) -> tuple[float, float, float]:
     lat = sorted(x * 1000 for r in results for x in r["lat"])
     if not lat:
         return 0.0, float("nan"), float("nan")
-    return received / max(expected, 1), statistics.median(lat), lat[min(len(lat) - 1, int(0.99 * len(lat)))]
+    return received / max(expected, 1), statistics.median(lat), p99(lat)
+
+
+def p99(ordered: list[float]) -> float:
+    """The 99th percentile of an ascending list (its largest value below 100 samples)."""
+    return ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))]
 
 
 def report(label: str, results: list[dict[str, Any]]) -> None:
@@ -240,8 +245,7 @@ def estop_trials(
 
 def quantiles_ms(seconds: list[float]) -> str:
     ms = sorted(s * 1000 for s in seconds)
-    p99 = ms[min(len(ms) - 1, int(0.99 * len(ms)))]
-    return f"p50 {statistics.median(ms):6.2f}  p99 {p99:6.2f}  max {ms[-1]:6.2f} ms"
+    return f"p50 {statistics.median(ms):6.2f}  p99 {p99(ms):6.2f}  max {ms[-1]:6.2f} ms"
 
 
 def reset_all(lives: list[LiveServer], timeout: float = 20.0) -> None:
