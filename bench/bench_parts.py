@@ -8,7 +8,9 @@ median over ``--rounds`` rounds that take every measurement in turn:
 
 - baseline: ``RiderModel.evaluate`` (today's rule evaluation, the live tick's path);
 - parts: what the tick adds (``TickCore._parts``: ``RiderParts.evaluate`` on the
-  published rider and the finite check);
+  published rider and the finite check), the source compiled by numba as the tick runs
+  it (compiled or loaded before timing, as the tick's warm-up does);
+- the same, interpreted (the one source on Python floats: no numba);
 - follow-through, when a preset turns it on (off in ``kuhnel2003``): one
   ``spring_step`` over the 37 rider channels (NumPy), for reference.
 
@@ -52,6 +54,8 @@ def main() -> None:
     params = load_preset("kuhnel2003")
     model = RiderModel(params, scale=DEFAULT_SCALE)
     parts = RiderParts(params)
+    parts.warm()  # as the tick does before its first deadline
+    interpreted = RiderParts(params, compiled=False)
     third = args.frames // 3 + 1
     takes = [generate_gait(g, third / 120.0, 120.0).values for g in ("gallop", "walk", "canter")]
     horse = [list(map(float, row)) for row in np.concatenate(takes)[: args.frames]]
@@ -66,16 +70,21 @@ def main() -> None:
         out = parts.evaluate(horse[i], rider[i])
         return all(map(isfinite, out))
 
+    def python(i: int) -> object:
+        out = interpreted.evaluate(horse[i], rider[i])
+        return all(map(isfinite, out))
+
     state = SpringState(np.zeros(len(rider[0])), np.zeros(len(rider[0])))
     targets = [np.asarray(r) for r in rider]
 
     def follow(i: int) -> object:
         return spring_step(state, targets[i], 1 / 120, 3.0, 0.4)
 
-    results: dict[str, list[float]] = {"rules": [], "parts": [], "follow": []}
+    results: dict[str, list[float]] = {"rules": [], "parts": [], "python": [], "follow": []}
     for _ in range(args.rounds):
         results["rules"].append(per_frame(rules, n))
         results["parts"].append(per_frame(added, n))
+        results["python"].append(per_frame(python, n))
         results["follow"].append(per_frame(follow, n))
     med = {k: statistics.median(v) for k, v in results.items()}
     low = {k: min(v) for k, v in results.items()}
@@ -83,13 +92,15 @@ def main() -> None:
     rows = (
         ("rules", "rules (RiderModel.evaluate, baseline)"),
         ("parts", "rider parts added by the tick"),
+        ("python", "the same parts, interpreted"),
         ("follow", "follow-through when on (spring_step)"),
     )
     print(f"frames {n} (gallop, walk, canter at 120 Hz), rounds {args.rounds}, one core")
     for key, label in rows:
         print(f"{label:40s} {med[key]:7.2f} us/frame  [{low[key]:.2f}-{high[key]:.2f}]")
     verdict = "ok" if med["parts"] <= 5.0 else "OVER"
-    print(f"parts / rules {med['parts'] / med['rules']:.2f}; target parts <= 5 us: {verdict}")
+    print(f"parts / rules {med['parts'] / med['rules']:.2f}, parts / interpreted {med['parts'] / med['python']:.2f}")
+    print(f"target parts <= 5 us: {verdict}")
 
 
 if __name__ == "__main__":

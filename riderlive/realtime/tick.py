@@ -169,7 +169,8 @@ class TickLoop:
             raise ValueError("the tick's extra channels (physics, rider parts) differ from the web process's")
 
     def warm(self) -> None:
-        """Compile or load the physics kernels now, so compile time never lands in a tick."""
+        """Compile or load the rider parts and physics kernels now, so compile time never lands in a tick."""
+        self.core.parts.warm()
         if self.physics is not None:
             self.physics.warm(self.core.neutral_horse, self.core.neutral_rider)
 
@@ -510,7 +511,7 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
 
         signal.signal(signal.SIGTERM, on_term)
     try:
-        # The physics kernels compile (cold cache) or load here: before real-time priority
+        # The parts and physics kernels compile (cold cache) or load here: before real-time priority
         # (a 10-20 s compile at FIFO would starve the web process), before the collector is
         # frozen (compiling makes cyclic garbage) and before the first deadline.
         loop.warm()

@@ -15,12 +15,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from riderlive import fastpath
 from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, generate_gait
 from riderlive.ranges import DEFAULT_RANGES
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
-from riderlive.rules.parts import PartsGeometry, RiderParts, default_geometry
+from riderlive.rules.parts import KNOBS, PartsGeometry, RiderParts, default_geometry, parts_knobs
 from riderlive.skeleton import HORSE_RIG, horse_pose, quat, rider_pose, rider_rig
 from riderlive.skeleton.rig import Rig, bones_from_rows
 
@@ -250,6 +251,71 @@ def test_any_plausible_input_gives_finite_parts(neck: tuple[float, float, float]
     values = PARTS.evaluate(frame, rider)
     assert all(math.isfinite(v) for v in values)
     assert 0.0 <= values[PART["reins.slip"]] < 1e6
+
+
+@pytest.mark.skipif(not fastpath.AVAILABLE, reason="numba is not installed")
+@settings(max_examples=150, deadline=None)
+@given(
+    st.tuples(*(_bounded(n) for n in ("horseNeck.rz", "horseNeck.ry", "horseHead.rz"))),
+    st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=len(RIDER_NAMES), max_size=len(RIDER_NAMES)),
+    st.fixed_dictionaries(
+        {
+            "reins.weight": st.floats(0.0, 1.0),
+            "reins.length_scale": st.floats(0.5, 2.0),
+            "reins.reach": st.floats(0.5, 1.0),
+            "arms.in_gain": st.floats(-10.0, 10.0),
+            "stirrups.weight": st.floats(0.0, 1.0),
+            "stirrups.leather_scale": st.floats(0.5, 1.5),
+        }
+    ),
+    st.sampled_from([1.0, 0.01, 4.0]),
+)
+def test_the_compiled_parts_are_the_python_source_exactly(
+    neck: tuple[float, float, float], rider: list[float], knobs: dict[str, float], metres_per_unit: float
+) -> None:
+    """The live path runs the source compiled by numba: the same floats as the source on Python floats,
+    for any preset values (they reach the compiled function as values, not as compiled-in constants)."""
+    params = THESIS.with_values(knobs)
+    frame = horse(horseNeck_rz=neck[0], horseNeck_ry=neck[1], horseHead_rz=neck[2])
+    compiled = RiderParts(params, metres_per_unit, compiled=True).evaluate(frame, rider)
+    python = RiderParts(params, metres_per_unit, compiled=False).evaluate(frame, rider)
+    assert compiled == python
+    assert all(type(v) is float for v in compiled)
+
+
+@pytest.mark.skipif(not fastpath.AVAILABLE, reason="numba is not installed")
+def test_a_parameter_change_reuses_the_compiled_function() -> None:
+    """A live weight change must not compile (seconds in the tick): only the knobs change; nor may
+    an input of another type (an int)."""
+    changed = THESIS.with_values({"reins.weight": 0.5, "arms.in_gain": 1.5, "stirrups.leather_scale": 0.8})
+    a, b = RiderParts(THESIS, compiled=True), RiderParts(changed, metres_per_unit=0.01, compiled=True)
+    a.warm()
+    b.warm()
+    assert a._one is b._one  # type: ignore[attr-defined]
+    assert len(a._one.signatures) == 1  # type: ignore[attr-defined]
+    frame = horse(horseNeck_rz=-25, lfHoof_ty=0.2)  # an int, as a JSON or msgpack producer may send
+    frame[HORSE_INDEX["horseHead.rz"]] = 10
+    rider = MODEL.evaluate(frame)
+    assert b.evaluate(frame, rider) == RiderParts(changed, 0.01, compiled=False).evaluate(frame, rider)
+    assert len(a._one.signatures) == 1  # type: ignore[attr-defined]  # converted, never compiled in a loop
+
+
+def test_the_knobs_are_the_preset_and_the_skeletons() -> None:
+    geo = default_geometry()
+    assert geo.has_reins and geo.has_stirrups
+    params = THESIS.with_values({"reins.length_scale": 1.5, "stirrups.leather_scale": 0.8})
+    knobs = dict(zip(KNOBS, parts_knobs(params, geo, 0.04), strict=True))
+    assert knobs["metres_per_unit"] == 0.04 and knobs["units_per_metre"] == pytest.approx(25.0, rel=1e-15)
+    assert knobs["arm_gain"] == -THESIS.arms.in_gain and knobs["rein_weight"] == THESIS.reins.weight
+    assert knobs["reach"] == pytest.approx(THESIS.reins.reach * geo.arm_length, rel=1e-15)
+    assert knobs["foot_weight"] == THESIS.stirrups.weight
+    assert knobs["left_leather"] == pytest.approx(0.8 * geo.leathers[0], rel=1e-15)
+    for side, key in enumerate(("left_rein", "right_rein")):
+        # the rest hand to its bit ring: neck joint + poll + ring (all at rest: no rotation), times 1.5
+        ring = [geo.neck[i] + geo.poll[i] + geo.rings[side][i] for i in range(2)] + [geo.neck[2] + geo.rings[side][2]]
+        rest = math.dist(geo.hands[side], ring)
+        assert knobs[key] == pytest.approx(1.5 * rest, rel=1e-12)
+        assert 0.2 < rest < 3.0
 
 
 def test_part_parameters_are_validated() -> None:
