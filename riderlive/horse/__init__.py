@@ -10,7 +10,8 @@
   ``sample(t)`` returns one frame in ``channels.HORSE`` order (metres, degrees) for
   ``t`` in seconds, non-decreasing; ``set_gait(gait, speed=None)`` changes gait or
   speed at any time, ``perform(move)`` starts a movement from the current state,
-  ``play(script)`` follows a :class:`ShotScript` from now on; ``gait``, ``move`` and
+  ``play(script)`` follows a :class:`ShotScript` from now on; ``set_terrain(terrain)``
+  changes the ground ahead (:func:`riderlive.horse.terrain.join`); ``gait``, ``move`` and
   ``speed`` (m/s) report what it is doing. Every channel stays C1
   across every change. A seed turns on seeded stride-to-stride variation.
 - ``generate(script, rate)`` / ``generate_gait(gait, seconds, rate)``: a whole take as
@@ -29,13 +30,15 @@ its height (``riderlive.horse.terrain``).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from riderlive.framefile import FrameTable
 from riderlive.horse.curves import SCALAR
 from riderlive.horse.gaits import GAIT_TABLE, GAITS, WITHERS_HEIGHT, Gait, parse_gait
 from riderlive.horse.model import Model, Perform, SetGait, State, command, initial, step, target_speed, unschedule
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
-from riderlive.horse.terrain import Terrain, TerrainConfig
+from riderlive.horse.terrain import Terrain, TerrainConfig, join
 
 DEFAULT_SCALE = 25.0
 """Thesis rig units per metre (a 1.6 m horse is 40 units tall at the withers)."""
@@ -141,6 +144,19 @@ class ProceduralHorse:
     def play(self, script: ShotScript) -> None:
         """Follow ``script`` from now: its segments replace whatever was queued."""
         self._apply(script)
+
+    def set_terrain(self, terrain: Terrain | None) -> float:
+        """Change the ground to ``terrain`` (None: flat and level) from the last sample on: the
+        ground under the horse stays, the slope eases into the new one over ``TRANSITION`` m
+        (:func:`~riderlive.horse.terrain.join`), so position and pitch stay C1. Returns the
+        distance travelled (m) where the new ground's distance 0 lies (0 before the first sample)."""
+        if self._state is None:
+            self.model = replace(self.model, terrain=terrain)
+            return 0.0
+        at = self._state.x0 + float(self._state.ramp.at(self._t, SCALAR)[2])
+        joined, start = join(self.model.terrain, terrain, at)
+        self.model = replace(self.model, terrain=joined)
+        return start
 
     def _apply(self, cmd: SetGait | Perform | ShotScript, validate: bool = False) -> None:
         if validate and isinstance(cmd, SetGait) and cmd.speed is not None and cmd.gait in GAIT_TABLE:

@@ -13,6 +13,10 @@ The trunk's pitch follows the line through the ground under the hind and the for
 hooves, :data:`HOOF_BASE` apart: the pitch of the chord from ``s - B/2`` to ``s + B/2``.
 On a constant slope that is the slope; where the slope changes it is a moving mean of
 it over the body's length, so the pitch has continuous velocity (C1) even at a knot.
+
+A running horse can change ground (the live service's ``PUT /api/source``): :func:`join`
+keeps the old ground under and behind the horse and eases the slope into the new one
+over :data:`TRANSITION` metres ahead, so its position and pitch carry on (C1).
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy.typing as npt
 import pydantic
 
 from riderlive.configfile import StrictModel
-from riderlive.horse.curves import SCALAR, Ops
+from riderlive.horse.curves import ARRAY, SCALAR, Ops
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -37,6 +41,9 @@ MAX_DISTANCE = 1e5
 HOOF_BASE = 1.25
 """Distance (m) from the hind to the fore hooves' ground contact of the standing horse: the
 default skeleton's (``riderlive.skeleton.horse``, fore hooves at +0.60, hind at -0.65)."""
+TRANSITION = 5.0
+"""Distance (m) over which the slope goes linearly from the old ground's to the new ground's
+when the ground changes under a running horse (:func:`join`): 0.3 s at a gallop, 3 s at a walk."""
 
 
 class TerrainConfig(StrictModel):
@@ -73,10 +80,18 @@ class TerrainConfig(StrictModel):
 
     def terrain(self) -> Terrain | None:
         """The ground (None when it is flat and level: the horse of before, exactly)."""
-        knots = [(0.0, self.slope)] if self.slope is not None else list(self.profile or ())
-        if all(slope == 0.0 for _, slope in knots):
+        knots = np.array([(0.0, self.slope)] if self.slope is not None else self.profile or (), dtype=np.float64)
+        if not knots[:, 1].any():
             return None
-        return Terrain(tuple(d for d, _ in knots), tuple(s for _, s in knots))
+        return Terrain(tuple(knots[:, 0].tolist()), tuple(knots[:, 1].tolist()))
+
+    def describe(self, start: float = 0.0) -> dict[str, Any]:
+        """A short JSON-able account of this ground (a profile by its knot count and length, not
+        its knots), with ``from``: the horse's distance (m) where its distance 0 lies."""
+        if self.slope is not None:
+            return {"kind": "slope", "slope": self.slope, "from": start}
+        profile = self.profile or [(0.0, 0.0)]
+        return {"kind": "profile", "knots": len(profile), "length": profile[-1][0], "from": start}
 
 
 def _sinc(u: Any, ops: Ops) -> Any:
@@ -88,10 +103,12 @@ def _sinc(u: Any, ops: Ops) -> Any:
 
 @dataclass(frozen=True)
 class Terrain:
-    """The ground: slope knots ``distances`` (m, increasing) and ``slopes`` (deg)."""
+    """The ground: slope knots ``distances`` (m, increasing) and ``slopes`` (deg); ``origin``
+    is the world ``(x, y)`` (m) of the first knot."""
 
     distances: tuple[float, ...]
     slopes: tuple[float, ...]
+    origin: tuple[float, float] = (0.0, 0.0)
     _s: FloatArray = field(init=False, repr=False)
     _theta: FloatArray = field(init=False, repr=False)
     _rate: FloatArray = field(init=False, repr=False)
@@ -99,17 +116,18 @@ class Terrain:
     _y: FloatArray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        s = np.asarray(self.distances, dtype=np.float64)
-        theta = np.radians(np.asarray(self.slopes, dtype=np.float64))
+        s = np.fromiter(self.distances, np.float64, len(self.distances))
+        theta = np.radians(np.fromiter(self.slopes, np.float64, len(self.slopes)))
         rate = np.zeros_like(s)  # rad per m; 0 beyond the last knot
         rate[:-1] = np.diff(theta) / np.diff(s)
-        x, y = np.zeros_like(s), np.zeros_like(s)
-        for k in range(1, len(s)):  # the world position at each knot, by the closed form
-            d = s[k] - s[k - 1]
-            half = 0.5 * rate[k - 1] * d
-            mean = theta[k - 1] + half
-            x[k] = x[k - 1] + d * math.cos(mean) * _sinc(half, SCALAR)
-            y[k] = y[k - 1] + d * math.sin(mean) * _sinc(half, SCALAR)
+        # The world position at each knot, by the closed form: sums in knot order from the origin
+        # (vectorised: a 10 000-knot ground is built within a tick when it changes live).
+        d = np.diff(s)
+        half = 0.5 * rate[:-1] * d
+        mean = theta[:-1] + half
+        step = d * _sinc(half, ARRAY)
+        x = np.cumsum(np.concatenate(([self.origin[0]], step * np.cos(mean))))
+        y = np.cumsum(np.concatenate(([self.origin[1]], step * np.sin(mean))))
         for name, value in (("_s", s), ("_theta", theta), ("_rate", rate), ("_x", x), ("_y", y)):
             object.__setattr__(self, name, value)
 
@@ -138,3 +156,39 @@ class Terrain:
         if ops.is_array:
             return x, y, np.degrees(np.arctan2(y1 - y0, x1 - x0))
         return x, y, math.degrees(math.atan2(y1 - y0, x1 - x0))
+
+    def slope_at(self, s: float) -> float:
+        """The slope (deg) at distance ``s``: linear between knots, constant beyond them."""
+        return float(np.interp(s, self._s, self.slopes))
+
+
+FLAT = Terrain((0.0,), (0.0,))
+"""Flat and level ground as a :class:`Terrain` (a horse on it runs as on ``None``)."""
+
+
+def join(old: Terrain | None, new: Terrain | None, at: float) -> tuple[Terrain | None, float]:
+    """The ground after changing from ``old`` to ``new`` under a horse at distance ``at`` (m),
+    and where the new ground's distance 0 lies (m, in the horse's distance).
+
+    The old ground stays up to the fore hooves (``at + HOOF_BASE / 2``: the position and the
+    pitch at ``at`` are unchanged), then the slope goes linearly to the new ground's first
+    slope over :data:`TRANSITION` m, then the new ground follows, its knots shifted to start
+    there. The slope stays continuous, so the pitch stays C1. Knots more than half a body
+    behind the horse are dropped (the first kept one's world position becomes the origin),
+    so changes do not pile up knots. ``(None, 0)`` when both are flat (None).
+    """
+    if old is None and new is None:
+        return None, 0.0
+    old = FLAT if old is None else old
+    new = FLAT if new is None else new
+    fore = at + 0.5 * HOOF_BASE
+    first = max(int(np.searchsorted(old._s, at - 0.5 * HOOF_BASE, side="right")) - 1, 0)
+    kept = old._s[first:] < fore  # vectorised: a long profile joins within a tick
+    ahead = new._s > 0.0
+    start = fore + TRANSITION
+    distances = np.concatenate((old._s[first:][kept], [fore, start], start + new._s[ahead]))
+    slopes = np.concatenate(
+        (np.asarray(old.slopes[first:])[kept], [old.slope_at(fore), new.slopes[0]], np.asarray(new.slopes)[ahead])
+    )
+    origin = (float(old._x[first]), float(old._y[first])) if kept.any() else old.position(fore, SCALAR)
+    return Terrain(tuple(distances.tolist()), tuple(slopes.tolist()), origin), start

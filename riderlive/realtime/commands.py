@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from riderlive.horse.terrain import TerrainConfig
 from riderlive.realtime.core import Mode
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import RuleParams
@@ -23,6 +24,14 @@ class SetGait:
 
     gait: str
     speed: float | None = None
+
+
+@dataclass(frozen=True)
+class SetTerrain:
+    """Change the ground under the procedural horse from now (None: flat and level); the
+    ground under it stays and the slope eases into the new one (``horse.terrain.join``)."""
+
+    terrain: TerrainConfig | None
 
 
 @dataclass(frozen=True)
@@ -119,5 +128,19 @@ class Reply:
     message: str = ""
 
 
-Command = SetMode | SetGait | Perform | SetModel | ProducerGone | EStop | Arm | Disarm | Reset | Reload | Tune | Stop
+Command = (
+    SetMode
+    | SetGait
+    | SetTerrain
+    | Perform
+    | SetModel
+    | ProducerGone
+    | EStop
+    | Arm
+    | Disarm
+    | Reset
+    | Reload
+    | Tune
+    | Stop
+)
 Request = Arm | Disarm | Reset | Reload | Tune

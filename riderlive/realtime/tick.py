@@ -36,7 +36,7 @@ from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.registry import DeviceSpec
-from riderlive.horse import ProceduralHorse
+from riderlive.horse import ProceduralHorse, TerrainConfig
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import latency
 from riderlive.realtime import layout as L
@@ -74,6 +74,8 @@ class TickSetup:
     speed: float | None = None
     """m/s; None: the gait's own speed."""
     seed: int | None = None
+    terrain: TerrainConfig | None = None
+    """The procedural horse's ground (None: flat and level)."""
     mode: Mode = Mode.INPUT
     realtime_priority: bool = True
     spin: float | None = None
@@ -147,7 +149,9 @@ class TickLoop:
         """The phase lock's state (started with the clock in :meth:`run`); no model: off."""
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
-        self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed)
+        ground = setup.terrain  # the procedural horse's ground, described in the status (None: flat)
+        self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed, terrain=ground.terrain() if ground else None)
+        self.terrain = ground.describe() if ground else None
         self.core = TickCore(
             model, setup.timing, self.horse, setup.mode, setup.rider_bounds, saddle_point=setup.saddle_point
         )
@@ -180,6 +184,9 @@ class TickLoop:
             self.core.set_mode(command.mode, now)
         elif isinstance(command, cmd.SetGait):
             self.horse.set_gait(command.gait, command.speed)
+        elif isinstance(command, cmd.SetTerrain):
+            ground = command.terrain or TerrainConfig(slope=0.0)
+            self.terrain = ground.describe(self.horse.set_terrain(ground.terrain()))
         elif isinstance(command, cmd.Perform):
             perform = getattr(self.horse, "perform", None)
             if perform is None:
@@ -239,6 +246,7 @@ class TickLoop:
             "gait": self.horse.gait,
             "move": getattr(self.horse, "move", None),
             "speed": self.horse.speed,
+            "terrain": self.terrain,
             "estop": self.latch.latched,
             "realtime": self.realtime,
             "rate": self.setup.rate,

@@ -24,6 +24,7 @@ from fastapi.staticfiles import StaticFiles
 import riderlive.horse as horse_module
 from riderlive import __version__
 from riderlive.configfile import ConfigError
+from riderlive.horse.terrain import MAX_SLOPE, TRANSITION
 from riderlive.realtime import commands as cmd
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import find_preset, load_preset, shipped_presets
@@ -116,7 +117,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             g.value: {"speed": list(spec.speed), "default": spec.default_speed}
             for g, spec in horse_module.GAIT_TABLE.items()
         }
-        return {"gaits": gaits, "moves": list(horse_module.MOVES)}
+        ground = {"max_slope": MAX_SLOPE, "transition": TRANSITION}  # deg; m over which a new ground eases in
+        return {"gaits": gaits, "moves": list(horse_module.MOVES), "terrain": ground}
 
     @app.post("/api/horse/perform", dependencies=ctl, summary="Ask the procedural horse for a move")
     async def perform(body: PerformRequest) -> dict[str, Any]:

@@ -15,7 +15,7 @@ import pydantic
 from riderlive.bus.config import NatsSection
 from riderlive.channels import Kind, is_known
 from riderlive.configfile import StrictModel, load
-from riderlive.horse import DEFAULT_SCALE, GAITS, gait_speed
+from riderlive.horse import DEFAULT_SCALE, GAITS, TerrainConfig, gait_speed
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 from riderlive.saddle.pose import SaddlePoint
 
@@ -124,6 +124,9 @@ class SourceSection(StrictModel):
     speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
     """m/s within the gait's range; unset: the gait's own speed."""
     seed: int | None = None
+    terrain: TerrainConfig | None = None
+    """``[source.terrain]``: the ground the procedural horse runs on, one of ``slope`` (deg) or
+    ``profile`` (``[[distance m, slope deg], ...]``, from where it starts); unset: flat and level."""
 
     @pydantic.field_validator("gait")
     @classmethod

@@ -23,7 +23,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from riderlive.horse import GAITS, gait_speed
+from riderlive.horse import GAITS, TerrainConfig, gait_speed
 from riderlive.names import NAME_PATTERN
 
 Name = Annotated[str, pydantic.Field(min_length=1, max_length=64, pattern=NAME_PATTERN)]
@@ -40,6 +40,8 @@ class ProceduralSource(Body):
     kind: Literal["procedural"]
     gait: str | None = None
     speed: float | None = pydantic.Field(default=None, ge=0.0, le=20.0)
+    terrain: TerrainConfig | None = None
+    """The ground from now on (``horse.terrain.join``: the slope eases in over 5 m); unset: unchanged."""
 
     @pydantic.field_validator("gait")
     @classmethod

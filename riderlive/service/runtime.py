@@ -16,6 +16,7 @@ import numpy as np
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDLE_NAMES
 from riderlive.devices.registry import DeviceSpec
+from riderlive.horse import TerrainConfig
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
@@ -68,6 +69,7 @@ def make_setup(
         gait=source.gait,
         speed=source.speed,
         seed=source.seed,
+        terrain=source.terrain,
         mode=Mode.PROCEDURAL if source.kind == "procedural" else Mode.INPUT,
         realtime_priority=config.tick.realtime_priority,
         isolation=config.tick.isolation,
@@ -221,9 +223,14 @@ class Service:
             gait, speed = request.get("gait"), request.get("speed")
             if gait is not None:
                 self.link.apply(cmd.SetGait(gait, speed), gait=gait, speed=speed)  # None: the gait's own
+            ground = None if request.get("terrain") is None else TerrainConfig.model_validate(request["terrain"])
+            if ground is not None:  # live, from the horse's next tick; a restarted tick starts on it
+                self.link.apply(cmd.SetTerrain(ground), terrain=ground)
             self.arbiter.selection = "procedural"
             self.link.apply(cmd.SetMode(Mode.PROCEDURAL), mode=Mode.PROCEDURAL)
             self.source = {"kind": "procedural", "gait": gait, "speed": speed}
+            if ground is not None:
+                self.source["terrain"] = ground.model_dump(exclude_none=True)
         elif kind == "live":
             self.arbiter.selection = "live"
             self.link.apply(cmd.SetMode(Mode.INPUT), mode=Mode.INPUT)

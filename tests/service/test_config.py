@@ -75,3 +75,31 @@ def test_the_phase_margin_must_be_less_than_half_a_period(tmp_path: Path) -> Non
     path.write_text("[tick]\nrate = 1000.0\nphase_margin = 0.0004\n")
     assert load_config(path).tick.phase_margin == 0.0004
     assert ServiceConfig().tick.phase_lock is True
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "message"),
+    [
+        ("slope = 45.0", "source.terrain.slope", r"less than or equal to 30 \(got 45\.0\)"),
+        ("slope = nan", "source.terrain.slope", "finite number"),
+        ("profile = [[0, 0], [10, 31]]", "source.terrain.profile", "knot 1: slope must be within -30-30 deg"),
+        ("profile = [[0, 0], [0, 5]]", "source.terrain.profile", "knot 1: distances must increase strictly"),
+        ("profile = []", "source.terrain.profile", "at least 1 item"),
+        ("slope = 5.0\nprofile = [[0, 5]]", "source.terrain", r"exactly one of 'slope' \(deg\) or 'profile'"),
+        ("height = 5.0", "source.terrain.height", "unknown key"),
+    ],
+)
+def test_a_bad_source_terrain_names_file_key_and_range(tmp_path: Path, text: str, key: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[source.terrain]\n{text}\n")
+    with pytest.raises(ConfigError, match=message) as err:
+        load_config(path)
+    assert str(err.value).startswith(f"{path}: {key}: ")
+
+
+def test_the_source_terrain_is_flat_unless_given(tmp_path: Path) -> None:
+    assert ServiceConfig().source.terrain is None
+    path = tmp_path / "hill.toml"
+    path.write_text("[source.terrain]\nprofile = [[0, 0], [20, 8]]\n")
+    terrain = load_config(path).source.terrain
+    assert terrain is not None and terrain.profile == [(0.0, 0.0), (20.0, 8.0)] and terrain.slope is None
