@@ -11,7 +11,8 @@ in the same run and browser, is the same page with today's primitives
 an empty page that only counts animation frames. Target: median >= 55 fps with meshes.
 The page picks its render scale (dynamic resolution, web/src/resolution.js) unless
 ``--scale X`` pins it on the meshes and the primitives pages alike; the seconds spent at
-each scale are reported.
+each scale are reported. Each page runs ``--warmup`` seconds (10) before it is sampled: from
+scale 1, the dynamic resolution reaches its lowest step in 8 s.
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_page.py [--seconds 20] [--scale 1.0]
 
@@ -105,11 +106,12 @@ def _feed(url: str, stop: threading.Event, rate: float) -> None:
                 time.sleep(delay)
 
 
-def sample(page: object, seconds: float) -> tuple[list[float], list[float], list[float]]:
+def sample(page: object, seconds: float, warmup: float = 1.5) -> tuple[list[float], list[float], list[float]]:
+    """One-second samples of (fps, websocket frames/s, render scale) after ``warmup`` seconds."""
     fps: list[float] = []
     rate: list[float] = []
     scale: list[float] = []
-    time.sleep(1.5)
+    time.sleep(warmup)
     for _ in range(int(seconds)):
         time.sleep(1.0)
         f, r, s = page.evaluate("() => [riderlive.fps, riderlive.frameRate || 0, riderlive.renderScale || 1]")  # type: ignore[attr-defined]
@@ -153,6 +155,9 @@ def main() -> int:
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=760)
     ap.add_argument("--scale", type=float, help="pin the render scale (0..1]; default: the page's automatic one")
+    ap.add_argument(
+        "--warmup", type=float, default=10.0, help="seconds before sampling a page (the dynamic resolution settles)"
+    )
     args = ap.parse_args()
     if args.scale is not None and not 0 < args.scale <= 1:
         ap.error(f"--scale {args.scale}: expected a render scale in (0, 1]")
@@ -179,7 +184,7 @@ def main() -> int:
                     page.evaluate("() => riderlive.setView('perspective')")
                     if args.scale is not None:
                         page.evaluate("(s) => riderlive.setRenderScale(s)", args.scale)
-                    out = sample(page, seconds)
+                    out = sample(page, seconds, args.warmup)
                     return (*out, page)
 
                 half = max(2.0, args.seconds / 2)
