@@ -9,8 +9,12 @@ frames per second) once a second. The page draws the skinned meshes; the baselin
 in the same run and browser, is the same page with today's primitives
 (``?render=sticks``), measured before and after (halves of the baseline's seconds), and
 an empty page that only counts animation frames. Target: median >= 55 fps with meshes.
+The page picks its render scale (dynamic resolution, web/src/resolution.js) unless
+``--scale X`` pins it on the meshes and the primitives pages alike; the seconds spent at
+each scale are reported. Each page runs ``--warmup`` seconds (10) before it is sampled: from
+scale 1, the dynamic resolution reaches its lowest step in 8 s.
 
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_page.py [--seconds 20]
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_page.py [--seconds 20] [--scale 1.0]
 
 Pictures for the docs: bench/page_shots.py.
 """
@@ -18,6 +22,7 @@ Pictures for the docs: bench/page_shots.py.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import os
 import signal
@@ -101,11 +106,12 @@ def _feed(url: str, stop: threading.Event, rate: float) -> None:
                 time.sleep(delay)
 
 
-def sample(page: object, seconds: float) -> tuple[list[float], list[float], list[float]]:
+def sample(page: object, seconds: float, warmup: float = 1.5) -> tuple[list[float], list[float], list[float]]:
+    """One-second samples of (fps, websocket frames/s, render scale) after ``warmup`` seconds."""
     fps: list[float] = []
     rate: list[float] = []
     scale: list[float] = []
-    time.sleep(1.5)
+    time.sleep(warmup)
     for _ in range(int(seconds)):
         time.sleep(1.0)
         f, r, s = page.evaluate("() => [riderlive.fps, riderlive.frameRate || 0, riderlive.renderScale || 1]")  # type: ignore[attr-defined]
@@ -137,12 +143,24 @@ def solver_cost(n: int = 2000) -> tuple[float, float, float]:
     return per_call(bone_quaternions, riders), per_call(horse_pose, frames), per_call(model.evaluate, frames)
 
 
+def scale_share(scales: list[float]) -> str:
+    """Seconds at each render scale, largest scale first: '1.00 x12, 0.85 x8'."""
+    counts = collections.Counter(round(s, 2) for s in scales)
+    return ", ".join(f"{s:.2f} x{n}" for s, n in sorted(counts.items(), reverse=True))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=760)
+    ap.add_argument("--scale", type=float, help="pin the render scale (0..1]; default: the page's automatic one")
+    ap.add_argument(
+        "--warmup", type=float, default=10.0, help="seconds before sampling a page (the dynamic resolution settles)"
+    )
     args = ap.parse_args()
+    if args.scale is not None and not 0 < args.scale <= 1:
+        ap.error(f"--scale {args.scale}: expected a render scale in (0, 1]")
 
     with tempfile.TemporaryDirectory() as tmp:
         proc, url = start_server(Path(tmp))
@@ -164,11 +182,13 @@ def main() -> int:
                     page.goto(url + "/" + query)
                     page.wait_for_function("() => window.riderlive && riderlive.connected && riderlive.frames > 10")
                     page.evaluate("() => riderlive.setView('perspective')")
-                    out = sample(page, seconds)
+                    if args.scale is not None:
+                        page.evaluate("(s) => riderlive.setRenderScale(s)", args.scale)
+                    out = sample(page, seconds, args.warmup)
                     return (*out, page)
 
                 half = max(2.0, args.seconds / 2)
-                sticks_fps, _, _, sticks = measure("?render=sticks", half)
+                sticks_fps, _, sticks_scale, sticks = measure("?render=sticks", half)
                 sticks.close()
                 fps, rate, scale, page = measure("", args.seconds)
                 tail_drawn = page.evaluate("() => Object.keys(riderlive.values).some((n) => n.startsWith('tail_'))")
@@ -177,9 +197,10 @@ def main() -> int:
                 state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
                 fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
                 page.close()
-                more, _, _, sticks = measure("?render=sticks", half)
+                more, _, more_scale, sticks = measure("?render=sticks", half)
                 sticks.close()
                 sticks_fps += more
+                sticks_scale += more_scale
                 browser.close()
         finally:
             stop.set()
@@ -198,7 +219,9 @@ def main() -> int:
     print("fps by second " + " ".join(f"{f:.0f}" for f in fps))
     print(f"frames in/s   median {statistics.median(rate):.1f}  min {min(rate):.1f}")
     print(f"JS per animation frame {tick_ms:.2f} ms (pose both skeletons, update the scene, submit GL, plots)")
-    print(f"render scale  median {statistics.median(scale):.2f}  min {min(scale):.2f} (dynamic resolution)")
+    how = f"pinned at {args.scale:g} (--scale)" if args.scale is not None else "automatic: dynamic resolution"
+    print(f"render scale  {how}; seconds at each: {scale_share(scale)}")
+    print(f"              primitives: {scale_share(sticks_scale)}")
     print(f"load average  {os.getloadavg()[0]:.1f} (2 cores, shared)")
     sticks_med = statistics.median(sticks_fps)
     print(f"skinned tail and braid drawn: {tail_drawn}")

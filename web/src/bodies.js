@@ -4,6 +4,7 @@
 
 import { Bone, MeshBasicMaterial, MeshLambertMaterial, Skeleton, SkinnedMesh } from "three";
 import { horseGeometry, riderGeometry } from "./meshes.js";
+import { vertexLitMaterial } from "./vertexlit.js";
 
 function bonesOf(rig) {
   const bones = rig.bones.map((b) => {
@@ -16,8 +17,10 @@ function bonesOf(rig) {
   return bones;
 }
 
-function skinned(geometry, bones, root) {
-  const lit = new MeshLambertMaterial({ vertexColors: true });
+function skinned(geometry, bones, root, lights) {
+  // Lit per vertex (vertexlit.js): on software WebGL, per-pixel Lambert cost the bodies' pixels
+  // several times what an interpolated colour does (docs/performance.md).
+  const lit = lights ? vertexLitMaterial(lights.sky, lights.sun, { vertexColors: true }) : new MeshLambertMaterial({ vertexColors: true });
   const flat = new MeshBasicMaterial({ vertexColors: true });
   const mesh = new SkinnedMesh(geometry, lit);
   mesh.frustumCulled = false; // the bounding sphere is the rest pose's
@@ -29,7 +32,7 @@ function skinned(geometry, bones, root) {
 }
 
 export class Bodies {
-  constructor(scene, horseRig, riderRig, saddleBone = "saddle") {
+  constructor(scene, horseRig, riderRig, lights = null, saddleBone = "saddle") {
     this.horseBones = bonesOf(horseRig);
     this.riderBones = bonesOf(riderRig);
     const horseRoot = this.horseBones[0];
@@ -37,11 +40,11 @@ export class Bodies {
     const saddle = this.horseBones[horseRig.index[saddleBone] ?? 0];
     const riderRoot = this.riderBones[0];
     saddle.add(riderRoot);
-    this.horse = skinned(horseGeometry(horseRig), this.horseBones, horseRoot);
+    this.horse = skinned(horseGeometry(horseRig), this.horseBones, horseRoot, lights);
     scene.add(this.horse);
     // The rider's geometry is in its own frame (the seat at the origin): bound where the
     // saddle's rest puts it.
-    this.rider = skinned(riderGeometry(riderRig), this.riderBones, horseRoot);
+    this.rider = skinned(riderGeometry(riderRig), this.riderBones, horseRoot, lights);
     saddle.getWorldPosition(this.rider.position);
     this.rider.updateMatrixWorld(true);
     this.rider.bind(this.rider.skeleton, this.rider.matrixWorld);

@@ -8,6 +8,7 @@ import { RiderLink } from "./link.js";
 import { emit, on } from "./panels.js";
 import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
+import { DEFAULTS, initial as initialResolution, next as nextResolution, pin as pinResolution, scaleOf } from "./resolution.js";
 import { compileRig, solve } from "./rig.js";
 import { SaddlePanel } from "./saddle.js";
 import { chainPoints, DEFAULT_VIEW, placed, View, VIEWS, WRAP } from "./scene.js";
@@ -105,6 +106,7 @@ async function start() {
     $("scene").replaceWith(canvas);
     view = makeView(sk);
     if (view) view.setView(page.viewName || DEFAULT_VIEW);
+    if (view) view.setScale(page.renderScale || 1);
     if (view && page.platform) view.scene.add(page.platform.group);
   };
   page.solveRider = (values) => solve(riderRig, values).localRotations.flat();
@@ -235,28 +237,28 @@ async function start() {
   page.latency = latency;
   setInterval(() => latency.refresh(), 1000);
 
-  // Dynamic resolution: render fewer pixels while the page runs below 40 fps (a busy
-  // machine, software WebGL), go back up after 3 s above 55 fps.
-  const SCALES = [1, 0.75, 0.5];
-  let scaleStep = 0;
-  let goodSeconds = 0;
-  page.renderScale = 1;
-  let scaleLocked = false;
-  page.setRenderScale = (scale) => {
-    scaleLocked = scale !== null;
-    if (scaleLocked && view) view.setScale((page.renderScale = scale));
+  // Dynamic resolution (resolution.js): the render scale that holds 55 fps, stepping down
+  // after 2 s below it and up after seconds well above it, with backoff; pinned by
+  // setRenderScale(scale), automatic again with setRenderScale(null).
+  let resolution = initialResolution();
+  const showScale = () => {
+    page.renderScale = scaleOf(resolution);
+    page.renderScaleAuto = resolution.pinned === null;
+    if (view) view.setScale(page.renderScale);
+    $("resolution").textContent = view ? `render ${page.renderScale.toFixed(2)}× ${page.renderScaleAuto ? "auto" : "pinned"}` : "";
   };
+  page.setRenderScale = (scale) => {
+    resolution = pinResolution(resolution, scale);
+    showScale();
+  };
+  Object.defineProperty(page, "resolution", { get: () => ({ ...resolution }) }); // the controller's state (diagnostics)
+  page.resolutionUnit = { DEFAULTS, initial: initialResolution, next: nextResolution, pin: pinResolution, scaleOf }; // tests
+  showScale();
   function adaptScale() {
-    if (scaleLocked || !view) return;
-    if (page.fps < 40 && scaleStep < SCALES.length - 1) {
-      scaleStep += 1;
-      goodSeconds = 0;
-    } else if (page.fps > 55 && scaleStep > 0 && ++goodSeconds >= 3) {
-      scaleStep -= 1;
-      goodSeconds = 0;
-    } else return;
-    page.renderScale = SCALES[scaleStep];
-    view.setScale(page.renderScale);
+    if (!view) return;
+    const before = scaleOf(resolution);
+    resolution = nextResolution(resolution, page.fps);
+    if (scaleOf(resolution) !== before) showScale();
   }
 
   /** Pose both skeletons for `values` and draw them. */

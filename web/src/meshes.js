@@ -7,6 +7,15 @@
 
 import { BufferAttribute, BufferGeometry, Color } from "three";
 
+/**
+ * Vertices around each ring: the count a part asks for x DETAIL, at least 6. At previs
+ * distance (a 780x370 px view, the horse ~250 px long) 0.6 keeps the shapes (screenshots
+ * compared by eye) and takes 40 % of the skinned vertices (1776 -> 1064) off SwiftShader's
+ * vertex work (docs/performance.md).
+ */
+export const DETAIL = 0.6;
+const around = (n) => Math.max(6, Math.round(n * DETAIL));
+
 const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
 const addv = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
 const mul = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
@@ -59,7 +68,8 @@ class Builder {
    * A lofted tube through ring centres `c` with half-widths `r` ([along `side`, across])
    * and per-ring skin weights [[bone, w], ...]; closed by cones of `caps` metres.
    */
-  loft({ c, r, skin, color, id = "other", side = [0, 0, 1], segments = 12, caps = [0.02, 0.02] }) {
+  loft({ c, r, skin, color, id = "other", side = [0, 0, 1], segments: seg = 12, caps = [0.02, 0.02] }) {
+    const segments = around(seg);
     const col = new Color(color);
     const idc = new Color(ID_COLORS[id]);
     const n = c.length;
@@ -95,7 +105,7 @@ class Builder {
   }
 
   /** An ellipsoid with semi-axes `radii` along `axis` and two perpendiculars. */
-  ellipsoid({ center, radii, axis = [1, 0, 0], side = [0, 0, 1], skin, color, id = "other", rings = 8, segments = 12 }) {
+  ellipsoid({ center, radii, axis = [1, 0, 0], side = [0, 0, 1], skin, color, id = "other", rings = 6, segments = 12 }) {
     const a = unit(axis);
     const c = [];
     const r = [];
@@ -304,7 +314,7 @@ export function riderGeometry(rig) {
     bld.loft({ c: [addv(at("neck"), [0, -0.04, 0]), at("head")], r: [0.055, 0.05], skin: [[[neck, 1]], [[neck, 0.5], [head, 0.5]]], color: P.skin, id: "rider", segments: 10 });
     const hc = addv(at("head"), [0.01, 0.11, 0]);
     bld.ellipsoid({ center: hc, radii: [0.115, 0.1, 0.085], axis: [0, 1, 0], side: [0, 0, 1], skin: [[head, 1]], color: P.skin, id: "rider" });
-    bld.ellipsoid({ center: addv(hc, [-0.01, 0.035, 0]), radii: [0.1, 0.11, 0.095], axis: [0, 1, 0], side: [0, 0, 1], skin: [[head, 1]], color: P.helmet, id: "rider", rings: 6 });
+    bld.ellipsoid({ center: addv(hc, [-0.01, 0.035, 0]), radii: [0.1, 0.11, 0.095], axis: [0, 1, 0], side: [0, 0, 1], skin: [[head, 1]], color: P.helmet, id: "rider", rings: 4 });
     bld.loft({ c: [addv(hc, [0.08, 0.06, 0]), addv(hc, [0.14, 0.05, 0])], r: [[0.08, 0.012], [0.07, 0.008]], skin: [[[head, 1]], [[head, 1]]], color: P.helmet, id: "rider", segments: 8 });
   }
   for (const s of ["lf", "rt"]) {

@@ -166,7 +166,7 @@ export class View {
     this.horseRig = horseRig;
     this.riderRig = riderRig;
     if (render === "sticks") this.sticks = new Sticks(this.scene, horseRig, riderRig);
-    else this.bodies = new Bodies(this.scene, horseRig, riderRig);
+    else this.bodies = new Bodies(this.scene, horseRig, riderRig, { sky, sun });
     this.tack = render === "sticks" ? null : new Tack(this.scene, horseRig, riderRig);
     this.tail = new Tubes(this.scene, 4, 12, 0x1c1511, (s, t) => (s === 0 ? 0.035 + 0.03 * Math.sin(Math.PI * Math.min(1, t * 1.2)) : 0.018 * (1 - 0.6 * t)));
     this.braid = new Tubes(this.scene, 1, 10, 0x6b4a2a, (s, t) => 0.018 * (1 - 0.5 * t));
