@@ -24,8 +24,8 @@ from bench.serving import burn
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Timing
 from riderlive.realtime.link import TickLink
+from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.tail import physics_channels
-from riderlive.realtime.tick import TickSetup
 from riderlive.rules import RuleParams
 from riderlive.rules.animator import AnimatorLayer
 

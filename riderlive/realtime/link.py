@@ -28,8 +28,9 @@ from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import latency
 from riderlive.realtime import layout as L
+from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.realtime.tick import TickSetup, tick_main
+from riderlive.realtime.tick import tick_main
 
 
 class TickLink:

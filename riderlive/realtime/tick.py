@@ -26,7 +26,6 @@ import signal
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
@@ -35,21 +34,18 @@ import orjson
 from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
-from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import ProceduralHorse, TerrainConfig
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import latency
 from riderlive.realtime import layout as L
-from riderlive.realtime import phase_lock as phase
-from riderlive.realtime.core import Driver, Mode, TickCore, TickResult, Timing
+from riderlive.realtime.core import Driver, TickCore, TickResult
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
+from riderlive.realtime.phase_follow import PhaseFollower
+from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
-from riderlive.rules.params import RuleParams
 from riderlive.saddle import estimate as saddle_estimate
-from riderlive.saddle.pose import SaddlePoint
 
 if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
@@ -57,60 +53,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 _PARTS_AT_REST = (0.0,) * len(PART_NAMES)
 """The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
-
-
-@dataclass(frozen=True)
-class TickSetup:
-    """Everything the tick process needs, picklable for a spawned process."""
-
-    rate: float
-    start: float
-    """perf_counter value that is engine time 0 (CLOCK_MONOTONIC, shared by processes)."""
-    timing: Timing
-    params: RuleParams
-    animator: AnimatorLayer
-    length_scale: float
-    gait: str = "trot"
-    speed: float | None = None
-    """m/s; None: the gait's own speed."""
-    seed: int | None = None
-    terrain: TerrainConfig | None = None
-    """The procedural horse's ground (None: flat and level)."""
-    mode: Mode = Mode.INPUT
-    realtime_priority: bool = True
-    spin: float | None = None
-    """Seconds spun before each deadline; None: 0.25 ms at SCHED_FIFO, 1 ms otherwise."""
-    isolation: str = "process"
-    """``process`` (the design) or ``thread`` (in the web process; a baseline for benchmarks)."""
-    devices: tuple[DeviceSpec, ...] = ()
-    """Devices to drive (planned by the web process: validated, rates fitted)."""
-    park_timeout: float = 5.0
-    """At shutdown, how long the devices may take to park before the tick stops anyway."""
-    generation: int = 1
-    """1 for the first tick of a service, +1 per restart after a crash or a hang."""
-    arm_on_start: str | None = None
-    """``serve --arm``: arm each device once when it first gets to disarmed (first
-    generation only; a restarted tick never re-arms)."""
-    guardian: bool = False
-    """A guardian process watches this tick: arming is refused while it is not running."""
-    latch_name: str | None = None
-    board_name: str | None = None
-    tail: bool = False
-    """Run the tail and braid physics (``riderlive.realtime.tail``) and publish their channels."""
-    physics_file: str | None = None
-    """Physics TOML (None: ``config/physics/tail.toml``)."""
-    extra_channels: tuple[str, ...] = PART_NAMES
-    """Channels appended to each output record after the rider's: the tail's (when on),
-    then the rider parts (``channels.RIDER_PARTS``)."""
-    shm_names: dict[str, str] = field(default_factory=dict)
-    rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
-    """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
-    saddle_point: SaddlePoint = field(default_factory=SaddlePoint)
-    """Where the published saddle pose is taken, and where a saddle input's samples are from."""
-    phase_lock: bool = True
-    """Move the deadlines to just after the driving producer's frames arrive (``realtime/phase_lock.py``)."""
-    phase_margin: float = 0.0003
-    """Seconds: the least time from a frame's expected arrival to the deadline that takes it."""
 
 
 class TickLoop:
@@ -144,9 +86,8 @@ class TickLoop:
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
         self._unsent_rx = -1.0
         """Receive time of the newest input taken but not yet in a goal written to a device (or -1)."""
-        self.phase_model = phase.Model(1.0 / setup.rate, setup.phase_margin) if setup.phase_lock else None
-        self.phase = phase.State()
-        """The phase lock's state (started with the clock in :meth:`run`); no model: off."""
+        self.phase = PhaseFollower(setup.rate, setup.phase_margin, setup.phase_lock)
+        """The phase lock (started with the clock in :meth:`run`)."""
         self.status_blob = SharedBlob(name=names["status"])
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         ground = setup.terrain  # the procedural horse's ground, described in the status (None: flat)
@@ -258,7 +199,7 @@ class TickLoop:
             **self.device_status,
             "physics": None if self.physics is None else self.physics.status(),
             "saddle": self._saddle_status(),
-            "phase_lock": self._phase_status(),
+            "phase_lock": self.phase.status(),
             "events": list(self.events),
         }
 
@@ -270,40 +211,14 @@ class TickLoop:
         source_t = core.saddle.source_time(time.perf_counter() - self.setup.start)
         return saddle_estimate(core.saddle.state, source_t).as_dict()
 
-    def _phase_status(self) -> dict[str, Any] | None:
-        """The phase lock as of its last lock or loss (None when off); the live lead, margin and
-        slews are counters (``/metrics``, ``/api/latency``)."""
-        if self.phase_model is None:
-            return None
-        p = self.phase
-        return {
-            "locked": p.locked,
-            "harmonic": p.harmonic,
-            "resultant": p.resultant,
-            "drift": p.drift,
-            "locks": p.locks,
-            "losses": p.losses,
-            "lost": p.lost or None,
-        }
-
     def _follow_phase(self, clock: DeadlineClock, now: float, arrivals: list[float], values: Any) -> None:
-        """Step the phase lock with the driving producer's frames taken this tick; move the clock."""
-        assert self.phase_model is not None
+        """Step the phase lock with the driving producer's horse frames taken this tick; move the clock."""
         core = self.core
         driving = core.driver is Driver.INPUT and core.input_kind is L.InputKind.HORSE
-        was = self.phase.locked
-        self.phase = phase.step(self.phase_model, self.phase, now, core.producer if driving else -1, arrivals)
-        clock.start += self.phase.shift  # |shift| <= slew * period: the next deadline is that much nearer or later
-        index = self.counters.index
-        lead = phase.lead(self.phase_model, self.phase)
-        values[index["phase_locked"]] = float(self.phase.locked)
-        values[index["phase_lead"]] = lead if math.isfinite(lead) else -1.0
-        values[index["phase_margin"]] = self.phase.margin if math.isfinite(self.phase.margin) else -1.0
-        values[index["phase_resultant"]] = self.phase.resultant
-        values[index["phase_slews"]] = self.phase.slews
-        values[index["phase_locks"]] = self.phase.locks
-        values[index["phase_losses"]] = self.phase.losses
-        self._status_dirty |= self.phase.locked is not was
+        producer = core.producer if driving else -1
+        self._status_dirty |= self.phase.follow(
+            clock, now, producer, arrivals, values=values, index=self.counters.index
+        )
 
     def _publish_status(self) -> None:
         self.status_blob.write(orjson.dumps(self.status()))
@@ -317,7 +232,7 @@ class TickLoop:
         bucket0 = index["lateness_bucket_0"]
         spin = setup.spin if setup.spin is not None else (0.00025 if self.realtime == "fifo" else 0.001)
         clock = DeadlineClock(period=1.0 / setup.rate, start=time.perf_counter(), spin=spin)
-        self.phase = phase.start(clock.start - setup.start)
+        self.phase.start(clock.start - setup.start)
         arrivals: list[float] = []
         status_every = max(1, round(setup.rate / 30.0))
         values[index["realtime"]] = 1.0 if self.realtime == "fifo" else 0.0
@@ -408,7 +323,7 @@ class TickLoop:
             self.outputs.write(record_out)
             with contextlib.suppress(BlockingIOError, BrokenPipeError):
                 os.write(self.notify_fd, b"\x01")
-            if self.phase_model is not None:  # after the output is out: never on the latency path
+            if self.phase.enabled:  # after the output is out: never on the latency path
                 self._follow_phase(clock, now, arrivals, values)
             if result.driver is not last_driver:
                 last_driver = result.driver

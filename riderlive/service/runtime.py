@@ -22,7 +22,7 @@ from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
 from riderlive.realtime.latency import LatencySnapshot
 from riderlive.realtime.link import TickLink
-from riderlive.realtime.tick import TickSetup
+from riderlive.realtime.setup import TickSetup
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset

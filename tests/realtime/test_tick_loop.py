@@ -11,8 +11,9 @@ import pytest
 
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, TickResult, Timing
+from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.realtime.tick import TickLoop, TickSetup
+from riderlive.realtime.tick import TickLoop
 from riderlive.rules import RuleParams
 from riderlive.rules.animator import AnimatorLayer
 
@@ -67,7 +68,6 @@ def test_a_non_finite_rider_never_leaves_the_tick(loop: TickLoop) -> None:
 def test_the_phase_lock_follows_horse_frames_of_the_driver_only_and_moves_the_clock(loop: TickLoop) -> None:
     """The tick's edge of ``realtime/phase_lock.py``: the driving producer's horse frames lock
     the clock's phase; a saddle input never does, and without input the clock is untouched."""
-    from riderlive.realtime import phase_lock
     from riderlive.realtime.layout import InputKind
     from riderlive.realtime.pacing import DeadlineClock
 
@@ -77,7 +77,7 @@ def test_the_phase_lock_follows_horse_frames_of_the_driver_only_and_moves_the_cl
 
     def run(kind: InputKind, driver: Driver, seconds: float = 3.0) -> DeadlineClock:
         clock = DeadlineClock(period=period, start=loop.setup.start)
-        loop.phase = phase_lock.start(0.0)
+        loop.phase.start(0.0)
         loop.core.input_kind, loop.core.driver, loop.core.producer = kind, driver, 5
         frame = 0  # frame k arrives at k * period + 4 ms (engine seconds), taken by the first deadline after it
         for n in range(1, int(seconds / period)):
@@ -90,15 +90,15 @@ def test_the_phase_lock_follows_horse_frames_of_the_driver_only_and_moves_the_cl
         return clock
 
     clock = run(InputKind.SADDLE, Driver.INPUT)
-    assert clock.start == loop.setup.start and not loop.phase.locked and values[index["phase_slews"]] == 0
+    assert clock.start == loop.setup.start and not loop.phase.state.locked and values[index["phase_slews"]] == 0
     clock = run(InputKind.HORSE, Driver.NEUTRAL)  # frames of a producer that does not drive
-    assert clock.start == loop.setup.start and not loop.phase.locked
+    assert clock.start == loop.setup.start and not loop.phase.state.locked
     clock = run(InputKind.HORSE, Driver.INPUT)
-    assert loop.phase.locked and values[index["phase_locked"]] == 1.0 and values[index["phase_locks"]] == 1
-    assert clock.start - loop.setup.start == pytest.approx(loop.phase.offset, abs=1e-9)
+    assert loop.phase.state.locked and values[index["phase_locked"]] == 1.0 and values[index["phase_locks"]] == 1
+    assert clock.start - loop.setup.start == pytest.approx(loop.phase.state.offset, abs=1e-9)
     # Frames arrive 4 ms into each 10 ms period: the deadlines moved to 4 ms + the margin.
-    assert loop.phase.offset % period == pytest.approx(0.004 + loop.setup.phase_margin, abs=2e-5)
+    assert loop.phase.state.offset % period == pytest.approx(0.004 + loop.setup.phase_margin, abs=2e-5)
     assert values[index["phase_lead"]] == pytest.approx(loop.setup.phase_margin, abs=2e-5)
     status = loop.status()["phase_lock"]
     assert status["locked"] and status["locks"] == 1 and status["harmonic"] == 1 and status["resultant"] > 0.99
-    assert values[index["phase_slews"]] == loop.phase.slews > 0
+    assert values[index["phase_slews"]] == loop.phase.state.slews > 0
