@@ -46,6 +46,7 @@ deadline (:meth:`RiderParts.warm`).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -59,6 +60,8 @@ from riderlive.channels import RIDER_INDEX, RIDER_PART_NAMES
 from riderlive.rules.params import RuleParams
 from riderlive.rules.parts_geometry import PartsGeometry, default_geometry
 from riderlive.skeleton.quat import add, norm, sub
+
+log = logging.getLogger(__name__)
 
 PART_INPUTS: tuple[str, ...] = ("horseNeck.rz", "horseNeck.ry", "horseHead.rz")
 """The horse channels the parts read (degrees), besides the rules' output."""
@@ -335,8 +338,17 @@ class RiderParts:
         set_ = object.__setattr__
 
         def first(*args: Any) -> tuple[Any, ...]:
-            """The first frame compiles or loads the compiled function (see :meth:`warm`), then stands aside."""
-            one = compiled_parts(geometry, neutral)
+            """The first frame compiles or loads the compiled function (see :meth:`warm`), then stands aside.
+
+            Where numba cannot (no writable cache directory, a compiler error), the same
+            source runs interpreted: the same values, ~7 us a frame instead of ~3; logged."""
+            try:
+                one = compiled_parts(geometry, neutral)
+            except Exception as exc:  # numba's errors have no common base; the parts must go on
+                log.warning("rider parts: not compiled (%s: %s); running them interpreted", type(exc).__name__, exc)
+                one = make_parts(geometry, SCALAR, neutral)
+                args = (knobs, *args[1:])
+                set_(self, "_one_knobs", knobs)
             set_(self, "_one", one)
             return one(*args)
 

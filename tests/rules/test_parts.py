@@ -300,6 +300,24 @@ def test_a_parameter_change_reuses_the_compiled_function() -> None:
     assert len(a._one.signatures) == 1  # type: ignore[attr-defined]  # converted, never compiled in a loop
 
 
+def test_parts_that_cannot_be_compiled_run_interpreted(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No writable cache directory for numba (a read-only install), or a compiler error: the tick
+    must still start, with the same values from the same source, interpreted."""
+    from riderlive.rules import parts as parts_module
+
+    def cannot(*args: object) -> None:
+        raise RuntimeError("cannot cache function 'parts': no locator available")
+
+    monkeypatch.setattr(parts_module, "compiled_parts", cannot)
+    unlucky = RiderParts(THESIS, compiled=True)
+    unlucky.warm()
+    frame = horse(horseNeck_rz=-40.0, horseHead_rz=20.0, lfHoof_ty=0.2)
+    rider = MODEL.evaluate(frame)
+    values = unlucky.evaluate(frame, rider)
+    assert values == RiderParts(THESIS, compiled=False).evaluate(frame, rider)
+    assert all(type(v) is float for v in values) and any(values)
+
+
 def test_the_knobs_are_the_preset_and_the_skeletons() -> None:
     geo = default_geometry()
     assert geo.has_reins and geo.has_stirrups
