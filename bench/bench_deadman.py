@@ -96,7 +96,7 @@ class Rig:
                     return
                 print(f"  (arm refused, retrying: {answer.text})", flush=True)
             except SystemExit as exc:
-                print(f"  (no start, retrying: {str(exc)[:200]})", flush=True)
+                print(f"  (no start, retrying: {str(exc)[-1500:]})", flush=True)
             self.retries += 1
             time.sleep(1.0)
         raise SystemExit("the rig could not be armed")
