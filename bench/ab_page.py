@@ -18,18 +18,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import statistics
-import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
 
-from bench_page import feed, start_server
-from playwright.sync_api import sync_playwright
-
-from riderlive.web import CHROMIUM, CHROMIUM_ARGS
+from bench_page import served
 
 TICKS = os.sysconf("SC_CLK_TCK")
 COUNTER = """() => { window.__frames = 0;
@@ -88,23 +82,11 @@ def main() -> int:
     args = ap.parse_args()
     results: dict[str, list[tuple[float, float]]] = {q: [] for q in args.queries}
     loads = []
-    with tempfile.TemporaryDirectory() as tmp:
-        proc, url = start_server(Path(tmp))
-        stop = threading.Event()
-        errors: list[str] = []
-        threading.Thread(target=feed, args=(url, stop, errors), daemon=True).start()
-        try:
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
-                for r in range(args.rounds):
-                    for q in args.queries if r % 2 == 0 else args.queries[::-1]:
-                        results[q].append(measure(browser, url, q, args, proc.pid))
-                        loads.append(os.getloadavg()[0])
-                browser.close()
-        finally:
-            stop.set()
-            proc.send_signal(signal.SIGINT)
-            proc.wait(10)
+    with served() as (url, pid, errors, browser):
+        for r in range(args.rounds):
+            for q in args.queries if r % 2 == 0 else args.queries[::-1]:
+                results[q].append(measure(browser, url, q, args, pid))
+                loads.append(os.getloadavg()[0])
     load = f"load average {min(loads):.1f}-{max(loads):.1f}"
     print(f"render scale {args.scale:g}, {args.rounds} rounds x {args.seconds:g} s, {load}")
     for q, rs in results.items():

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import json
 import os
 import signal
@@ -34,10 +35,11 @@ import tempfile
 import threading
 import time
 import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-from playwright.sync_api import ViewportSize, sync_playwright
+from playwright.sync_api import Browser, ViewportSize, sync_playwright
 from websockets.sync.client import connect
 
 import riderlive
@@ -106,6 +108,38 @@ def _feed(url: str, stop: threading.Event, rate: float) -> None:
                 time.sleep(delay)
 
 
+class Served(NamedTuple):
+    """What :func:`served` yields."""
+
+    url: str
+    pid: int
+    """The service's process."""
+    feed_errors: list[str]
+    """Why the 120 Hz producer stopped, if it did."""
+    browser: Browser
+
+
+@contextlib.contextmanager
+def served(fed: bool = True) -> Iterator[Served]:
+    """The service (:func:`start_server`, in a temporary directory), the procedural horse streamed
+    into it at 120 Hz when ``fed`` (:func:`feed`), and headless Chromium; all stopped after."""
+    with tempfile.TemporaryDirectory() as tmp:
+        proc, url = start_server(Path(tmp))
+        stop = threading.Event()
+        errors: list[str] = []
+        if fed:
+            threading.Thread(target=feed, args=(url, stop, errors), daemon=True).start()
+        try:
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
+                yield Served(url, proc.pid, errors, browser)
+                browser.close()
+        finally:
+            stop.set()
+            proc.send_signal(signal.SIGINT)
+            proc.wait(15)
+
+
 def sample(page: object, seconds: float, warmup: float = 1.5) -> tuple[list[float], list[float], list[float]]:
     """One-second samples of (fps, websocket frames/s, render scale) after ``warmup`` seconds."""
     fps: list[float] = []
@@ -162,50 +196,37 @@ def main() -> int:
     if args.scale is not None and not 0 < args.scale <= 1:
         ap.error(f"--scale {args.scale}: expected a render scale in (0, 1]")
 
-    with tempfile.TemporaryDirectory() as tmp:
-        proc, url = start_server(Path(tmp))
-        stop = threading.Event()
-        feed_errors: list[str] = []
-        producer = threading.Thread(target=feed, args=(url, stop, feed_errors), daemon=True)
-        producer.start()
-        try:
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
-                viewport: ViewportSize = {"width": args.width, "height": args.height}
-                blank = browser.new_page(viewport=viewport)
-                blank.set_content(BLANK)
-                base_fps, _, _ = sample(blank, min(args.seconds, 8))
-                blank.close()
+    with served() as (url, _, feed_errors, browser):
+        viewport: ViewportSize = {"width": args.width, "height": args.height}
+        blank = browser.new_page(viewport=viewport)
+        blank.set_content(BLANK)
+        base_fps, _, _ = sample(blank, min(args.seconds, 8))
+        blank.close()
 
-                def measure(query: str, seconds: float) -> tuple[list[float], list[float], list[float], Any]:
-                    page = browser.new_page(viewport=viewport)
-                    page.goto(url + "/" + query)
-                    page.wait_for_function("() => window.riderlive && riderlive.connected && riderlive.frames > 10")
-                    page.evaluate("() => riderlive.setView('perspective')")
-                    if args.scale is not None:
-                        page.evaluate("(s) => riderlive.setRenderScale(s)", args.scale)
-                    out = sample(page, seconds, args.warmup)
-                    return (*out, page)
+        def measure(query: str, seconds: float) -> tuple[list[float], list[float], list[float], Any]:
+            page = browser.new_page(viewport=viewport)
+            page.goto(url + "/" + query)
+            page.wait_for_function("() => window.riderlive && riderlive.connected && riderlive.frames > 10")
+            page.evaluate("() => riderlive.setView('perspective')")
+            if args.scale is not None:
+                page.evaluate("(s) => riderlive.setRenderScale(s)", args.scale)
+            out = sample(page, seconds, args.warmup)
+            return (*out, page)
 
-                half = max(2.0, args.seconds / 2)
-                sticks_fps, _, sticks_scale, sticks = measure("?render=sticks", half)
-                sticks.close()
-                fps, rate, scale, page = measure("", args.seconds)
-                tail_drawn = page.evaluate("() => Object.keys(riderlive.values).some((n) => n.startsWith('tail_'))")
-                driver = page.evaluate("() => riderlive.driver")
-                tick_ms = page.evaluate("() => riderlive.tickMs")
-                state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
-                fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
-                page.close()
-                more, _, more_scale, sticks = measure("?render=sticks", half)
-                sticks.close()
-                sticks_fps += more
-                sticks_scale += more_scale
-                browser.close()
-        finally:
-            stop.set()
-            proc.send_signal(signal.SIGINT)
-            proc.wait(10)
+        half = max(2.0, args.seconds / 2)
+        sticks_fps, _, sticks_scale, sticks = measure("?render=sticks", half)
+        sticks.close()
+        fps, rate, scale, page = measure("", args.seconds)
+        tail_drawn = page.evaluate("() => Object.keys(riderlive.values).some((n) => n.startsWith('tail_'))")
+        driver = page.evaluate("() => riderlive.driver")
+        tick_ms = page.evaluate("() => riderlive.tickMs")
+        state = json.loads(urllib.request.urlopen(url + "/api/state", timeout=5).read())
+        fed = sum(p["accepted"] for p in state["arbitration"]["producers"])
+        page.close()
+        more, _, more_scale, sticks = measure("?render=sticks", half)
+        sticks.close()
+        sticks_fps += more
+        sticks_scale += more_scale
 
     rider_us, horse_us, rules_us = solver_cost()
     med = statistics.median(fps)

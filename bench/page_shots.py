@@ -14,18 +14,13 @@ import argparse
 import base64
 import io
 import json
-import signal
-import tempfile
 import time
 import urllib.request
 from pathlib import Path
 from typing import Any
 
-from bench_page import start_server
+from bench_page import served
 from PIL import Image
-from playwright.sync_api import sync_playwright
-
-from riderlive.web import CHROMIUM, CHROMIUM_ARGS
 
 GAITS = {"walk": 1.6, "trot": 4.0, "canter": 6.0, "gallop": 11.0}
 MOVES = {  # move: (gait it starts from, pitch in degrees that marks the moment: > if positive, < if negative)
@@ -56,42 +51,34 @@ def main() -> int:
     ap.add_argument("--moves-only", action="store_true", help="skip the gaits")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        proc, url = start_server(Path(tmp))
-        try:
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
-                page = browser.new_page(viewport={"width": 1200, "height": 800})
-                page.goto(url + "/")
-                page.wait_for_function("() => window.riderlive && riderlive.frames > 10")
-                page.evaluate("riderlive.setRenderScale(1)")
-                page.evaluate("riderlive.setView('perspective')")
-                for gait, speed in GAITS.items() if not args.moves_only else ():
-                    rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": gait, "speed": speed})
-                    time.sleep(2.5)  # the blend into the gait
-                    save(page, args.out / f"page_gait_{gait}.png")
-                page.evaluate("riderlive.setView('side')")
-                for move, (gait, pitch) in MOVES.items():
-                    rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": gait, "speed": GAITS[gait]})
-                    time.sleep(2.5)
-                    rest(url, "POST", "/api/horse/perform", {"move": move})
-                    test = f"> {pitch}" if pitch > 0 else f"< {pitch}"
-                    page.wait_for_function(f"() => riderlive.values['rearPivot.rz'] {test}", timeout=15000)
-                    save(page, args.out / f"page_move_{move}.png")
-                rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": "trot", "speed": 4.0})
-                time.sleep(2.5)
-                for view in VIEWS:
-                    page.evaluate(f"riderlive.setView('{view}')")
-                    time.sleep(0.3)
-                    save(page, args.out / f"page_view_{view}.png")
-                page.evaluate("riderlive.setView('perspective')")
-                page.screenshot(path=str(args.out / "page.png"))
-                Image.open(args.out / "page.png").convert("RGB").quantize(colors=128).save(args.out / "page.png")
-                print(f"wrote {args.out / 'page.png'}")
-                browser.close()
-        finally:
-            proc.send_signal(signal.SIGINT)
-            proc.wait(15)
+    with served(fed=False) as (url, _, _, browser):
+        page = browser.new_page(viewport={"width": 1200, "height": 800})
+        page.goto(url + "/")
+        page.wait_for_function("() => window.riderlive && riderlive.frames > 10")
+        page.evaluate("riderlive.setRenderScale(1)")
+        page.evaluate("riderlive.setView('perspective')")
+        for gait, speed in GAITS.items() if not args.moves_only else ():
+            rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": gait, "speed": speed})
+            time.sleep(2.5)  # the blend into the gait
+            save(page, args.out / f"page_gait_{gait}.png")
+        page.evaluate("riderlive.setView('side')")
+        for move, (gait, pitch) in MOVES.items():
+            rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": gait, "speed": GAITS[gait]})
+            time.sleep(2.5)
+            rest(url, "POST", "/api/horse/perform", {"move": move})
+            test = f"> {pitch}" if pitch > 0 else f"< {pitch}"
+            page.wait_for_function(f"() => riderlive.values['rearPivot.rz'] {test}", timeout=15000)
+            save(page, args.out / f"page_move_{move}.png")
+        rest(url, "PUT", "/api/source", {"kind": "procedural", "gait": "trot", "speed": 4.0})
+        time.sleep(2.5)
+        for view in VIEWS:
+            page.evaluate(f"riderlive.setView('{view}')")
+            time.sleep(0.3)
+            save(page, args.out / f"page_view_{view}.png")
+        page.evaluate("riderlive.setView('perspective')")
+        page.screenshot(path=str(args.out / "page.png"))
+        Image.open(args.out / "page.png").convert("RGB").quantize(colors=128).save(args.out / "page.png")
+        print(f"wrote {args.out / 'page.png'}")
     return 0
 
 

@@ -17,17 +17,12 @@ from __future__ import annotations
 import argparse
 import collections
 import json
-import signal
-import tempfile
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
-from bench_page import feed, start_server
-from playwright.sync_api import sync_playwright
-
-from riderlive.web import CHROMIUM, CHROMIUM_ARGS
+from bench_page import served
 
 CATEGORIES = [
     "devtools.timeline",
@@ -102,34 +97,24 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--save", type=Path, help="write each trace here (chrome://tracing, Perfetto)")
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        proc, url = start_server(Path(tmp))
-        stop = threading.Event()
-        errors: list[str] = []
-        threading.Thread(target=feed, args=(url, stop, errors), daemon=True).start()
-        try:
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS))
-                for query in args.queries:
-                    page = browser.new_page(viewport={"width": 1280, "height": 760})
-                    page.goto(url + "/" + query)
-                    live = "() => window.riderlive && riderlive.connected && riderlive.frames > 10"
-                    page.wait_for_function(live, timeout=120_000)
-                    page.evaluate("() => { riderlive.setView('perspective'); riderlive.setRenderScale(0.5); }")
-                    time.sleep(3)
-                    events = trace(page, args.seconds)
-                    print(f"\n== page /{query} (meshes unless ?render=sticks)")
-                    print("\n".join(per_thread(events)))
-                    if args.save:
-                        args.save.mkdir(parents=True, exist_ok=True)
-                        name = "".join(c if c.isalnum() else "_" for c in query) or "meshes"
-                        (args.save / f"trace_{name}.json").write_text(json.dumps({"traceEvents": events}))
-                    page.close()
-                browser.close()
-        finally:
-            stop.set()
-            proc.send_signal(signal.SIGINT)
-            proc.wait(10)
+    with served() as (url, _, errors, browser):
+        for query in args.queries:
+            page = browser.new_page(viewport={"width": 1280, "height": 760})
+            page.goto(url + "/" + query)
+            live = "() => window.riderlive && riderlive.connected && riderlive.frames > 10"
+            page.wait_for_function(live, timeout=120_000)
+            page.evaluate("() => { riderlive.setView('perspective'); riderlive.setRenderScale(0.5); }")
+            time.sleep(3)
+            events = trace(page, args.seconds)
+            print(f"\n== page /{query} (meshes unless ?render=sticks)")
+            print("\n".join(per_thread(events)))
+            if args.save:
+                args.save.mkdir(parents=True, exist_ok=True)
+                name = "".join(c if c.isalnum() else "_" for c in query) or "meshes"
+                (args.save / f"trace_{name}.json").write_text(json.dumps({"traceEvents": events}))
+            page.close()
+    if errors:
+        print(f"producer failed: {errors[0]}")
     return 0
 
 
