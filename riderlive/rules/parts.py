@@ -59,7 +59,6 @@ import numpy as np
 from riderlive.channels import RIDER_INDEX, RIDER_PART_NAMES
 from riderlive.rules.params import RuleParams
 from riderlive.rules.parts_geometry import PartsGeometry, default_geometry
-from riderlive.skeleton.quat import add, norm, sub
 
 log = logging.getLogger(__name__)
 
@@ -122,27 +121,21 @@ def parts_knobs(p: RuleParams, geometry: PartsGeometry, metres_per_unit: float =
     """The values in :data:`KNOBS` order for preset ``p`` on ``geometry`` in a unit of ``metres_per_unit``.
 
     A parameter change changes only these (not the compiled function: :func:`make_parts`).
-    Rein lengths are each rest hand's distance to its bit ring with the neck and head at
-    rest, times ``reins.length_scale``; leathers the skeleton's, times ``stirrups.leather_scale``.
+    Rein lengths are the skeletons' (``geometry.reins``) times ``reins.length_scale``;
+    leathers the skeleton's, times ``stirrups.leather_scale``.
     """
     m = metres_per_unit
     if not (math.isfinite(m) and m > 0.0):
         raise ValueError(f"metres_per_unit must be a finite number > 0, got {m!r}")
-    reins = [1.0, 1.0]  # never divided by 0 when the reins are off
-    if geometry.has_reins:
-        assert geometry.neck is not None
-        px, py, _ = geometry.poll
-        for side, ((gx, gy, gz), hand) in enumerate(zip(geometry.rings, geometry.hands, strict=True)):
-            bit = add(geometry.neck, (px + gx, py + gy, gz))
-            reins[side] = norm(sub(hand, bit)) * p.reins.length_scale
+    reins = geometry.reins if geometry.has_reins else (1.0, 1.0)  # never divided by 0 when the reins are off
     return (
         m,
         1.0 / m,
         -p.arms.in_gain,
         p.reins.weight,
         p.reins.reach * geometry.arm_length,
-        reins[0],
-        reins[1],
+        reins[0] * p.reins.length_scale,
+        reins[1] * p.reins.length_scale,
         p.stirrups.weight,
         geometry.leathers[0] * p.stirrups.leather_scale,
         geometry.leathers[1] * p.stirrups.leather_scale,

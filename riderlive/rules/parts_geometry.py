@@ -44,6 +44,8 @@ class PartsGeometry:
     lean_pivot: Vec3 = (0.0, 0.0, 0.0)
     """Where the trunk's forward lean turns the shoulders (the rider's ``lower_back`` joint)."""
     arm_length: float = 0.0
+    reins: tuple[float, float] = (1.0, 1.0)
+    """Each rest hand's distance to its bit ring (neck and head at rest): the reins' rest lengths."""
     ankles: tuple[Vec3, Vec3] | None = None
     """The rider's rest ankles (the leg IK's end); None: no stirrups."""
     centres: tuple[Vec3, Vec3] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -95,9 +97,10 @@ class PartsGeometry:
                 sub(r_rest["lf_hand"], r_rest["lf_forearm"])
             )
             rings = (h_bones["leftRein"].offset, h_bones["rightRein"].offset)
-            reins = [
-                norm(sub(hand, sub(h_rest[n], seat))) for hand, n in zip(hands, ("leftRein", "rightRein"), strict=True)
-            ]
+            reins = (
+                norm(sub(hands[0], sub(h_rest["leftRein"], seat))),
+                norm(sub(hands[1], sub(h_rest["rightRein"], seat))),
+            )
             if not _within(arm, ARM_LENGTH_RANGE) or not all(_within(r, REIN_LENGTH_RANGE) for r in reins):
                 notes.append(
                     f"absurd rein or arm length (reins {reins[0]:.3g}, {reins[1]:.3g} m, arm {arm:.3g} m): "
@@ -112,6 +115,7 @@ class PartsGeometry:
                     shoulders=shoulders,
                     lean_pivot=r_rest["lower_back"],
                     arm_length=arm,
+                    reins=reins,
                 )
         stirrup_bones = ("leftStirrupBar", "leftStirrup", "rightStirrupBar", "rightStirrup")
         leg_bones = tuple(f"{p}_{b}" for p in ("lf", "rt") for b in ("foot", "toes"))
