@@ -40,6 +40,11 @@ def _frame_step(pair: TakePair) -> float:
 
 def check_overlap(pair: TakePair, search: float) -> None:
     """Raise :class:`FitInputError` unless the takes share :data:`MIN_OVERLAP` s at every offset within ``search``."""
+    for take, t in ((pair.horse.name, pair.horse.t), (pair.rider.name, pair.rider.t)):
+        if t[-1] - t[0] < MIN_OVERLAP:
+            raise FitInputError(
+                f"{take} is too short to identify anything: {t[-1] - t[0]:.3f} s (at least {MIN_OVERLAP:g} s)"
+            )
     for offset in (-search, 0.0, search):
         start, stop = overlap(pair, offset)
         if stop - start < MIN_OVERLAP:
