@@ -110,7 +110,7 @@ def refine(pair: TakePair, preset: RuleParams, coarse: float, drift: bool, limit
         lambda offset: cost([align(pair, float(offset), drift)], preset),
         bounds=(low, high),
         method="bounded",
-        options={"xatol": 1e-4 * step},
+        options={"xatol": 1e-2 * step},
     )
     candidates = [float(result.x), coarse, *(np.round(np.array([low, high, coarse]) / step) * step)]
     costs = [cost([align(pair, c, drift)], preset) if low <= c <= high or c == coarse else np.inf for c in candidates]
