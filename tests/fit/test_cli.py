@@ -93,3 +93,23 @@ def test_bad_takes_are_refused_with_a_reason_and_no_preset(tmp_path: Path, capsy
     write_frames(str(short_r), FrameTable(r.names, r.values[:60], r.t[:60]))
     fails(capsys, [str(short_h), str(short_r), "-o", str(out)], "too short")
     assert not out.exists()
+
+
+def test_a_rider_take_in_its_own_length_unit_is_converted(tmp_path: Path) -> None:
+    """A rider in centimetres (its sidecar says so) beside a horse in metres fits as the same rider."""
+    from riderlive.channels import Kind, lookup
+
+    horse, rider = write_pair(tmp_path, "trot", "english")
+    table = read_frames(rider)
+    values = table.values.copy()
+    for j, name in enumerate(table.names):
+        if lookup(name).kind is Kind.TRANSLATION:
+            values[:, j] *= 100.0
+    in_cm = tmp_path / "trot_rider_cm.csv"
+    write_frames(str(in_cm), FrameTable(table.names, values, table.t))
+    record_scale(str(in_cm), METRES / 100.0)
+    report = tmp_path / "fit.json"
+    assert main(["fit", horse, str(in_cm), "-o", str(tmp_path / "cm.toml"), "--report", str(report), "--quiet"]) == 0
+    data = json.loads(report.read_text())
+    assert any("converted" in n for n in data["notes"])
+    assert all(c["rms"] < 1e-9 for c in data["takes"][0]["channels"])
