@@ -27,10 +27,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(.csv, .jsonl, .parquet of rider channels, or .bvh through --bonemap)",
     )
     parser.add_argument("-o", "--output", required=True, help="preset TOML to write")
-    parser.add_argument("--from", dest="start", default="kuhnel2003", help="starting preset (name or path)")
+    parser.add_argument(
+        "--from", dest="start", default="kuhnel2003", help="starting preset, name or path (default kuhnel2003)"
+    )
     parser.add_argument("--report", help="also write the report as JSON here")
     parser.add_argument("--plot", help="PNG of the first take: rider, fitted and starting prediction")
-    parser.add_argument("--bonemap", help="bone map of the BVH riders (name in config/bonemaps or path)")
+    parser.add_argument(
+        "--bonemap", help="bone map of the BVH riders: a name in config/bonemaps (default riderlive) or a .toml path"
+    )
     parser.add_argument(
         "--drift", action="store_true", help="take out each take's translation offsets and trends (mocap drift)"
     )
