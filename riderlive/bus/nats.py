@@ -1,8 +1,8 @@
 """The NATS implementation of :class:`~riderlive.bus.transport.Transport` (``nats-py``).
 
 Connection policy: :func:`connect` first tries once without retrying, bounded by
-``connect_timeout`` s as a whole (a closed port, a host that drops packets, a port that
-accepts and never speaks NATS), so a wrong address or refused credentials is a clear error
+``connect_timeout`` s (+ 1 s of slack as a whole: a closed port, a host that drops
+packets, a port that accepts and never speaks NATS), so a wrong address or refused credentials is a clear error
 at start (:class:`Unreachable`, :class:`Refused`). nats-py alone does not bound it: its
 first connect walks the server pool ``max_reconnect_attempts`` times even with
 ``allow_reconnect=False`` (and forever with 0). The connection it then keeps reconnects
@@ -129,10 +129,17 @@ def _what(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
+SLACK_S = 1.0
+"""Beyond ``connect_timeout`` for a whole first connect: nats-py bounds each of its steps
+(TCP connect, the greeting, the PONG) by ``connect_timeout`` itself, so a closed port or a
+mute broker ends at that; the slack keeps a busy host's slow handshake from failing."""
+
+
 async def _bounded(client: Client, timeout: float, **options: Any) -> None:
-    """``client.connect(**options)`` within ``timeout`` s, or closed and :class:`TimeoutError`."""
+    """``client.connect(**options)`` within ``timeout`` + :data:`SLACK_S` s, or closed and
+    :class:`TimeoutError`."""
     try:
-        await asyncio.wait_for(client.connect(**options), timeout)
+        await asyncio.wait_for(client.connect(**options), timeout + SLACK_S)
     except BaseException:
         with contextlib.suppress(Exception):
             await client.close()
