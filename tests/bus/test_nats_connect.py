@@ -2,11 +2,12 @@
 
 The real CLI (``riderlive serve --nats`` and every ``riderlive stage`` action) against a
 closed port and against a listening socket that accepts and never sends the NATS greeting.
-Time is measured from process start, so it includes the interpreter and the imports; the
+Time is measured from process start, so it includes the interpreter and the imports: the
 same command with a URL that nats-py rejects before any connect (port 99999: the same
-imports and event loop, no network), started at the same moment, is the baseline, and the budget is
-baseline + 3 s (``nats.connect_timeout`` is 2 s by default). On a busy host the start-up
-alone takes seconds; the difference is the connect.
+imports and event loop, no network), started at the same moment, is the baseline, and the
+budget is baseline + 25 % (load noise between the two) + 3 s (``nats.connect_timeout`` is
+2 s by default). On a busy host the start-up alone takes seconds. The connect alone, in
+process, is bounded without that noise (test_connect_itself_is_bounded).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 BUDGET_S = 3.0
 BAD_URL = "nats://127.0.0.1:99999"
+NOISE = 0.25
+"""Two processes started together on a loaded host end their imports up to this apart."""
 
 STAGE_ACTIONS = {
     "list": [],
@@ -87,11 +90,17 @@ def run_both(args: list[str], baseline: list[str], cwd: Path) -> tuple[tuple[int
         )
         for a in (args, baseline)
     ]
-    ends, errs = [], []
-    for proc in procs:
-        _, err = proc.communicate(timeout=60)
-        ends.append(time.perf_counter() - start)
-        errs.append(err)
+    ends, errs = [0.0, 0.0], ["", ""]
+
+    def reap(i: int) -> None:  # each end timed by its own waiter: neither waits for the other
+        errs[i] = procs[i].communicate(timeout=120)[1]
+        ends[i] = time.perf_counter() - start
+
+    waiters = [threading.Thread(target=reap, args=(i,)) for i in range(2)]
+    for w in waiters:
+        w.start()
+    for w in waiters:
+        w.join()
     assert procs[1].returncode == 2 and "invalid connect url" in errs[1], errs[1]
     return (procs[0].returncode, errs[0].splitlines(), ends[0]), ends[1]
 
@@ -111,7 +120,8 @@ def assert_fails_fast(command: list[str], url: str, cwd: Path) -> None:
     assert code == 2, lines
     assert len(lines) == 1, lines
     assert url in lines[0] and "no NATS server answers" in lines[0], lines
-    assert wall_s < base_s + BUDGET_S, f"{wall_s:.2f} s (start-up baseline {base_s:.2f} s): {lines}"
+    budget = base_s * (1.0 + NOISE) + BUDGET_S
+    assert wall_s < budget, f"{wall_s:.2f} s (start-up baseline {base_s:.2f} s, budget {budget:.2f} s): {lines}"
 
 
 @pytest.mark.slow
