@@ -13,6 +13,7 @@ ratio is wall / baseline. Two burner processes keep both cores busy unless
 from __future__ import annotations
 
 import argparse
+import asyncio
 import multiprocessing
 import os
 import socket
@@ -94,10 +95,28 @@ def main() -> int:
         burners = [ctx.Process(target=burn, args=(time.perf_counter() + 600.0,)) for _ in range(2)]
         for b in burners:
             b.start()
-    load = "loaded (2 burners)" if burners else "quiet (no burner)"
+    load = "2 burners" if burners else "no burner of its own"
     urls = {"closed": f"nats://127.0.0.1:{closed_port()}", "mute": f"nats://127.0.0.1:{mute_port()}"}
-    print(f"host: {load}, load average {os.getloadavg()[0]:.1f}; {args.runs} runs each; seconds from process start")
+    print(
+        f"host: {load}, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores "
+        f"({'loaded' if os.getloadavg()[0] >= 2 or burners else 'quiet'}); {args.runs} runs each; s from process start"
+    )
     try:
+        from riderlive.bus.nats import connect
+        from riderlive.bus.transport import Unreachable
+
+        for kind, url in urls.items():  # the connect alone, in this process: no start-up noise
+            times = []
+            for _ in range(args.runs):
+                start = time.perf_counter()
+                try:
+                    asyncio.run(connect(url))
+                except Unreachable:
+                    times.append(time.perf_counter() - start)
+            print(
+                f"connect() in process {kind:6s} Unreachable {len(times)}/{args.runs}  "
+                f"median {statistics.median(times):5.3f} max {max(times):5.3f} (connect_timeout 2 s)"
+            )
         for name, command in COMMANDS.items():
             for kind, url in urls.items():
                 walls, bases, codes = [], [], set()
