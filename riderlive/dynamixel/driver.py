@@ -233,6 +233,7 @@ class RigPlug:
             "fast_sync_read": rb.use_fast,
             "reply_allowance_ms": {k: round(t.allowance_ms(), 3) for k, t in self.bus.timers.items()},
             "bus_error_level": rb.budget.level,
+            "silent_ms": {str(sid): {"charged": c, "host_stalled": h} for sid, (c, h) in rb.silent.items()},
             "transactions": self.bus.transactions,
         }
 

@@ -31,7 +31,7 @@ from collections.abc import Sequence
 
 from riderlive.devices.budget import ErrorBudget
 from riderlive.devices.lifecycle import BusErrors, HardwareFault, NoReply
-from riderlive.devices.stall import HostClock, Sampler, SilenceState, silence_step
+from riderlive.devices.stall import HostClock, Sampler, SilenceState, lost_between, silence_step, usable_between
 from riderlive.dynamixel.bringup import servo_hardware_error
 from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
 from riderlive.dynamixel.sdkbus import SdkBus
@@ -75,6 +75,8 @@ class Readback:
         self._fast_retry_at: float | None = None
         self._retry_interval = self.rig.bus.fast_read_retry_s
         self.silence = SilenceState.fresh(len(self.ids))
+        self.silent: dict[int, tuple[float, float]] = {}
+        """Each silent servo at the last read: ms of silence charged, ms the host stalled meanwhile."""
         self._rode_through: set[int] = set()
         self.budget.reset()
 
@@ -96,6 +98,11 @@ class Readback:
         quiet = any(a and not h for a, h in zip(asked, heard, strict=True))
         sample = self.host.sample(now) if quiet else None
         self.silence, over = silence_step(self.silence, asked, heard, sample, self.rig.bus.reply_budget_s)
+        self.silent = {
+            sid: (round(usable_between(since, sample) * 1000, 1), round(lost_between(since, sample) * 1000, 1))
+            for sid, since in zip(self.ids, self.silence.since, strict=True)
+            if since is not None and sample is not None
+        }
         self._rode_through.intersection_update(i for i, h in enumerate(heard) if not h)
         self.fresh = set(block)
         for sid in self._decode(block):
