@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from riderlive.realtime.latency import LatencyHistogram, LatencySnapshot
+from riderlive.service.clocks import ClockEvent
 
 TICK_LATENESS = "How late each tick started after its deadline."
 INGEST_TO_SEND = "Horse frame received to the first rider frame computed from it written to every client due that tick."
@@ -200,8 +201,11 @@ def render(
     metric(
         "riderlive_clock_jumps_total",
         "counter",
-        "Producer clock jumps (a new stream segment each), by direction.",
-        [f'riderlive_clock_jumps_total{{direction="{d}"}} {metrics.clock_jumps[d]}' for d in ("backward", "forward")],
+        "Producer clock jumps, steps back, pauses and resumes (a new stream segment each), by direction.",
+        [
+            f'riderlive_clock_jumps_total{{direction="{e.direction}"}} {metrics.clock_jumps[e.direction]}'
+            for e in ClockEvent
+        ],
     )
     metric(
         "riderlive_clients_cut_off_total",
