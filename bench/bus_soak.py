@@ -37,7 +37,8 @@ VANISHING = 2
 
 def device(client: httpx.Client) -> dict[str, Any]:
     payload: dict[str, Any] = client.get("/api/devices").json()
-    return dict(payload["devices"][0]) | {"supervision": payload["supervision"]}
+    devices = payload["devices"] or [{"state": "none", "counters": {}}]  # a new tick not yet up
+    return dict(devices[0]) | {"supervision": payload["supervision"]}
 
 
 def wait_state(client: httpx.Client, wanted: set[str], timeout: float = 20.0, poll: float = 0.005) -> dict[str, Any]:
