@@ -1,0 +1,48 @@
+"""Every tick a /ws/rider client's decimation wants is sent, dropped or counted as skipped,
+against the real server with its web process stopped past the catch-up window."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import struct
+import threading
+import time
+
+from websockets.sync.client import connect
+
+from tests.service.live_server import LiveServer
+
+
+def test_sent_dropped_and_skipped_cover_every_wanted_tick(server: LiveServer) -> None:
+    seqs: list[int] = []
+    with connect(server.ws + "/ws/rider") as ws:
+        ws.recv(timeout=5)
+        ws.send(json.dumps({"type": "subscribe", "channels": ["head.rz"], "rate": 100, "encoding": "binary"}))
+        while not isinstance(message := ws.recv(timeout=5), str) or '"subscribed"' not in message:
+            pass
+        done = threading.Event()
+
+        def read() -> None:
+            while not done.is_set():
+                message = ws.recv(timeout=5)
+                if isinstance(message, bytes):
+                    seqs.append(struct.unpack_from("<Q", message, 8)[0])
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        time.sleep(0.3)
+        os.kill(server.proc.pid, signal.SIGSTOP)
+        time.sleep(0.5)  # 100 ticks at 200 Hz: those older than publish.CATCH_UP (0.25 s) are skipped
+        os.kill(server.proc.pid, signal.SIGCONT)
+        time.sleep(0.3)
+        clients = server.get("/api/state").json()["clients"]
+        done.set()
+        reader.join(6)
+    (ours,) = [c for c in clients if c["decimation"] == 2]
+    wanted = (ours["last_seq"] - ours["first_seq"]) // 2 + 1
+    assert ours["sent"] + ours["dropped"] + ours["skipped"] + int(ours["pending"]) == wanted, ours
+    assert ours["skipped"] >= 10, "the ticks older than the catch-up window were counted"  # ~25 at 200 Hz / 2
+    assert len(set(seqs)) == len(seqs) <= ours["sent"]
+    assert all(s % 2 == ours["first_seq"] % 2 for s in seqs), "one phase"
