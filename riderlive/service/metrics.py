@@ -184,7 +184,7 @@ def render(
     metric(
         "riderlive_frames_skipped_total",
         "counter",
-        "Ticks a client's decimation wanted that never reached it (the web process coalesced or missed them).",
+        "Ticks a client's decimation wanted that never reached it (skipped by the tick, coalesced or missed).",
         [f'riderlive_frames_skipped_total{{client="{_escape(c)}"}} {skipped}' for c, _, _, _, skipped in clients],
     )
     metric(

@@ -86,8 +86,9 @@ class Subscriber:
     sent: int = 0
     dropped: int = 0
     skipped: int = 0
-    """Ticks its decimation wanted that never reached it (coalesced after a late web process,
-    lapped in the output ring): with ``sent`` and ``dropped``, every wanted tick is counted."""
+    """Ticks its decimation wanted that never reached it (skipped by a late tick, coalesced
+    after a late web process, lapped in the output ring): with ``sent`` and ``dropped``,
+    every wanted tick is counted."""
     first_seq: int | None = None
     """The first tick offered to it since its subscription (or the tick) last changed."""
     last_seq: int | None = None
@@ -440,9 +441,9 @@ class Hub:
         return [(c.id, "/ws/rider", c.sent, c.dropped, c.skipped) for c in self.clients.values()]
 
     def describe_clients(self) -> list[dict[str, Any]]:
-        """For ``/api/state``: each client's counts and the ticks they cover: ``sent +
-        dropped + skipped`` (+ 1 while a frame waits in its slot) is every tick from
-        ``first_seq`` to ``last_seq`` its decimation wanted."""
+        """For ``/api/state``: each client's counts (since it connected) and the ticks its
+        current subscription covers: from ``first_seq`` to ``last_seq``, every tick its
+        decimation wanted was sent, dropped or skipped (+ 1 while a frame waits in its slot)."""
         return [
             {
                 "id": c.id,
