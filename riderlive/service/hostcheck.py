@@ -6,7 +6,7 @@ USB adapter as on a pty) before the tick sees it. The tick runs at SCHED_FIFO, b
 worker competes with every other process, and on a virtual machine the hypervisor can
 take a whole vCPU away (steal). Measured (``bench/probe_stall.py``, docs/hardware.md "A
 busy host"): with both cores loaded by normal-priority work a reply's serial path was
-up to 60 ms late; with that work kept off the tick's core, at most 7.6 ms.
+up to 60 ms late; with that work kept off the tick's core, 7.6-23.5 ms at most.
 
 :func:`gather` reads the facts (the only I/O); :func:`advise` is pure: each
 :class:`Advice` names the problem and the fix. ``serve`` prints them when a device is
