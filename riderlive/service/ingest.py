@@ -21,10 +21,11 @@ Each producer is told ``{"type": "control", "driving": true|false}`` when that c
 Every value is checked against its plausible range (:mod:`riderlive.ranges`) after
 conversion to the service's units; a frame with one value outside is rejected whole.
 A producer whose clock jumps, steps back, stands still or resumes
-(:func:`~riderlive.service.clocks.clock_step`) starts a new *stream segment*: the tick
-sees a new stream id, re-anchors its clock mapping and blends, and the producer is told
-``{"type": "segment", ...}`` (docs/protocol.md, "Clocks that jump"). While its clock
-stands still the service's clock stands in, so it keeps driving.
+(:func:`~riderlive.service.clocks.clock_step`) starts a new *segment* and is told
+``{"type": "segment", ...}`` (docs/protocol.md, "Clocks that jump"): after a jump the
+tick sees a new stream id, re-anchors its clock mapping and blends; after a step back, a
+pause (the service's clock stands in, so it keeps driving) or a resume, the time the
+tick is given stays continuous in the same stream.
 """
 
 from __future__ import annotations
@@ -324,10 +325,12 @@ class IngestEndpoint:
         return drives
 
     def new_segment(self, producer: Producer, t: float, step: ClockStep) -> None:
-        """Re-anchor: the tick gets a new stream id (a fresh clock mapping, a blend)."""
+        """Tell the producer; after a jump the tick gets a new stream id (a fresh clock
+        mapping, a blend); a step back, a pause or a resume keeps it (the time given is continuous)."""
         assert step.event is not None
         producer.segment += 1
-        producer.stream = next_producer_id()
+        if step.new_stream:
+            producer.stream = next_producer_id()
         self.service.metrics.clock_jumps[step.event.direction] += 1
         producer.outbox.append(
             {

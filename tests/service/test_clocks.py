@@ -38,6 +38,7 @@ def test_a_jump_either_way_starts_a_segment() -> None:
     frames += [(5000.0 + i * DT, (20 + i) * DT) for i in range(10)]
     steps = feed(frames)
     assert events(steps) == [(10, ClockEvent.BACKWARD), (20, ClockEvent.FORWARD)]
+    assert steps[10].new_stream and steps[20].new_stream and [s.t for s in steps] == [t for t, _ in frames]
     assert steps[10].previous_t == 100.0 + 9 * DT and steps[10].jump < -100.0 and steps[20].jump > 4000.0
 
 
@@ -52,13 +53,19 @@ def test_a_clock_that_stands_still_is_paused_within_pause_s_and_the_service_cloc
     # paused once the clock stood still for PAUSE_S, not later than one frame after
     still = frames[p][1] - frames[59][1]
     assert PAUSE - 1e-9 <= still < PAUSE + DT and steps[p].jump == -still
-    # from the pause on, the time given to the tick advances with the service's clock
-    given = [s.t for s in steps[p:r]]
-    received = [rx for _, rx in frames[p:r]]
-    assert given[0] == paused_at
-    assert all(abs((g - given[0]) - (x - received[0])) < 1e-9 for g, x in zip(given, received))
-    # resumed: its own clock again
-    assert [s.t for s in steps[r:]] == [t for t, _ in frames[r:]]
+    # from the pause on, the time given to the tick goes on from the last frame that moved
+    # with the service's clock: continuous, the same stream (no blend)
+    given = [s.t for s in steps[p:]]
+    received = [rx for _, rx in frames[p:]]
+    assert given[0] == paused_at + still
+    assert all(abs((g - given[0]) - (x - received[0])) < 1e-9 for g, x in zip(given[: r - p], received))
+    # resumed: its own clock again, plus the offset that keeps the time given continuous
+    offset = steps[r].t - frames[r][0]
+    assert all(abs(s.t - (t + offset)) < 1e-9 for s, (t, _) in zip(steps[r:], frames[r:]))
+    assert not any(s.new_stream for s in steps)
+    times = [s.t for s in steps]
+    assert all(b >= a for a, b in zip(times, times[1:])), "the time given never goes back"
+    assert all(b > a for a, b in zip(times[p - 1 :], times[p:])), "nor stands still once paused"
 
 
 def test_small_backward_steps_are_re_anchored() -> None:
@@ -67,8 +74,9 @@ def test_small_backward_steps_are_re_anchored() -> None:
     steps = feed(frames)
     assert events(steps) == [(i, ClockEvent.BACKWARD) for i in range(240, 1200, 240)]
     assert all(abs(steps[i].jump + 0.2 - DT) < 1e-9 for i in range(240, 1200, 240))
-    for a, b in zip(steps, steps[1:]):  # within each segment the time given only advances
-        assert b.event is not None or b.t > a.t
+    assert not any(s.new_stream for s in steps), "re-anchored in the same stream"
+    for a, b in zip(steps, steps[1:]):  # the time given advances with the service's clock, step or not
+        assert abs((b.t - a.t) - DT) < 1e-9
 
 
 def test_jitter_below_a_millisecond_is_no_segment() -> None:
@@ -114,8 +122,12 @@ def test_invariants(moves: list[tuple[float, float]]) -> None:
     ]
     for start in capped:
         assert sum(1 for x in capped if start <= x < start + 1.0) <= MAX_SEGMENTS_PER_S
+    previous = None
     for (_, rx), s in zip(frames, steps):
         assert abs(s.t) < 1e9
         if s.clock.standin is not None and s.event is None:
             t0, rx0 = s.clock.standin
             assert s.t == t0 + (rx - rx0)
+        if s.event is not None and not s.new_stream and previous is not None:
+            assert s.t >= previous.newest_eff - 1e-9, "a re-anchor never goes back"
+        previous = s.clock
