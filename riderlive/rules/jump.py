@@ -112,6 +112,17 @@ def apply_scalar(p: Jump, args: list[float], out: list[float]) -> None:
         out[column] += w * (target - out[column])
 
 
+def weights(p: Jump, args: list[Any]) -> Any:
+    """(N,) how far the layer moves each frame's trunk and head toward its pose (0: Appendix B's
+    values exactly), from the rules' argument columns (thesis units). For tools that model the rules
+    alone (a fit): frames with a weight above 0 are not Appendix B's in :data:`OUTPUTS`."""
+    pitch = np.asarray(args[PITCH], dtype=np.float64)
+    front = np.asarray(args[FRONT[0]] + args[FRONT[1]], dtype=np.float64)
+    back = np.asarray(args[BACK[0]] + args[BACK[1]], dtype=np.float64)
+    rise, hind = activation(p, pitch, np.asarray(args[HEIGHT], dtype=np.float64), front, back)
+    return p.weight * np.maximum(rise, hind)
+
+
 def apply_columns(p: Jump, args: list[Any], out: Any, gain: Any, offset: Any) -> None:
     """The layer on (N,) argument columns (thesis units) and an (N, len(RIDER)) output already through
     the animator layer (``out = rules * gain + offset``): each moved channel becomes

@@ -250,3 +250,16 @@ def test_the_hands_stay_on_the_reins_toward_the_bit(shot: str) -> None:
         length = np.linalg.norm(to_bit, axis=1)
         assert length.max() < 1.15 * rest, f"{shot} {side}: {length.max():.3f} m against a {rest:.3f} m rein"
         assert np.einsum("ni,ni->n", to_bit, forward).min() > 0.0, f"{shot} {side}: the bit behind the hand"
+
+
+def test_weights_say_which_frames_are_not_appendix_b() -> None:
+    """``jump.weights``: 0 exactly on the frames the layer leaves alone, above 0 on those it moves."""
+    from riderlive.rules import jump as jump_layer
+    from riderlive.rules.kuhnel2003 import RULE_INPUTS
+
+    table = generate(load_script("config/shots/jump.toml"), RATE)
+    args = [table.column(n) * (DEFAULT_SCALE if n.split(".")[1].startswith("t") else 1.0) for n in RULE_INPUTS]
+    w = jump_layer.weights(THESIS.jump, args)
+    p, plain = posed("jump"), posed("jump", 0.0)
+    moved = np.any(p.rider != plain.rider, axis=1)
+    assert np.array_equal(moved, w > 0.0)
