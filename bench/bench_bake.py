@@ -143,7 +143,8 @@ def main() -> None:
 
 def _accounted(account: str) -> float:
     """The seconds of the bake's --timings line (its read + rules + write)."""
-    return float(account.split(" frames in ")[1].split(" s", maxsplit=1)[0])
+    value, unit = account.split(" frames in ")[1].split(" (", maxsplit=1)[0].split()
+    return float(value) / (1e3 if unit == "ms" else 1.0)
 
 
 if __name__ == "__main__":

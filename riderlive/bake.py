@@ -137,12 +137,27 @@ class Timings:
 
     def __str__(self) -> str:
         total = self.read + self.rules + self.write
-        rate = self.frames / total / 1e6 if total > 0.0 else 0.0
-        filters = f" (smoothing {self.smoothing:.2f} s)" if self.smoothing > 0.0 else ""
+        filters = f" (smoothing {_seconds(self.smoothing)})" if self.smoothing > 0.0 else ""
         return (
-            f"{self.frames:,} frames in {total:.2f} s ({rate:.2f} M frames/s): "
-            f"read {self.read:.2f} s, rules {self.rules:.2f} s{filters}, write {self.write:.2f} s"
+            f"{self.frames:,} frames in {_seconds(total)} ({_throughput(self.frames, total)}): "
+            f"read {_seconds(self.read)}, rules {_seconds(self.rules)}{filters}, write {_seconds(self.write)}"
         )
+
+
+def _seconds(s: float) -> str:
+    """A duration with three significant figures in s or ms (a short take's steps take milliseconds)."""
+    return f"{s:.3g} s" if s >= 1.0 else f"{s * 1e3:.3g} ms"
+
+
+def _throughput(frames: int, seconds: float) -> str:
+    """Frames per second in the unit that keeps three significant figures: frames/s, k or M frames/s."""
+    if seconds <= 0.0:
+        return "too fast to time"
+    rate = frames / seconds
+    for scale, unit in ((1e6, "M frames/s"), (1e3, "k frames/s")):
+        if rate >= scale:
+            return f"{rate / scale:.3g} {unit}"
+    return f"{rate:.3g} frames/s"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
@@ -34,7 +34,40 @@ import msgpack
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 
-from riderlive.service.codecs import decode_binary_frame
+_DECODE: list[Callable[[bytes], dict[str, Any]]] = []
+
+
+def _load_codecs() -> Callable[[bytes], dict[str, Any]]:
+    """:func:`riderlive.service.codecs.decode_binary_frame`, imported when a subscriber is made, not
+    with this module (the codecs pull in NumPy, pydantic and the horse model: seconds on a busy host):
+    a tool that only probes or sends says a service is unreachable without waiting for them, and a
+    subscriber never pauses on its first frame."""
+    if not _DECODE:
+        from riderlive.service.codecs import decode_binary_frame as decode
+
+        _DECODE.append(decode)
+    return _DECODE[0]
+
+
+def time_left(timeout: float, least: float = 0.5) -> float:
+    """What is left of ``timeout`` seconds counted from this process's start (Linux: its start time in
+    ``/proc/self/stat``, so the interpreter's start and the imports count), at least ``least`` s."""
+    import os
+    import time
+
+    try:
+        with open("/proc/self/stat", "rb") as fh:
+            start = int(fh.read().rsplit(b")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
+        ran = time.clock_gettime(time.CLOCK_BOOTTIME) - start
+    except (OSError, ValueError, IndexError, AttributeError):
+        ran = 0.0  # elsewhere: the whole timeout from now
+    return max(least, timeout - ran)
+
+
+def decode_binary_frame(message: bytes) -> dict[str, Any]:
+    """One binary ``/ws/rider`` frame (:func:`riderlive.service.codecs.decode_binary_frame`)."""
+    return _load_codecs()(message)
+
 
 log = logging.getLogger(__name__)
 _RETRYABLE = (OSError, ConnectionClosed, InvalidHandshake, TimeoutError)
@@ -142,6 +175,7 @@ class RiderSubscriber:
         self._horse_names: list[str] = []
         self._subscribed = False
         self._closed = False
+        _load_codecs()
 
     def close(self) -> None:
         self._closed = True
@@ -320,6 +354,7 @@ class NatsRiderSubscriber:
     ) -> None:
         from riderlive.bus.subjects import Stage
 
+        _load_codecs()
         self.url = url
         self.subjects = Stage(stage).rig(rig)
         self.credentials = (user, password, creds)

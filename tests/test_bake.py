@@ -179,3 +179,17 @@ def test_output_gets_the_usual_file_mode(tmp_path: Path) -> None:
     mask = os.umask(0)
     os.umask(mask)
     assert out.stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+def test_timings_print_in_units_that_keep_three_figures() -> None:
+    """A short take reads in k frames/s and milliseconds (it printed '0.00 M frames/s')."""
+    from riderlive.bake import Timings
+
+    assert str(Timings(1201, 0.004, 0.0011, 0.002)) == (
+        "1,201 frames in 7.1 ms (169 k frames/s): read 4 ms, rules 1.1 ms, write 2 ms"
+    )
+    assert str(Timings(72_000_000, 1.2, 3.5, 4.1, 0.3)) == (
+        "72,000,000 frames in 8.8 s (8.18 M frames/s): read 1.2 s, rules 3.5 s (smoothing 300 ms), write 4.1 s"
+    )
+    assert "(250 frames/s)" in str(Timings(250, 0.5, 0.25, 0.25))
+    assert "(too fast to time)" in str(Timings(10, 0.0, 0.0, 0.0))

@@ -1,11 +1,13 @@
 """A take as one binary glTF 2.0 file (``.glb``): both skeletons and one animation.
 
 glTF's axes and units (right-handed, +Y up, the characters face +Z, metres). Each
-skeleton is a node tree under a root node named after it (``horse``: the world origin;
-``rider``: its seat point, animated with the horse's ``saddle`` so the rider rides
-the horse), one node per bone with its rest offset as ``translation`` (rest rotations
-are identity), and a skin listing those nodes (inverse bind matrices of the rest
-pose), so engines and Blender import each as an armature. The animation ``take`` has,
+skeleton is a static node ``NAME_armature`` (identity, not a joint: the armature object
+an importer makes) holding a node tree under a root node named after the skeleton
+(``horse``: the world origin; ``rider``: its seat point, animated with the horse's
+``saddle`` so the rider rides the horse), one node per bone with its rest offset as
+``translation`` (rest rotations are identity), and a skin listing the root and bone
+nodes (inverse bind matrices of the rest pose), so engines and Blender import each
+skeleton as its own armature (Blender: two armatures, each with one ``hips``). The animation ``take`` has,
 per node, a ``rotation`` channel (local, relative to the rest) and, for the root node
 and every bone that translates, a ``translation`` channel (the full local position),
 sampled ``LINEAR`` at the take's frames. The asset's ``extras.riderlive`` names the
@@ -29,6 +31,10 @@ from riderlive.skeleton import SKELETON_VERSION
 FloatArray = npt.NDArray[np.float64]
 FLOAT = 5126
 """glTF componentType for float32."""
+ARMATURE_SUFFIX = "_armature"
+"""Each skeleton's joints hang under a static node ``NAME_armature`` outside its skin: importers
+(Blender's) make the nearest common ancestor of a skin's joints that is not a joint the armature,
+so each skeleton becomes its own armature (without it, the scene root: one armature for both)."""
 
 
 class _Builder:
@@ -61,10 +67,12 @@ class _Builder:
 
 
 def _skeleton(gltf: dict[str, Any], builder: _Builder, track: SkeletonTrack, time: int, anim: dict[str, Any]) -> int:
-    """Add one skeleton's nodes, skin and animation channels; return its root node."""
+    """Add one skeleton's nodes, skin and animation channels; return its armature node."""
     rig = track.rig
     nodes = gltf["nodes"]
-    base = len(nodes)
+    armature = len(nodes)
+    nodes.append({"name": f"{rig.name}{ARMATURE_SUFFIX}", "children": [armature + 1]})
+    base = armature + 1
     rest_root = axes.positions(track.root_position[0])
     nodes.append({"name": rig.name, "translation": rest_root.tolist(), "children": []})
     rest_world = [np.zeros(3)] * len(rig.bones)
@@ -100,7 +108,7 @@ def _skeleton(gltf: dict[str, Any], builder: _Builder, track: SkeletonTrack, tim
         if bone.name in moving:
             channel(base + 1 + i, "translation", offsets[i])
         channel(base + 1 + i, "rotation", rotations[i])
-    return base
+    return armature
 
 
 def write_glb(fh: IO[bytes], take: TakePoses) -> None:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -40,6 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strands", metavar="NPZ", help="with --reference: write every strand vertex per frame here")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
     parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
 def run_take(
@@ -48,8 +51,13 @@ def run_take(
     rider_rules: RiderModel | None,
     rate: float,
     reference: bool,
+    *,
+    say: Callable[[str], object] | None = None,
 ) -> tuple[FrameTable, np.ndarray | None]:
-    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None."""
+    """Run the take; returns the output table and, with ``reference``, vertices (F, V, 3, N) or None.
+
+    ``say``: progress lines (the compile or cache load before the first frame, then the frames
+    about every 2 s): the first run on a machine compiles the physics for a minute or more."""
     horse = horse_matrix(table)
     times = table.times(rate)
     if len(times) > 1 and np.any(np.diff(times) <= 0.0):
@@ -67,8 +75,19 @@ def run_take(
     )
     rows = []
     vertices = []
-    for t in times:
+    if say is not None:
+        say("compiling or loading the compiled physics (numba: a first run compiles for a minute or more)…")
+    started = last = time.perf_counter()
+    for k, t in enumerate(times):
         sk.advance_to(float(t), source)
+        if say is not None:
+            now = time.perf_counter()
+            if k == 0:
+                say(f"physics ready in {now - started:.1f} s; {len(times):,} frames")
+                last = now
+            elif now - last >= 2.0:
+                say(f"{k + 1:,} / {len(times):,} frames")
+                last = now
         row = publish(skinned, sk.state)
         if ref is not None:
             ref.advance_to(float(t), source)
@@ -89,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
         table = read_frames(args.input, fmt=args.format)
         recorded = recorded_scale(args.input)  # the physics works in metres
         table = rescale_lengths(table, recorded / DEFAULT_SCALE) if recorded else table
-        result, vertices = run_take(table, config, rules, args.rate, args.reference)
+        say = None if args.quiet else (lambda line: print(f"riderlive tail: {line}", file=sys.stderr, flush=True))
+        result, vertices = run_take(table, config, rules, args.rate, args.reference, say=say)
         write_frames(args.output, result, args.format)
         if args.strands and vertices is not None:
             np.savez_compressed(args.strands, t=result.times(args.rate), vertices=vertices)

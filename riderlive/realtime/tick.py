@@ -98,6 +98,8 @@ class TickLoop:
         )
         self._saddle_seen = (-1, -1)
         """Lock and gait codes of the last status (a change makes the status dirty)."""
+        self._horse_seen: tuple[str, str | None] = ("", None)
+        """The procedural horse's gait and move in the last status (a change makes it dirty: the page's header)."""
         self.running = True
         self.stopping_since: float | None = None
         self.realtime = "off"
@@ -276,6 +278,10 @@ class TickLoop:
             if newest_rx >= 0.0:
                 self.histograms["ingest_to_tick"].observe(now - newest_rx)
             result = self._step(now, values, index)
+            horse_now = (self.horse.gait, self.horse.move)
+            if horse_now != self._horse_seen:
+                self._horse_seen = horse_now
+                self._status_dirty = True
             if self.core.faults:
                 self.events.extend(self.core.faults)
                 self.core.faults.clear()

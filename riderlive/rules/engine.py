@@ -13,7 +13,10 @@ applies in output units. Both paths evaluate the same rule source
 On sloping ground (``ground.rz`` not 0, thesis section 10) every path reads the horse
 relative to the ground and adds the preset's ``[terrain]`` lean to ``lower_back.rz``
 before the animator layer (:mod:`riderlive.rules.terrain`); a frame without the ground
-channels, or with ``ground.rz`` 0, takes the flat path unchanged.
+channels, or with ``ground.rz`` 0, takes the flat path unchanged. Over a fence (the
+forehand rising beyond any gait, hooves higher than a gallop lifts them) every path moves
+the trunk and head toward the preset's ``[jump]`` pose (:mod:`riderlive.rules.jump`),
+before the animator layer; outside a jump the rules' values pass untouched.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy.typing as npt
 
 from riderlive import fastpath
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER, Kind
+from riderlive.rules import jump as jump_layer
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.kuhnel2003 import ARRAY_OPS, RULE_INPUTS, SCALAR_OPS, RuleFunction, make_rules
 from riderlive.rules.params import RuleParams
@@ -35,6 +39,7 @@ FloatArray = npt.NDArray[np.float64]
 
 _INPUT_COLUMNS: tuple[int, ...] = tuple(HORSE_INDEX[name] for name in RULE_INPUTS)
 _INPUT_IS_LENGTH: tuple[bool, ...] = tuple(HORSE[HORSE_INDEX[name]].kind is Kind.TRANSLATION for name in RULE_INPUTS)
+_PITCH, (_LF, _RF), (_LB, _RB) = jump_layer.PITCH, jump_layer.FRONT, jump_layer.BACK
 _OUTPUT_IS_LENGTH: tuple[bool, ...] = tuple(c.kind is Kind.TRANSLATION for c in RIDER)
 BATCH_CHUNK = 4096
 """Frames per chunk of the NumPy batch path: its temporaries stay in the CPU cache."""
@@ -68,6 +73,8 @@ class RiderModel:
         object.__setattr__(self, "_out_offset", offset)
         pairs = None if identity else tuple(zip(gain.tolist(), offset.tolist(), strict=True))
         object.__setattr__(self, "_out_pairs", pairs)
+        jp = self.params.jump
+        object.__setattr__(self, "_jump_gate", (jp.pitch_from, jp.hooves_from) if jp.weight else None)
 
     def evaluate(self, horse: Sequence[float]) -> list[float]:
         """One frame on Python floats (the live tick's path)."""
@@ -84,6 +91,12 @@ class RiderModel:
             out: Sequence[float] = leaned
         else:
             out = rules(*args)
+        gate = self._jump_gate  # type: ignore[attr-defined]
+        if gate is not None and (
+            args[_PITCH] > gate[0] or args[_LF] + args[_RF] > gate[1] or args[_LB] + args[_RB] > gate[1]
+        ):  # over a fence (rules/jump.py); else Appendix B's values pass untouched
+            out = list(out)
+            jump_layer.apply_scalar(self.params.jump, args, out)
         pairs = self._out_pairs  # type: ignore[attr-defined]
         if pairs is None:
             return list(out)
@@ -111,15 +124,20 @@ class RiderModel:
     def _batch(
         self, inputs: list[FloatArray], n: int, compiled: bool | None, ground: FloatArray | None = None
     ) -> FloatArray:
-        """The rules on ``inputs`` (RULE_INPUTS order) over ground pitch ``ground`` (deg; None: flat);
-        (N, len(RIDER)), each channel contiguous."""
+        """The rules on ``inputs`` (RULE_INPUTS order) over ground pitch ``ground`` (deg; None: flat), then the
+        terrain lean and the ``[jump]`` layer, in :meth:`evaluate`'s order; (N, len(RIDER)), each channel contiguous."""
         if ground is not None and ground.any():  # sloping ground somewhere (see the module docstring)
             ground = np.asarray(ground, dtype=np.float64)
             inputs = list(inputs)
             inputs[PITCH_ARGUMENT] = np.asarray(inputs[PITCH_ARGUMENT], dtype=np.float64) - ground
-            out = self._batch(inputs, n, compiled)
+            out = self._rules(inputs, n, compiled)
             out[:, LEAN_OUTPUT] += self._out_gain[LEAN_OUTPUT] * lean(self.params.terrain, ground)  # type: ignore[attr-defined]
-            return out
+        else:
+            out = self._rules(inputs, n, compiled)
+        return self._jump(inputs, out)
+
+    def _rules(self, inputs: list[FloatArray], n: int, compiled: bool | None) -> FloatArray:
+        """Appendix B and the animator layer on ``inputs``: (N, len(RIDER)), each channel contiguous."""
         if compiled is None:
             compiled = fastpath.AVAILABLE and n >= COMPILED_FROM
         by_channel = np.empty((len(RIDER), n), dtype=np.float64)
@@ -143,6 +161,14 @@ class RiderModel:
         if self._out_pairs is not None:  # type: ignore[attr-defined]
             out *= self._out_gain  # type: ignore[attr-defined]
             out += self._out_offset  # type: ignore[attr-defined]
+        return out
+
+    def _jump(self, inputs: list[FloatArray], out: FloatArray) -> FloatArray:
+        """The ``[jump]`` layer (rules/jump.py) on a batch's output, in place; frames outside a jump untouched."""
+        if self.params.jump.weight:
+            in_gain = self._in_gain  # type: ignore[attr-defined]
+            args = [np.asarray(c, dtype=np.float64) * g for c, g in zip(inputs, in_gain, strict=True)]
+            jump_layer.apply_columns(self.params.jump, args, out, self._out_gain, self._out_offset)  # type: ignore[attr-defined]
         return out
 
     def _kernel(self) -> fastpath.BatchKernel:

@@ -210,6 +210,36 @@ class Terrain(StrictModel):
     downhill_lean: float = pydantic.Field(default=0.1, ge=0.0, le=1.0)  # deg back per deg of descent
 
 
+class Jump(StrictModel):
+    """Over a fence, what Appendix B leaves out (``riderlive.rules.jump``; ``weight`` 0: Appendix B).
+
+    While the horse's forehand rises (its pitch beyond any gait's, not from the hindquarters sitting
+    down as in a sliding stop; or the front hooves higher than a gallop lifts them) the trunk folds
+    forward from the hip to ``fold`` degrees forward of upright in the world; while only the hind
+    hooves are high (landing, a buck) it opens to ``land`` degrees (- back). Its bend against the
+    horse's back stays within ``max_bend``.
+    """
+
+    weight: float = pydantic.Field(default=1.0, ge=0.0, le=1.0)
+    fold: float = pydantic.Field(default=30.0, ge=0.0, le=60.0)  # deg forward of upright, world
+    land: float = pydantic.Field(default=-5.0, ge=-30.0, le=10.0)  # deg, - behind upright, world
+    max_bend: float = pydantic.Field(default=60.0, ge=10.0, le=90.0)  # deg, trunk against the horse's back
+    hip_share: float = pydantic.Field(default=0.6, ge=0.0, le=1.0)  # of the bend at the hip; the rest the back
+    head_follow: float = pydantic.Field(default=0.9, ge=0.0, le=1.0)  # head counters this much of the lean
+    pitch_from: float = pydantic.Field(default=8.0, ge=0.0, le=45.0)  # deg, rearPivot.rz: none below (gaits 7)
+    pitch_full: float = pydantic.Field(default=16.0, ge=1.0, le=60.0)  # deg: fully folded from here
+    sit_from: float = pydantic.Field(default=2.5, ge=0.0, le=50.0)  # thesis units the hindquarters sink: a stop
+    sit_full: float = pydantic.Field(default=4.0, ge=0.1, le=50.0)  # (a take-off sinks 2, a sliding stop 8)
+    hooves_from: float = pydantic.Field(default=16.0, ge=0.0, le=100.0)  # thesis units, a pair's height sum
+    hooves_full: float = pydantic.Field(default=36.0, ge=1.0, le=200.0)  # (a gallop lifts a pair to 14)
+
+    @pydantic.model_validator(mode="after")
+    def _ordered(self) -> Jump:
+        if self.pitch_full <= self.pitch_from or self.hooves_full <= self.hooves_from or self.sit_full <= self.sit_from:
+            raise ValueError("jump: each *_full must exceed its *_from (pitch, sit, hooves)")
+        return self
+
+
 class Errata(StrictModel):
     """Where Appendix B contradicts itself: numbers that select a reading.
 
@@ -250,6 +280,7 @@ class RuleParams(StrictModel):
     stirrups: Stirrups = Stirrups()
     follow_through: FollowThrough = FollowThrough()
     terrain: Terrain = Terrain()
+    jump: Jump = Jump()
 
     def with_values(self, changes: dict[str, float]) -> RuleParams:
         """Return a copy with dotted keys (``"head.lift_gain"``) changed, validated."""

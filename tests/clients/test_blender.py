@@ -114,3 +114,33 @@ def test_blender_drives_armatures_from_the_stream_and_imports_a_take(tmp_path: P
                     quat.rotate(tuple(q), tuple(track.poses.world_positions[i, k]))
                 )  # type: ignore[arg-type]
                 np.testing.assert_allclose(got[name]["head"], TO_BLENDER @ world, atol=1e-4, err_msg=name)
+
+
+def test_background_blender_drives_with_the_frames_step(tmp_path: Path) -> None:
+    """``blender -b`` never fires the live mode's timers: ``riderlive_blender.drive`` steps it (N new
+    frames, keyed), as a script or a render farm would."""
+    out = tmp_path / "drive.json"
+    script = (
+        "import json, sys, bpy, riderlive_blender as r\n"
+        "bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        "n = r.drive(sys.argv[1], frames=30, key=True)\n"
+        "rider = bpy.data.objects['riderlive_rider']\n"
+        "action = rider.animation_data.action\n"
+        "curves = list(getattr(action, 'fcurves', []) or [c for l in action.layers for s in l.strips"
+        " for b in s.channelbags for c in b.fcurves])\n"
+        "json.dump({'applied': n, 'keys': max(len(c.keyframe_points) for c in curves)}, open(sys.argv[2], 'w'))\n"
+    )
+    server = LiveServer(BASE_CONFIG, tmp_path)
+    try:
+        env = dict(os.environ, PYTHONPATH=str(ROOT / "clients" / "blender"))
+        proc = subprocess.run(
+            [str(BLENDER_PYTHON), "-c", script, server.ws + "/ws/rider", str(out)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    finally:
+        server.stop()
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(out.read_text()) == {"applied": 30, "keys": 30}

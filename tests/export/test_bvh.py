@@ -37,11 +37,38 @@ def test_an_independent_reader_sees_the_skeleton_and_its_frames(
     assert track is not None
     container = bvhio.readAsBvh(str(files[skeleton]))
     assert container.FrameCount == len(take.t) == 120
-    assert container.FrameTime == pytest.approx(1.0 / 120.0, abs=1e-8)
+    assert 1.0 / container.FrameTime == 120.0  # exactly: the frame time is written shortest-exact
     root = bvhio.readAsHierarchy(str(files[skeleton]))
     names = [joint.Name for joint, _, _ in root.layout()]
-    assert names[0] == skeleton
-    assert sorted(names[1:]) == sorted(track.rig.names)
+    if skeleton == "rider":  # the seat point, then the bones, and one branch joint under the hips
+        assert names[0] == "rider"
+        assert sorted(names[1:]) == sorted([*track.rig.names, "hips_branch"])
+    else:  # the horse stays at the world origin: its root bone is the ROOT
+        assert names[0] == "root"
+        assert sorted(names) == sorted(track.rig.names)
+
+
+@pytest.mark.parametrize("skeleton", ["rider", "horse"])
+def test_every_joint_has_a_bone_length(take: TakePoses, skeleton: str) -> None:
+    """The mean of a joint's children's offsets (where Blender aims it) is at least 1 mm from it."""
+    from riderlive.export.bvh import layout
+
+    track = take.rider if skeleton == "rider" else take.horse
+    assert track is not None
+    joints = layout(track)
+    for joint in joints:
+        if joint.children:
+            mean = np.mean([joints[c].offset for c in joint.children], axis=0)
+            assert np.linalg.norm(mean) > 0.001, joint.name
+    branch = [j for j in joints if j.bone is None and not j.position]
+    assert [j.name for j in branch] == (["hips_branch"] if skeleton == "rider" else [])
+
+
+@pytest.mark.parametrize("rate", [24.0, 25.0, 30.0, 50.0, 60.0, 100.0, 120.0, 240.0, 1000.0])
+def test_the_frame_time_reads_back_as_the_exact_rate(rate: float) -> None:
+    from riderlive.export.bvh import frame_time
+
+    assert 1.0 / float(frame_time(rate)) == rate
 
 
 @pytest.mark.parametrize("skeleton", ["rider", "horse"])

@@ -23,7 +23,7 @@ def test_a_take_by_name_becomes_two_bvh_files_and_one_glb(tmp_path: Path, capsys
     code, err = _run(capsys, "jump", "--takes", str(takes), "--format", "bvh", "-o", str(tmp_path / "out"))
     assert code == 0, err
     assert (tmp_path / "out.rider.bvh").read_text().startswith("HIERARCHY\nROOT rider\n")
-    assert (tmp_path / "out.horse.bvh").read_text().startswith("HIERARCHY\nROOT horse\n")
+    assert (tmp_path / "out.horse.bvh").read_text().startswith("HIERARCHY\nROOT root\n")
     assert "60 frames at 120 Hz" in err
     code, err = _run(capsys, str(takes / "jump.csv"), "--format", "gltf", "-o", str(tmp_path / "jump.glb"))
     assert code == 0, err

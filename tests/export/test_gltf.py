@@ -112,6 +112,19 @@ def test_node_animation_read_by_pygltflib_poses_both_skeletons_like_the_solver(
             np.testing.assert_allclose(world_rot[j], _matrix(rotations(np.asarray(q))), atol=1e-5)
 
 
+def test_each_skeleton_hangs_under_its_own_armature_node_outside_its_skin(take: TakePoses, glb: Path) -> None:
+    """What makes Blender's importer build one armature per skeleton: a static non-joint parent per skin."""
+    gltf = pygltflib.GLTF2().load(str(glb))
+    scene = [gltf.nodes[i] for i in gltf.scenes[0].nodes]
+    assert [n.name for n in scene] == ["horse_armature", "rider_armature"]
+    for node, skin in zip(scene, gltf.skins, strict=True):
+        assert node.children == [skin.joints[0]] == [skin.skeleton]
+        assert node.translation is None and node.rotation is None and node.matrix is None
+        assert skin.joints[0] not in gltf.scenes[0].nodes
+    animated = {ch.target.node for ch in gltf.animations[0].channels}
+    assert not animated & set(gltf.scenes[0].nodes)
+
+
 def test_file_axes_are_a_proper_rotation_of_ours() -> None:
     """x left, y up, z forward: a rotated vector maps the same whichever way round."""
     rng = np.random.default_rng(1)

@@ -35,13 +35,16 @@ def _csv_fallback(path: Path) -> list[str]:
     return path.read_text().splitlines()[0].split(",")
 
 
-def test_tail_command_writes_bone_channels(tmp_path: Path) -> None:
+def test_tail_command_writes_bone_channels(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     times, frames = horse_take("buck")
     keep = slice(0, 240, 4)  # one second at 60 Hz
     take = tmp_path / "buck.csv"
     write_frames(str(take), FrameTable(HORSE_NAMES, frames[keep], times[keep]))
     out = tmp_path / "tail.csv"
     assert main(["tail", str(take), "-o", str(out)]) == 0
+    progress = capsys.readouterr().err.splitlines()  # before the first frame's compile, and once it is done
+    assert progress[0].startswith("riderlive tail: compiling or loading the compiled physics")
+    assert progress[1].startswith("riderlive tail: physics ready in ") and progress[1].endswith("; 60 frames")
     header = _csv_fallback(out)
     assert header[0] == "t" and "tail_00.qw" in header and "braid_10.rz" in header and "tail_10.fan" in header
     assert "tail_03.fan" not in header  # fan-out only on the lower half

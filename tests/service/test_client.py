@@ -97,3 +97,36 @@ def test_examples_stream_a_csv_in_and_record_rider_frames_out(server: LiveServer
     assert streamer.wait(30) == 0
     rider = read_frames(str(out))
     assert rider.names == ("head.rz", "cog.ty") and len(rider) > 100
+
+
+def test_examples_give_a_one_line_error_within_the_timeout_counted_from_start(tmp_path: Path) -> None:
+    """A host that takes the connection and never answers: each example exits 2 with one line on
+    stderr within its --timeout counted from the process's start, imports included (it took 15 s)."""
+    import socket
+    import time
+
+    horse_csv = tmp_path / "horse.csv"
+    write_frames(str(horse_csv), FrameTable(HORSE_NAMES, np.zeros((2, len(HORSE_NAMES))), np.array([0.0, 0.01])))
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(8)  # the kernel completes the TCP handshake; nobody ever answers the websocket's
+    url = f"ws://127.0.0.1:{silent.getsockname()[1]}"
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    try:
+        for example, first in (("stream_horse_csv.py", str(horse_csv)), ("record_rider.py", str(tmp_path / "r.csv"))):
+            start = time.monotonic()
+            proc = subprocess.run(
+                [sys.executable, str(ROOT / "examples" / example), first, "--url", url, "--timeout", "3"],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=30,
+            )
+            elapsed = time.monotonic() - start
+            assert proc.returncode == 2, proc.stderr
+            lines = proc.stderr.strip().splitlines()
+            assert len(lines) == 1 and "cannot reach riderlive" in lines[0] and "no answer within" in lines[0], lines
+            # 3 s from the process's start (0.5 s more only where start-up alone outlasts it), and its exit.
+            assert elapsed < 3.0 + 1.5, f"{example}: {elapsed:.2f} s"  # 3.0-3.3 s measured at load 25
+    finally:
+        silent.close()

@@ -156,6 +156,6 @@ def open_page(browser: Any, url: str, path: str = "/") -> PageUnderTest:
 def live_page(browser: Any, server: Server) -> Iterator[PageUnderTest]:
     """One page for the module's tests (each leaves the service as it found it)."""
     p = open_page(browser, server.url)
-    p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5")
+    p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5", timeout=40)
     yield p
     p.page.close()

@@ -47,13 +47,32 @@ export function say(text, bad = false) {
   m.style.color = bad ? "var(--bad)" : "";
 }
 
+/**
+ * The header's alert: the last control that failed and why (the service's status and reason),
+ * in sight whatever panel is open; cleared when that control next succeeds, or by a click.
+ */
+function alertFailure(what, message) {
+  const a = $("alert");
+  if (!a) return;
+  a.textContent = `${what} failed: ${message}`;
+  a.dataset.what = what;
+  a.hidden = false;
+}
+
+function clearAlert(what) {
+  const a = $("alert");
+  if (a && !a.hidden && a.dataset.what === what) a.hidden = true;
+}
+
 export async function attempt(what, fn) {
   try {
     const out = await fn();
     say(`${what}: ok`);
+    clearAlert(what);
     return out;
   } catch (err) {
     say(`${what}: ${err.message}`, true);
+    alertFailure(what, err.message);
     return null;
   }
 }
@@ -139,7 +158,14 @@ export class Controls {
   }
 
   bind() {
-    $("reset").addEventListener("click", () => attempt("reset", () => api("POST", "/api/reset")).then(() => this.refresh()));
+    // After a reset, failed or not, the latch and the devices are read back from the service: the
+    // header then says what is true (a refused reset leaves the e-stop latched, and says so).
+    $("reset").addEventListener("click", async () => {
+      await attempt("reset", () => api("POST", "/api/reset"));
+      if (this.state.status) await this.state.status.fetchDevices();
+      await this.refresh();
+    });
+    $("alert").addEventListener("click", () => ($("alert").hidden = true));
     $("src-speed").addEventListener("input", () => ($("src-speed-out").textContent = (+$("src-speed").value).toFixed(1)));
     $("src-kind").addEventListener("change", () => this.showSourceRows());
     $("src-gait").addEventListener("change", () => this.fitSpeed(true));

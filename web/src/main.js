@@ -5,6 +5,7 @@
 import { api, attempt, bindEstop, Controls, controlToken } from "./controls.js";
 import { LatencyPanel } from "./latency.js";
 import { RiderLink } from "./link.js";
+import { HorseNow } from "./horsenow.js";
 import { emit, on } from "./panels.js";
 import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
@@ -72,10 +73,12 @@ function exaggerated(values, rig, names, k) {
 }
 
 async function start() {
-  const plots = new Plots($("plot"));
+  const plots = new Plots($("plot"), $("plot-axis"));
   const controls = new Controls(page);
   const status = new Status(page, api, attempt);
   page.status = status;
+  const horseNow = new HorseNow($("horse-now"));
+  page.horseNow = horseNow;
   const takes = new Takes(api, attempt, (name) => controls.applySource(name), () => page.tickRate || 120);
   controls.takes = takes;
   controls.onState = (state) => status.fromState(state);
@@ -208,12 +211,15 @@ async function start() {
         status.show();
       }
       plots.push(frame.t, frame.values);
+      const root = { "root.tx": frame.values["root.tx"] * toMetres, "root.tz": frame.values["root.tz"] * toMetres };
+      horseNow.frame(frame.t, root, frame.driver);
       saddle.frame(frame);
       emit("frame", frame);
     },
     status(msg) {
       page.tickStatus = msg;
       status.fromStatus(msg);
+      horseNow.fromStatus(msg);
       controls.servos(msg.rig || null);
       platform.status(msg);
       emit("status", msg);
@@ -233,6 +239,7 @@ async function start() {
   link.subscription = SaddlePanel.subscription();
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
+  setInterval(() => (page.horseText = horseNow.show()), 250);
   const latency = new LatencyPanel($("panel"), $("message"));
   page.latency = latency;
   setInterval(() => latency.refresh(), 1000);

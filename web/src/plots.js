@@ -1,6 +1,6 @@
 // Scrolling plots of chosen channels (canvas 2D): one lane per channel, at least
 // LANE_MIN px tall (the box scrolls when they do not fit), a time axis in seconds before
-// now, each lane's unit, a selectable window (up to MAX_WINDOW s), and lanes scaled to
+// now (its own canvas under the box: always in sight, however many lanes scroll), each lane's unit, a selectable window (up to MAX_WINDOW s), and lanes scaled to
 // their own range or sharing one range per unit. Every channel's history is kept, so a
 // newly chosen channel shows its past at once. draw() repaints only when a frame came or
 // a setting or the size changed, with 1 px (hairline) traces: a software 2D canvas strokes
@@ -19,9 +19,10 @@ function niceStep(span, ticks) {
 }
 
 export class Plots {
-  constructor(canvas, capacity = 120 * (MAX_WINDOW + 2)) {
+  constructor(canvas, axis = null, capacity = 120 * (MAX_WINDOW + 2)) {
     this.canvas = canvas;
     this.ctx = canvas.getContext("2d");
+    this.axis = axis; // the time axis's canvas, outside the scrolling box (null: drawn under the lanes)
     this.capacity = capacity;
     this.times = new Float64Array(capacity);
     this.series = new Map(); // name -> Float64Array
@@ -102,7 +103,8 @@ export class Plots {
     const c = this.canvas;
     const [w, boxH] = this.boxSize;
     const lanes = Math.max(1, this.chosen.length);
-    const h = Math.max(boxH, lanes * LANE_MIN + AXIS_H);
+    const axisH = this.axis ? 0 : AXIS_H; // the lanes' canvas keeps room for the axis only without its own
+    const h = Math.max(boxH, lanes * LANE_MIN + axisH);
     const key = `${this.head} ${this.count} ${w} ${h} ${this.window} ${this.ownScale} ${this.chosen.join(",")} ${Object.keys(this.units).length}`;
     if (key === this.drawn) return;
     this.drawn = key;
@@ -113,26 +115,36 @@ export class Plots {
     }
     const ctx = this.ctx;
     ctx.clearRect(0, 0, w, h);
+    const ax = this.axis ? this.axis.getContext("2d") : ctx;
+    if (this.axis && (this.axis.width !== w || this.axis.height !== AXIS_H)) {
+      this.axis.width = w;
+      this.axis.height = AXIS_H;
+    }
+    if (this.axis) ax.clearRect(0, 0, w, AXIS_H);
     if (this.count < 2 || this.chosen.length === 0 || w < 40) return;
     const last = (this.head - 1 + this.capacity) % this.capacity;
     const tEnd = this.times[last];
-    const laneH = (h - AXIS_H) / lanes;
+    const laneH = (h - axisH) / lanes;
+    const labelY = this.axis ? AXIS_H - 5 : h - 5;
     const x0 = 58; // value labels on the left
     const plotW = w - x0 - 6;
     const xOf = (age) => x0 + plotW - (age / this.window) * plotW;
-    ctx.font = "11px system-ui, sans-serif";
+    ctx.font = ax.font = "11px system-ui, sans-serif";
     // Time axis: seconds before now, with a faint grid through the lanes.
     const step = niceStep(this.window, 6);
-    ctx.textAlign = "center";
+    ax.textAlign = "center";
+    this.axisLabels = [];
     for (let age = 0; age <= this.window + 1e-9; age += step) {
       const x = xOf(age);
       ctx.strokeStyle = "#242a31";
       ctx.beginPath();
       ctx.moveTo(x, 0);
-      ctx.lineTo(x, h - AXIS_H);
+      ctx.lineTo(x, h - axisH);
       ctx.stroke();
-      ctx.fillStyle = "#8a939d";
-      ctx.fillText(age === 0 ? "now" : `-${+age.toFixed(2)} s`, Math.min(Math.max(x, x0 + 14), w - 14), h - 5);
+      ax.fillStyle = "#8a939d";
+      const label = age === 0 ? "now" : `-${+age.toFixed(2)} s`;
+      ax.fillText(label, Math.min(Math.max(x, x0 + 14), w - 14), labelY);
+      this.axisLabels.push(label);
     }
     const ranges = this.ranges(last, tEnd);
     this.chosen.forEach((name, lane) => {

@@ -7,13 +7,30 @@ const $ = (id) => document.getElementById(id);
 const ARMABLE = ["disarmed", "parked"];
 const MOVING = ["homing", "soft_start", "running"];
 
-/** One line saying what drives the rider, and how sure we are (ok / warn / bad). */
+/**
+ * Streamed input that a chosen source (procedural, replay) leaves unused: it does not drive
+ * until the source is handed back (`PUT /api/source {"kind": "live"}`, Source: live, Apply).
+ */
+export function ignoredInput(source, state) {
+  const kind = source && source.kind;
+  if (kind !== "procedural" && kind !== "replay") return "";
+  const producers = ((state && state.arbitration) || {}).producers || [];
+  if (!producers.length) return "";
+  const names = producers.map((p) => p.name || `producer ${p.id}`).join(", ");
+  return ` · live input from ${names} ignored: Source "live" hands back`;
+}
+
+/**
+ * One line saying what drives the rider, and how sure we are (ok / warn / bad). What the
+ * horse does (gait, measured speed) is the header's horse line (horsenow.js), not the request.
+ */
 export function describeDriver(source, driver, state, tick) {
   if (tick && tick.tick_up === false) return [`tick down — ${tick.restarting ? "restarting" : "stopped"}${tick.reason ? ` (${tick.reason})` : ""}`, "bad"];
   const kind = source && source.kind;
   if (!driver) return ["waiting for frames…", "warn"];
-  if (kind === "replay") return [`replay of ${source.take}${driver !== "input" ? ` (${driver})` : ""}`, "ok"];
-  if (kind === "procedural") return [`procedural ${source.gait || ""}${source.speed !== undefined ? ` ${Number(source.speed).toFixed(1)} m/s` : ""} (chosen)`, "ok"];
+  const ignored = ignoredInput(source, state);
+  if (kind === "replay") return [`replay of ${source.take}${driver !== "input" ? ` (${driver})` : ""}${ignored}`, ignored ? "warn" : "ok"];
+  if (kind === "procedural") return [`procedural horse (chosen)${ignored}`, ignored ? "warn" : "ok"];
   if (driver === "input") {
     const arb = (state && state.arbitration) || {};
     const producer = (arb.producers || []).find((p) => p.id === arb.active);

@@ -7,6 +7,12 @@ and press Connect: two armatures appear, ``riderlive_rider`` and ``riderlive_hor
 and follow the service at the viewport's pace. "Import take" reads a ``.glb`` written
 by ``riderlive export TAKE --format gltf`` and keys both armatures at the take's rate.
 Only Blender's own Python is needed (the websocket client is in ``wsclient.py``).
+
+Live mode runs on ``bpy.app.timers``, which only an interactive Blender fires: in background
+Blender (``blender -b``, a render farm, a script) Connect shows nothing. There, step it
+yourself with :func:`drive` (``--frames``-style: apply N new frames, optionally keying each)::
+
+    blender -b scene.blend --python-expr "import riderlive_blender as r; r.drive('ws://HOST:8000/ws/rider', frames=600, key=True)"
 """
 
 from __future__ import annotations
@@ -37,6 +43,33 @@ def _tick() -> float | None:
         return None
     session.apply_latest()
     return 1.0 / 60.0
+
+
+def drive(url: str, frames: int, key: bool = False, timeout: float = 10.0) -> int:
+    """Background Blender's live mode: connect, apply ``frames`` new frames as they come (what the
+    timer does interactively), key both armatures' pose bones at scene frames 1, 2, ... with
+    ``key``; returns how many were applied (fewer when none comes for ``timeout`` seconds)."""
+    import time
+
+    session = stream.LiveRider(url)
+    applied, waited_since = 0, time.monotonic()
+    try:
+        while applied < frames:
+            if session.apply_latest() is None:
+                if time.monotonic() - waited_since > timeout:
+                    break
+                time.sleep(0.002)
+                continue
+            waited_since = time.monotonic()
+            applied += 1
+            if key:
+                for obj in session.objects.values():
+                    for bone in obj.pose.bones:
+                        bone.keyframe_insert("rotation_quaternion", frame=applied)
+                        bone.keyframe_insert("location", frame=applied)
+    finally:
+        session.close()
+    return applied
 
 
 class RIDERLIVE_OT_connect(bpy.types.Operator):
