@@ -12,7 +12,11 @@ the unitless hair and cloth attributes (:func:`channel_sigma`). With ``drift`` o
 take's translation channels lose their mean and linear trend (predicted and measured alike:
 a projection, so the fit is exact least squares with a free offset and drift per channel),
 which a mocap take's drifting translations need; their rest offsets then cannot be
-identified. Predictions come from the engine's batch path
+identified. Over a fence the preset's ``[jump]`` layer (:mod:`riderlive.rules.jump`) blends the
+trunk and head toward its pose, ``rules + w * (target - rules)``: the targets depend on the
+horse alone, so the layer is modelled exactly (:func:`_jump_layer`), its table held like the
+errata (a choice, not a measurement: with its weight free, a jump's frames could no longer tell
+the rules' lift and back gains from the fold). Predictions come from the engine's batch path
 (:meth:`riderlive.rules.engine.RiderModel.evaluate_columns`); derivatives from the same rules
 on dual numbers (:mod:`riderlive.fit.dual`), accumulated as normal equations channel by
 channel (each channel touches a dozen parameters, so ``J^T J`` costs little).
@@ -22,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -29,9 +34,10 @@ import numpy.typing as npt
 from riderlive.channels import RIDER_INDEX, Kind, lookup
 from riderlive.fit.dual import Dual, dual_rules, tangent_of, value_of
 from riderlive.frameunits import METRES
+from riderlive.rules import jump as jump_table
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
-from riderlive.rules.params import RuleParams, Terrain
+from riderlive.rules.params import Jump, RuleParams, Terrain
 from riderlive.rules.terrain import LEAN_OUTPUT, PITCH_ARGUMENT, lean
 
 FloatArray = npt.NDArray[np.float64]
@@ -199,6 +205,7 @@ def linearise(
                     unit = Terrain(**{kk: float(kk == key) for kk in _TERRAIN_KEYS})
                     tangent[k] = lean(unit, aligned.ground)
             outputs[LEAN_OUTPUT] = Dual(value_of(lean_out), tangent)
+        _jump_layer(outputs, inputs, preset.jump, index.get("jump.weight"), n)
         for c, name in enumerate(aligned.channels):
             j = RIDER_INDEX[name]
             out_scale = 1.0 / scale if lookup(name).kind is Kind.TRANSLATION else 1.0
@@ -224,3 +231,28 @@ def linearise(
             normal[np.ix_(keys, keys)] += jac @ jac.T
             gradient[keys] += jac @ r
     return Linearised(total, normal, gradient, rows)
+
+
+def _jump_layer(outputs: list[Any], args: Sequence[FloatArray], p: Jump, weight_k: int | None, n: int) -> None:
+    """The ``[jump]`` layer on the rules' dual ``outputs``, in place, as the engine applies it: each of
+    :data:`riderlive.rules.jump.OUTPUTS` becomes ``rules + w * (target - rules)`` with ``w = weight *
+    max(rise, hind)``. The targets depend on the horse (``args``: the rules' arguments, thesis units)
+    and the held table alone, so the derivatives are ``(1 - w)`` times the rules' and, for ``weight``
+    (parameter ``weight_k`` when fitted), ``max(rise, hind) * (target - rules)``."""
+    if weight_k is None and p.weight == 0.0:
+        return
+    pitch = np.asarray(args[jump_table.PITCH], dtype=np.float64)
+    front = np.asarray(args[jump_table.FRONT[0]] + args[jump_table.FRONT[1]], dtype=np.float64)
+    back = np.asarray(args[jump_table.BACK[0]] + args[jump_table.BACK[1]], dtype=np.float64)
+    rise, hind = jump_table.activation(p, pitch, np.asarray(args[jump_table.HEIGHT], dtype=np.float64), front, back)
+    raw = np.maximum(rise, hind)
+    if not raw.any():
+        return  # no frame over a fence: Appendix B's values and no derivative for the weight
+    w = p.weight * raw
+    saddle = pitch + np.asarray(args[jump_table.BEND], dtype=np.float64)
+    for column, target in zip(jump_table.OUTPUTS, jump_table.pose(p, saddle, rise, hind), strict=True):
+        rules = np.broadcast_to(value_of(outputs[column]), (n,))
+        tangent = {k: (1.0 - w) * t for k, t in tangent_of(outputs[column]).items()}
+        if weight_k is not None:
+            tangent[weight_k] = raw * (target - rules)
+        outputs[column] = Dual(rules + w * (target - rules), tangent)

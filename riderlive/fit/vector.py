@@ -4,7 +4,8 @@ Every number the rules read (:func:`riderlive.rules.kuhnel2003.make_rules`) and 
 ``[terrain]`` lean is a candidate: the groups of :data:`FIT_GROUPS`, each field of
 :class:`~riderlive.rules.params.RuleParams` in declaration order. Not fitted, held at the
 starting preset's value and listed as such in the report: ``[errata]`` (readings of
-Appendix B, chosen, not measured), ``[smoothing]`` and ``[follow_through]`` (filters over
+Appendix B, chosen, not measured), ``[jump]`` (the fold over a fence, modelled exactly but
+chosen), ``[smoothing]`` and ``[follow_through]`` (filters over
 time), ``[reins]``, ``[arms]`` and ``[stirrups]`` (rider parts, not rider channels).
 
 Bounds come from the preset model's own constraints (pydantic ``ge`` / ``le``); a divisor
@@ -43,7 +44,7 @@ FIT_GROUPS: tuple[str, ...] = (
 )
 """The preset tables whose numbers are fitted."""
 
-HELD_GROUPS: tuple[str, ...] = ("errata", "smoothing", "follow_through", "reins", "arms", "stirrups")
+HELD_GROUPS: tuple[str, ...] = ("errata", "jump", "smoothing", "follow_through", "reins", "arms", "stirrups")
 """The preset tables held at the starting preset's values (see the module docstring)."""
 
 TIES: dict[str, str] = {"errata.left_foot_clamped_belly_pivot_gain": "feet.belly_pivot_gain"}

@@ -9,6 +9,7 @@ from riderlive.channels import RIDER_INDEX, RIDER_NAMES
 from riderlive.fit.dual import Dual, dual_rules, tangent_of, value_of
 from riderlive.fit.problem import align, linearise, residuals
 from riderlive.fit.vector import from_vector, parameters, ties, to_vector
+from riderlive.rules import jump
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.rules.params import load_preset
@@ -26,13 +27,17 @@ def test_values_are_the_engines_and_derivatives_match_central_differences(preset
     names = [p.name for p in params]
     outputs = dual_rules(preset, names, ties(preset))(*inputs)
     engine = RiderModel(params=preset).evaluate_columns(dict(zip(RULE_INPUTS, inputs, strict=True)), n, compiled=False)
+    # the dual is the rules alone: the [jump] layer (not fitted) moves the trunk and head over a fence
+    over_fence = np.asarray(jump.weights(preset.jump, inputs) > 0.0)  # (linearise adds it: tested below)
+    assert over_fence.any() == (take == "jump" and preset_name == "english")
     for j, name in enumerate(RIDER_NAMES):
         value = np.broadcast_to(value_of(outputs[j]), (n,))  # the same arithmetic, operands maybe swapped
-        np.testing.assert_allclose(value, engine[:, j], rtol=1e-13, atol=1e-13, err_msg=name)
+        rows = ~over_fence if j in jump.OUTPUTS else np.ones(n, dtype=bool)
+        np.testing.assert_allclose(value[rows], engine[rows, j], rtol=1e-13, atol=1e-13, err_msg=name)
     x = to_vector(preset, names)
     for k, p in enumerate(params):
-        if p.name.startswith("terrain."):
-            continue  # the lean is added after the rules (tested through linearise below)
+        if p.name.startswith(("terrain.", "jump.")):
+            continue  # the lean and the jump layer come after the rules (tested through linearise below)
         h = 1e-6 * max(abs(x[k]), 1.0)
         up, down = x.copy(), x.copy()
         up[k] += h
@@ -45,16 +50,20 @@ def test_values_are_the_engines_and_derivatives_match_central_differences(preset
         )
         numeric = (a - b) / (2 * h)
         for j, name in enumerate(RIDER_NAMES):
-            exact = np.broadcast_to(tangent_of(outputs[j]).get(k, 0.0), (n,))
+            rows = ~over_fence if j in jump.OUTPUTS else np.ones(n, dtype=bool)
+            exact = np.broadcast_to(tangent_of(outputs[j]).get(k, 0.0), (n,))[rows]
             # frames where a clamp or branch switches inside +-h differ; elsewhere the two agree
-            close = np.abs(exact - numeric[:, j]) <= 1e-5 * (1.0 + np.abs(exact))
-            assert close.mean() >= 0.995, (p.name, name, float(np.max(np.abs(exact - numeric[:, j]))))
+            close = np.abs(exact - numeric[rows, j]) <= 1e-5 * (1.0 + np.abs(exact))
+            assert close.mean() >= 0.995, (p.name, name, float(np.max(np.abs(exact - numeric[rows, j]))))
 
 
-def test_normal_equations_equal_the_dense_jacobians() -> None:
-    """J^T J and J^T r from the dual equal those of a dense finite-difference Jacobian of residuals()."""
-    truth, preset = load_preset("english"), load_preset("child")
-    take = align(pair("canter", truth, seconds=3.0), 0.0, drift=True)
+@pytest.mark.parametrize("shot", ["canter", "jump"])
+def test_normal_equations_equal_the_dense_jacobians(shot: str) -> None:
+    """J^T J and J^T r from the dual equal those of a dense finite-difference Jacobian of residuals();
+    over a fence with the [jump] layer blended in (at a weight of 0.7)."""
+    truth = load_preset("english")
+    preset = load_preset("child").with_values({"jump.weight": 0.7})
+    take = align(pair(shot, truth, seconds=3.0 if shot == "canter" else 8.0), 0.0, drift=True)
     names = [p.name for p in parameters(preset)][:20]
     lin = linearise([take], preset, names, ties(preset))
     x = to_vector(preset, names)

@@ -16,9 +16,12 @@ HELD_OUT = "gallop"
 
 
 def literal_start() -> RuleParams:
-    """English numbers with Appendix B's literal readings: the errata are held, never fitted."""
+    """English numbers with Appendix B's literal readings and no jump layer: errata and [jump] are held,
+    never fitted (chosen with the starting preset)."""
     literal = load_preset("kuhnel2003_literal").flat()
-    return load_preset("english").with_values({k: v for k, v in literal.items() if k.startswith("errata.")})
+    return load_preset("english").with_values(
+        {k: v for k, v in literal.items() if k.startswith(("errata.", "jump."))}
+    )
 
 
 CASES = {
