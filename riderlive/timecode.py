@@ -134,7 +134,9 @@ def check_fields(h: int, m: int, s: int, ff: int, rate: Rate) -> None:
         raise TimecodeError("timecode_malformed", f"timecode {label}: hours < 24, minutes and seconds < 60")
     if ff >= facts.nominal:
         raise TimecodeError(
-            "timecode_rate", f"frame {ff} does not exist at {rate.value} (frames 00-{facts.nominal - 1}): another rate?"
+            "timecode_rate",
+            f"timecode {h:02d}:{m:02d}:{s:02d}.{ff:02d}: frame {ff} does not exist at {rate.value} "
+            f"(frames 00-{facts.nominal - 1}): another rate?",
         )
     if facts.drop and s == 0 and ff < facts.drop and m % 10:
         raise TimecodeError(

@@ -46,6 +46,7 @@ from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
+from riderlive.timecode import TimecodeError
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -118,6 +119,8 @@ class Producer:
     window_start: float = 0.0
     window_frames: int = 0
     websocket: WebSocket | None = None
+    timecode_error_at: float = -1e9
+    """When the producer was last told its ``tc`` is unusable (at most once a second)."""
 
     def __post_init__(self) -> None:
         self.stream = self.stream or self.id
@@ -281,6 +284,7 @@ class IngestEndpoint:
         except WebSocketDisconnect:
             pass
         finally:
+            service.timecode.forget(producer.stream)
             if service.arbiter.remove(producer.id):
                 service.link.tell(cmd.ProducerGone(producer.stream))
 
@@ -320,6 +324,8 @@ class IngestEndpoint:
         jump = clock_jump(producer.last_t, producer.last_frame_at, frame.t, now, limits.clock_jump)
         if jump is not None:
             self.new_segment(producer, frame.t, jump)
+        if "tc" in obj:
+            self.timecode(producer, frame.t, obj, now)
         producer.last_t = frame.t
         producer.accepted += 1
         self.service.metrics.count_frame_in(producer.name)
@@ -329,6 +335,20 @@ class IngestEndpoint:
         if drives:
             self.service.link.push_input(producer.stream, frame.t, now - self.service.link.start, values, spec.kind)
         return drives
+
+    def timecode(self, producer: Producer, t: float, obj: dict[str, Any], now: float) -> None:
+        """A frame's ``tc`` (and ``tc_rate``; docs/protocol.md, "Timecode"). An unusable one
+        (malformed, another rate) is counted and answered at most once a second, and ignored:
+        the frame still drives (its motion is valid). A jump is counted and told."""
+        try:
+            jump = self.service.timecode.producer_label(producer.stream, t, obj["tc"], obj.get("tc_rate"))
+        except TimecodeError as exc:
+            if now - producer.timecode_error_at >= 1.0:
+                producer.timecode_error_at = now
+                producer.outbox.append({"type": "error", "reason": exc.reason, "message": str(exc)})
+            return
+        if jump is not None:
+            producer.outbox.append({"type": "timecode", "reason": "jump", "frames": jump, "tc": obj["tc"]})
 
     def new_segment(self, producer: Producer, t: float, jump: float) -> None:
         """Re-anchor: the tick gets a new stream id (a fresh clock mapping, a blend)."""
