@@ -279,6 +279,17 @@ class TimecodeSection(StrictModel):
     """Seconds a stage heartbeat's timecode stays the reference after the last one arrived."""
 
 
+class FoxgloveSection(StrictModel):
+    """The Foxglove WebSocket server (docs/foxglove.md); also ``serve --foxglove PORT``."""
+
+    port: int | None = pydantic.Field(default=None, ge=0, le=65535)
+    """Unset: off; 0: any free port. It listens on ``server.host`` and has no token: read-only data."""
+    tf_rate: float = pydantic.Field(default=30.0, gt=0.0, le=1000.0)
+    """``/tf`` (both skeletons) messages per second (every ``round(tick.rate / tf_rate)``-th tick)."""
+    backlog: int = pydantic.Field(default=1024, ge=16, le=1_000_000)
+    """Messages the SDK queues per client before it drops that client's messages."""
+
+
 class ServiceConfig(StrictModel):
     server: ServerSection = ServerSection()
     security: SecuritySection = SecuritySection()
@@ -297,6 +308,7 @@ class ServiceConfig(StrictModel):
     """Where the saddle point sits on the horse's back (docs/saddle.md): the published
     saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""
     timecode: TimecodeSection = TimecodeSection()
+    foxglove: FoxgloveSection = FoxgloveSection()
     nats: NatsSection = NatsSection()
     """Join a stage over NATS (docs/deployment.md); unset ``url``: brokerless."""
 

@@ -40,6 +40,7 @@ from riderlive.takes.stamp import start_index, take_timecode
 
 if TYPE_CHECKING:
     from riderlive.bus.rig import RigNode
+    from riderlive.service.foxglove import FoxgloveLive
 
 log = logging.getLogger(__name__)
 
@@ -143,6 +144,7 @@ class Service:
         self.arm_checks: list[Callable[[], str | None]] = []
         """Each says why arming must wait (e.g. no stage heartbeat), or None."""
         self.stage: RigNode | None = None
+        self.foxglove: FoxgloveLive | None = None
 
     def _report_configured(self) -> None:
         """Preset, animator layer and source as configured (at start, and when a restarted
@@ -170,6 +172,12 @@ class Service:
             self.link, self.config, self.on_tick, self.hub.publish_status, self._tick_fell_back
         )
         await self.supervisor.start()
+        section = self.config.foxglove
+        if section.port is not None:
+            from riderlive.service.foxglove import FoxgloveLive
+
+            self.foxglove = FoxgloveLive(self, self.config.server.host, section.port, section.tf_rate, section.backlog)
+            self.sinks.append(self.foxglove.publish)
         if self.config.nats.url is not None:
             from riderlive.bus.rig import join_stage
 
@@ -190,6 +198,8 @@ class Service:
         self.link.close()
         if self.vmc is not None:
             self.vmc.close()
+        if self.foxglove is not None:
+            self.foxglove.stop()
 
     # -- the tick's records ---------------------------------------------------
     def on_tick(self) -> None:
@@ -405,4 +415,5 @@ class Service:
             "horse_channels": list(HORSE_NAMES),
             "vmc": None if self.vmc is None else self.vmc.status(),
             "timecode": self.timecode.status(link.engine_time()),
+            "foxglove": None if self.foxglove is None else self.foxglove.status(),
         }

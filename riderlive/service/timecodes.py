@@ -81,6 +81,8 @@ class ServiceTimecode:
         """The stage heartbeat's last label on the engine clock."""
         self.stage_seen = -1e9
         self.counts: Counter[str] = Counter() if counts is None else counts
+        self.epoch_at_engine_zero = 0.0
+        """Unix time of engine time 0 (for log times of Foxglove and MCAP messages)."""
 
     def parse_label(self, label: object, rate: object = None) -> int:
         """A wire ``tc`` (and optional ``tc_rate``) -> frames; TimecodeError (counted) otherwise."""
@@ -143,6 +145,10 @@ class ServiceTimecode:
             int(record[L.OUT_PRODUCER]),
         )
 
+    def wall_ns(self, engine_t: float) -> int:
+        """Unix nanoseconds of engine time ``engine_t``."""
+        return round((self.epoch_at_engine_zero + engine_t) * 1e9)
+
     def status(self, engine_t: float) -> dict[str, Any]:
         """For ``/api/state`` and the page: the host-or-stage label now, the rate, the counters."""
         stamp = self.at(engine_t, engine_t, -1, 0)
@@ -155,4 +161,6 @@ def host_timecode(section: TimecodeSection, engine_start: float, counts: Counter
     during a run is not followed (restart the service)."""
     wall = time.time() - (time.perf_counter() - engine_start)
     zone = time.localtime(wall).tm_gmtoff if section.clock == "local" else 0
-    return ServiceTimecode(section.rate, section.offset, section.stage_timeout, (wall + zone) % 86400.0, counts)
+    out = ServiceTimecode(section.rate, section.offset, section.stage_timeout, (wall + zone) % 86400.0, counts)
+    out.epoch_at_engine_zero = wall
+    return out
