@@ -164,3 +164,10 @@ def host_timecode(section: TimecodeSection, engine_start: float, counts: Counter
     out = ServiceTimecode(section.rate, section.offset, section.stage_timeout, (wall + zone) % 86400.0, counts)
     out.epoch_at_engine_zero = wall
     return out
+
+
+def host_label(rate: Rate, offset: float = 0.0, clock: str = "local", wall: float | None = None) -> str:
+    """The host clock's label now (or at Unix time ``wall``): ``riderlive stage heartbeat``'s ``tc``."""
+    wall = time.time() if wall is None else wall
+    zone = time.localtime(wall).tm_gmtoff if clock == "local" else 0
+    return tc.format_frames(tc.seconds_to_frames((wall + zone + offset) % 86400.0, rate), rate)
