@@ -3,8 +3,8 @@
 
 | topic | schema (encoding) | what |
 | --- | --- | --- |
-| ``/rider/joints`` | ``riderlive.RiderJoints`` (JSON Schema, ``json``) | ``t`` s, ``timecode``, every rider channel |
-| ``/horse/joints`` | ``riderlive.HorseJoints`` (JSON Schema, ``json``) | ``t`` s, ``timecode``, every horse channel |
+| ``/rider/joints`` | ``riderlive.RiderJoints`` (JSON Schema, ``json``) | ``seq``, ``t``, ``timecode``, rider channels |
+| ``/horse/joints`` | ``riderlive.HorseJoints`` (JSON Schema, ``json``) | ``seq``, ``t``, ``timecode``, horse channels |
 | ``/tf`` | ``foxglove.FrameTransforms`` (the SDK's protobuf) | both skeletons as a frame tree |
 | ``/status`` | ``riderlive.Status`` (JSON Schema, ``json``) | the service's status (live only) |
 
@@ -47,6 +47,7 @@ def field_name(channel: str) -> str:
 def joints_schema(title: str, names: Sequence[str]) -> dict[str, Any]:
     """The JSON Schema of a joints message over channels ``names``."""
     properties: dict[str, Any] = {
+        "seq": {"type": "integer", "description": "tick sequence number live, frame index in a file: gaps are drops"},
         "t": {"type": "number", "description": "seconds (engine time live; take time in a file)"},
         "timecode": {"type": "string", "description": "SMPTE label HH:MM:SS:FF (;FF drop-frame)"},
     }
@@ -98,9 +99,11 @@ def _json(obj: Any) -> bytes:
     return orjson.dumps(obj)
 
 
-def joints_message(t: float, timecode: str, names: Sequence[str], values: Sequence[float] | FloatArray) -> bytes:
+def joints_message(
+    seq: int, t: float, timecode: str, names: Sequence[str], values: Sequence[float] | FloatArray
+) -> bytes:
     """One joints message (JSON bytes)."""
-    body: dict[str, Any] = {"t": t, "timecode": timecode}
+    body: dict[str, Any] = {"seq": seq, "t": t, "timecode": timecode}
     body.update(zip(map(field_name, names), map(float, values), strict=True))
     return orjson.dumps(body)
 

@@ -62,9 +62,9 @@ def write_mcap(fh: IO[bytes], take: TakePoses, started_ns: int = 0) -> int:
         time_ns = started_ns + round(t * 1e9)
         messages = [(fx.TF_TOPIC, fx.frame_transforms(time_ns, frames, _local(tracks, k)))]
         if rider_names:
-            messages.append((fx.RIDER_TOPIC, fx.joints_message(t, labels[k], rider_names, rider_values[k])))
+            messages.append((fx.RIDER_TOPIC, fx.joints_message(k, t, labels[k], rider_names, rider_values[k])))
         if horse_names:
-            messages.append((fx.HORSE_TOPIC, fx.joints_message(t, labels[k], horse_names, horse_values[k])))
+            messages.append((fx.HORSE_TOPIC, fx.joints_message(k, t, labels[k], horse_names, horse_values[k])))
         for topic, data in messages:
             writer.add_message(channels[topic], log_time=time_ns, data=data, publish_time=time_ns, sequence=k)
             written += 1

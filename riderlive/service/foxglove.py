@@ -95,17 +95,17 @@ class FoxgloveLive:
         if want_rider or want_horse or want_tf:
             stamps = self.service.timecode
             for record in records:
-                engine_t = float(record[L.OUT_ENGINE_T])
+                engine_t, seq = float(record[L.OUT_ENGINE_T]), int(record[L.OUT_SEQ])
                 time_ns = wall(engine_t)
                 label = stamps.of_record(record).label if (want_rider or want_horse) else ""
                 if want_rider:
                     values = record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)]
-                    rider.log(fx.joints_message(engine_t, label, RIDER_NAMES, values), log_time=time_ns)
+                    rider.log(fx.joints_message(seq, engine_t, label, RIDER_NAMES, values), log_time=time_ns)
                     self.counts["rider_messages"] += 1
                 if want_horse:
                     values = record[L.OUT_HORSE : L.OUT_RIDER]
-                    horse.log(fx.joints_message(engine_t, label, HORSE_NAMES, values), log_time=time_ns)
-                if want_tf and int(record[L.OUT_SEQ]) % self.tf_every == 0:
+                    horse.log(fx.joints_message(seq, engine_t, label, HORSE_NAMES, values), log_time=time_ns)
+                if want_tf and seq % self.tf_every == 0:
                     tf.log(fx.frame_transforms(time_ns, self.frames, self._poses(record)), log_time=time_ns)
         self._status()
 

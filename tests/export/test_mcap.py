@@ -74,7 +74,7 @@ def test_a_take_round_trips_through_the_official_reader(tmp_path: Path, capsys: 
         assert rider[name.replace(".", "_")] == pytest.approx(rows[k, header.index(name)], abs=1e-9)
     horse = topics["/horse/joints"][k][1]
     assert horse[HORSE_NAMES[0].replace(".", "_")] == pytest.approx(rows[k, header.index(HORSE_NAMES[0])], abs=1e-9)
-    assert rider["t"] == pytest.approx(k / 120)
+    assert rider["t"] == pytest.approx(k / 120) and rider["seq"] == k
     expected = tc.format_frames(
         tc.parse(START, Rate.FPS_29_97_DF) + math.floor(k / 120 * 30000 / 1001 + 1e-6), Rate.FPS_29_97_DF
     )

@@ -63,7 +63,7 @@ def test_joints_and_skeletons_stream(server: LiveServer) -> None:
         client.subscribe("/rider/joints", "/horse/joints", "/tf")
         _wait(lambda: len(client.received["/rider/joints"]) >= 100 and len(client.received["/tf"]) >= 3)
         rider = client.json_messages("/rider/joints")
-        assert set(rider[-1]) == {"t", "timecode", *(n.replace(".", "_") for n in RIDER_NAMES)}
+        assert set(rider[-1]) == {"seq", "t", "timecode", *(n.replace(".", "_") for n in RIDER_NAMES)}
         ts = [m["t"] for m in rider]
         assert all(b > a for a, b in zip(ts, ts[1:])), "in order, none twice"
         tc.parse(rider[-1]["timecode"], Rate.FPS_25)  # the service's default rate
