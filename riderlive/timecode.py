@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass
 from enum import StrEnum
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -88,6 +89,7 @@ RATES: dict[Rate, RateFacts] = {
     Rate.FPS_60: RateFacts(60, Fraction(60), 0),
 }
 """The facts of each rate (SMPTE 12-1; ST 12-3 for 48, 50, 59.94 and 60)."""
+_FLOAT_FPS = {rate: float(facts.fps) for rate, facts in RATES.items()}
 
 _LABEL = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;.,])(\d{2})")
 
@@ -116,14 +118,21 @@ def fields_to_frames(fields: npt.ArrayLike, rate: Rate) -> IntArray:
 def frames_to_fields(frames: npt.ArrayLike, rate: Rate) -> IntArray:
     """Frames since 00:00:00:00 (any integers: wrapped into one day) -> (N, 4) hours,
     minutes, seconds, frames of their labels (vectorised)."""
+    return np.stack(_fields(np.asarray(frames, dtype=np.int64), rate), axis=-1)
+
+
+def _fields(f: Any, rate: Rate) -> tuple[Any, Any, Any, Any]:
+    """Label fields of frame counts ``f``: an int, or an int64 array (element-wise). Operators
+    only, so that one body serves the vectorised and the per-record (scalar) callers."""
     facts = RATES[rate]
-    f = np.mod(np.asarray(frames, dtype=np.int64), facts.frames_per_day)
+    f = f % facts.frames_per_day
     if facts.drop:
-        tens, rest = np.divmod(f, facts.frames_per_ten_minutes)
+        tens, rest = divmod(f, facts.frames_per_ten_minutes)
         # the first minute of ten keeps its labels; each later one skips `drop` at its start
-        f = f + 9 * facts.drop * tens + facts.drop * (np.maximum(rest - facts.drop, 0) // facts.frames_per_minute)
+        late = (rest - facts.drop) * (rest > facts.drop)
+        f = f + 9 * facts.drop * tens + facts.drop * (late // facts.frames_per_minute)
     n = facts.nominal
-    return np.stack((f // (3600 * n), f // (60 * n) % 60, f // n % 60, f % n), axis=-1)
+    return f // (3600 * n), f // (60 * n) % 60, f // n % 60, f % n
 
 
 def check_fields(h: int, m: int, s: int, ff: int, rate: Rate) -> None:
@@ -169,7 +178,7 @@ def parse(text: object, rate: Rate) -> int:
 
 def format_frames(frames: int, rate: Rate) -> str:
     """The label of ``frames`` since 00:00:00:00 (wrapped into one day)."""
-    h, m, s, ff = (int(v) for v in frames_to_fields(frames, rate))
+    h, m, s, ff = _fields(int(frames), rate)
     return f"{h:02d}:{m:02d}:{s:02d}{';' if RATES[rate].drop else ':'}{ff:02d}"
 
 
@@ -202,7 +211,11 @@ class Anchor:
     def frames_at(self, t: float) -> int:
         """The frame showing at ``t`` on the anchor's clock (wrapped into one day)."""
         facts = RATES[self.rate]
-        return (self.frames + math.floor((t - self.t) * facts.fps + 1e-6)) % facts.frames_per_day
+        return (self.frames + math.floor((t - self.t) * self._fps + 1e-6)) % facts.frames_per_day
+
+    @property
+    def _fps(self) -> float:
+        return _FLOAT_FPS[self.rate]
 
     def label_at(self, t: float) -> str:
         return format_frames(self.frames_at(t), self.rate)

@@ -99,13 +99,19 @@ def _json(obj: Any) -> bytes:
     return orjson.dumps(obj)
 
 
-def joints_message(
-    seq: int, t: float, timecode: str, names: Sequence[str], values: Sequence[float] | FloatArray
-) -> bytes:
-    """One joints message (JSON bytes)."""
-    body: dict[str, Any] = {"seq": seq, "t": t, "timecode": timecode}
-    body.update(zip(map(field_name, names), map(float, values), strict=True))
-    return orjson.dumps(body)
+class JointsEncoder:
+    """Joints messages over fixed channels (field names computed once: the live path's encoder)."""
+
+    def __init__(self, names: tuple[str, ...]) -> None:
+        self.keys = tuple(map(field_name, names))
+
+    def encode(self, seq: int, t: float, timecode: str, values: Sequence[float] | FloatArray) -> bytes:
+        floats = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
+        if len(floats) != len(self.keys):
+            raise ValueError(f"{len(floats)} values for {len(self.keys)} channels")
+        body: dict[str, Any] = {"seq": seq, "t": t, "timecode": timecode}
+        body.update(zip(self.keys, floats, strict=True))
+        return orjson.dumps(body)
 
 
 @dataclass(frozen=True)

@@ -57,14 +57,15 @@ def write_mcap(fh: IO[bytes], take: TakePoses, started_ns: int = 0) -> int:
     meta = {"take": take.name, "rate": f"{take.rate:g}", "frames": str(len(take.t)), **timecode_fields(take)}
     writer.add_metadata("riderlive", meta)
     labels = frame_labels(take)
+    rider_joints, horse_joints = fx.JointsEncoder(rider_names), fx.JointsEncoder(horse_names)
     written = 0
     for k, t in enumerate(take.t.tolist()):
         time_ns = started_ns + round(t * 1e9)
         messages = [(fx.TF_TOPIC, fx.frame_transforms(time_ns, frames, _local(tracks, k)))]
         if rider_names:
-            messages.append((fx.RIDER_TOPIC, fx.joints_message(k, t, labels[k], rider_names, rider_values[k])))
+            messages.append((fx.RIDER_TOPIC, rider_joints.encode(k, t, labels[k], rider_values[k])))
         if horse_names:
-            messages.append((fx.HORSE_TOPIC, fx.joints_message(k, t, labels[k], horse_names, horse_values[k])))
+            messages.append((fx.HORSE_TOPIC, horse_joints.encode(k, t, labels[k], horse_values[k])))
         for topic, data in messages:
             writer.add_message(channels[topic], log_time=time_ns, data=data, publish_time=time_ns, sequence=k)
             written += 1

@@ -79,6 +79,7 @@ class FoxgloveLive:
                 topic, schema=schema, message_encoding=message_encoding, context=self.context
             )
         self.frames = fx.skeleton_frames(*_rigs())
+        self.rider_joints, self.horse_joints = fx.JointsEncoder(RIDER_NAMES), fx.JointsEncoder(HORSE_NAMES)
         self.tf_every = max(1, round(service.config.tick.rate / tf_rate))
         self._status_version = -1
         print(
@@ -100,11 +101,11 @@ class FoxgloveLive:
                 label = stamps.of_record(record).label if (want_rider or want_horse) else ""
                 if want_rider:
                     values = record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)]
-                    rider.log(fx.joints_message(seq, engine_t, label, RIDER_NAMES, values), log_time=time_ns)
+                    rider.log(self.rider_joints.encode(seq, engine_t, label, values), log_time=time_ns)
                     self.counts["rider_messages"] += 1
                 if want_horse:
                     values = record[L.OUT_HORSE : L.OUT_RIDER]
-                    horse.log(fx.joints_message(seq, engine_t, label, HORSE_NAMES, values), log_time=time_ns)
+                    horse.log(self.horse_joints.encode(seq, engine_t, label, values), log_time=time_ns)
                 if want_tf and seq % self.tf_every == 0:
                     tf.log(fx.frame_transforms(time_ns, self.frames, self._poses(record)), log_time=time_ns)
         self._status()
