@@ -120,6 +120,7 @@ class Service:
             from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
 
             self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
+            self.vmc.timecode = lambda record: self.timecode.of_record(record).label
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
