@@ -3,9 +3,11 @@ the stage stamps its records with it (docs/timecode.md). A real nats-server, two
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import orjson
 import pytest
@@ -66,3 +68,27 @@ def test_a_heartbeat_at_another_rate_is_counted_not_followed(broker: Broker, rig
         assert _timecode(rigs[0])["source"] == "host"
     finally:
         probe.close()
+
+
+def test_stage_record_writes_mcap(broker: Broker, rigs: list[LiveServer], tmp_path: Path) -> None:
+    """``riderlive stage record --mcap``: the JetStream take as MCAP, read back by the official reader."""
+    from mcap.reader import make_reader
+
+    out = tmp_path / "m1.mcap"
+    command = [sys.executable, "-m", "riderlive", "stage", "--nats", broker.url, "--stage", STAGE, "record",
+               "--rig", "r0", "--take", "m1", "--seconds", "0.6", "--mcap", str(out)]  # fmt: skip
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    frames = int(re.search(r"(\d+) frames of rig", done.stdout).group(1))  # type: ignore[union-attr]
+    with out.open("rb") as fh:
+        reader = make_reader(fh)
+        counts = {c.topic: 0 for c in reader.get_summary().channels.values()}  # type: ignore[union-attr]
+        for _, channel, _ in reader.iter_messages():
+            counts[channel.topic] += 1
+    assert counts == {"/tf": frames, "/rider/joints": frames, "/horse/joints": frames}
+    # a take that does not exist: a clear error, no file
+    missing = tmp_path / "none.mcap"
+    command = [sys.executable, "-m", "riderlive", "stage", "--nats", broker.url, "--stage", STAGE, "export",
+               "--take", "nope", "--out", str(tmp_path / "nope.csv")]  # fmt: skip
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "no take" in done.stderr and not missing.exists()
