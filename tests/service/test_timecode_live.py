@@ -179,3 +179,34 @@ def test_state_shows_the_timecode(server: LiveServer) -> None:
     state = server.get("/api/state").json()["timecode"]
     assert state["rate"] == "29.97df" and state["source"] in ("host", "stage")
     tc.parse(state["tc"], RATE)
+
+
+def test_ws_rider_frames_carry_the_timecode_when_asked(server: LiveServer) -> None:
+    with connect(server.ws + "/ws/rider") as ws:
+        hello = json.loads(ws.recv(timeout=5))
+        assert hello["timecode"]["rate"] == "29.97df"
+        ws.send(json.dumps({"type": "subscribe", "timecode": True}))
+        frames = []
+        while len(frames) < 5:
+            message = json.loads(ws.recv(timeout=5))
+            if message["type"] == "subscribed":
+                assert message["timecode"] is True
+            if message["type"] == "frame" and "tc" in message:
+                frames.append(message)
+        labels = [tc.parse(f["tc"], RATE) for f in frames]
+        assert all(0 <= tc.frames_between(b, a, RATE) <= 1 for a, b in zip(labels, labels[1:]))  # 200 Hz ticks
+        ws.send(json.dumps({"type": "subscribe", "timecode": True, "encoding": "binary"}))
+        from riderlive.service.codecs import decode_binary_frame
+
+        while True:
+            message = ws.recv(timeout=5)
+            if isinstance(message, bytes):
+                frame = decode_binary_frame(message)
+                assert abs(tc.frames_between(frame["tc_frames"], labels[-1], RATE)) < 30 * 5
+                break
+        ws.send(json.dumps({"type": "subscribe", "timecode": "yes"}))
+        while True:
+            message = ws.recv(timeout=5)
+            if isinstance(message, str) and json.loads(message)["type"] == "error":
+                assert "timecode" in json.loads(message)["message"]
+                break
