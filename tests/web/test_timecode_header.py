@@ -12,10 +12,7 @@ pytestmark = pytest.mark.browser
 
 
 def test_the_header_shows_the_frames_timecode(live_page: PageUnderTest) -> None:
-    try:
-        live_page.wait_for("typeof riderlive.timecode === 'string'", timeout=10)
-    except Exception:
-        raise AssertionError(str(live_page.state("JSON.stringify(Object.keys(riderlive))")) + str(live_page.errors))
+    live_page.wait_for("typeof riderlive.timecode === 'string'", timeout=10)
     text = live_page.page.locator("#timecode").inner_text()
     assert text.startswith("TC ")
     first = tc.parse(text[3:], Rate.FPS_25)  # the service's default rate
