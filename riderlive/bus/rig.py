@@ -46,6 +46,7 @@ from riderlive.devices.lifecycle import DeviceState
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import layout as L
 from riderlive.service.codecs import PROTOCOL_VERSION, encode_frame
+from riderlive.timecode import TimecodeError
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -251,6 +252,17 @@ class RigNode:
             return
         self.last_heartbeat = time.perf_counter()
         self.counts["heartbeats"] += 1
+        self.stage_timecode(msg.data)
+
+    def stage_timecode(self, data: bytes) -> None:
+        """A heartbeat's ``tc``: the stage-wide timecode reference; unusable: counted (timecode errors)."""
+        try:
+            body = orjson.loads(data)
+        except orjson.JSONDecodeError:
+            return
+        if isinstance(body, dict) and "tc" in body:
+            with contextlib.suppress(TimecodeError):  # counted by ServiceTimecode
+                self.service.timecode.stage_beat(self.service.link.engine_time(), body["tc"], body.get("tc_rate"))
 
     async def on_discover(self, msg: Message) -> None:
         if msg.reply:

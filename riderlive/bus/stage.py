@@ -26,7 +26,10 @@ import orjson
 
 from riderlive.bus.subjects import Kind, Stage, check_name
 from riderlive.bus.transport import Message, Transport, TransportError
+from riderlive.timecode import Rate, TimecodeError, parse_rate
 
+Timecode = tuple[Rate, float, str]
+"""A heartbeat's timecode: rate, offset (s) and clock (local or utc), as ``[timecode]``."""
 HEARTBEAT_PERIOD_S = 0.1
 """The heartbeat's period: 10 per ``nats.heartbeat_timeout`` (1 s) by default."""
 
@@ -81,14 +84,24 @@ async def stage_estop(transport: Transport, stage: Stage, by: str, wait: float =
     return await gather_replies(transport, stage.subject(Kind.ESTOP), body, wait)
 
 
-async def beat(transport: Transport, stage: Stage, period: float, stop: asyncio.Event) -> int:
-    """Publish the stage heartbeat every ``period`` s until ``stop``; how many were sent."""
+async def beat(
+    transport: Transport, stage: Stage, period: float, stop: asyncio.Event, timecode: Timecode | None = None
+) -> int:
+    """Publish the stage heartbeat every ``period`` s until ``stop``; how many were sent.
+
+    ``timecode`` (rate, offset s, clock): each beat carries ``tc`` (the host clock's label)
+    and ``tc_rate``, the stage-wide timecode reference of every rig (docs/timecode.md)."""
     subject = stage.subject(Kind.HEARTBEAT)
     source = socket.gethostname()
     sent = 0
     next_at = time.perf_counter()
     while not stop.is_set():
-        await transport.publish(subject, orjson.dumps({"seq": sent, "t": time.time(), "source": source}))
+        body: dict[str, Any] = {"seq": sent, "t": time.time(), "source": source}
+        if timecode is not None:
+            from riderlive.service.timecodes import host_label
+
+            body |= {"tc": host_label(*timecode, wall=body["t"]), "tc_rate": timecode[0].value}
+        await transport.publish(subject, orjson.dumps(body))
         sent += 1
         next_at += period
         with contextlib.suppress(TimeoutError):
@@ -137,6 +150,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     heart = sub.add_parser("heartbeat", help="publish the stage heartbeat until Ctrl-C")
     heart.add_argument("--period", type=float, default=HEARTBEAT_PERIOD_S, help="seconds between beats")
     heart.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: never)")
+    heart.add_argument("--tc-rate", help="carry the stage timecode at this rate (25, 29.97df...; docs/timecode.md)")
+    heart.add_argument("--tc-offset", type=float, default=0.0, help="seconds added to the host clock's time of day")
+    heart.add_argument("--tc-clock", choices=("local", "utc"), default="local", help="time of day: local or utc")
     from riderlive.bus.takes import add_take_arguments
 
     add_take_arguments(sub)
@@ -171,8 +187,9 @@ async def _run(args: argparse.Namespace) -> int:
                 loop.add_signal_handler(sig, done.set)
             if args.duration > 0:
                 loop.call_later(args.duration, done.set)
+            timecode = None if args.tc_rate is None else (parse_rate(args.tc_rate), args.tc_offset, args.tc_clock)
             print(f"heartbeat: stage {stage.name!r} every {args.period:g} s", flush=True)
-            sent = await beat(transport, stage, args.period, done)
+            sent = await beat(transport, stage, args.period, done, timecode)
             print(f"heartbeat: {sent} sent", flush=True)
             return 0
         from riderlive.bus.takes import run_take_action
@@ -185,6 +202,6 @@ async def _run(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     try:
         return asyncio.run(_run(args))
-    except (TransportError, ValueError) as exc:
+    except (TransportError, ValueError, TimecodeError) as exc:
         print(f"riderlive stage: {exc}", file=sys.stderr)
         return 2

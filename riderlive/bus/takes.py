@@ -180,6 +180,28 @@ async def export(transport: Transport, stage: Stage, take: str, out: Path) -> in
     return len(recorded)
 
 
+async def export_mcap(transport: Transport, stage: Stage, take: str, out: Path) -> int:
+    """Write a take as MCAP (the schemas of ``riderlive export --format mcap``, through a local
+    take file in a temporary directory); messages written. Nothing is written for a take
+    without frames (TransportError) or one the skeletons cannot pose."""
+    import tempfile
+
+    from riderlive.export.mcap import start_ns, write_mcap
+    from riderlive.export.take import ExportError, load_take, sidecar_of
+    from riderlive.framefile import _atomic_binary
+
+    with tempfile.TemporaryDirectory() as tmp:
+        local = Path(tmp) / f"{take}.csv"
+        if await export(transport, stage, take, local) == 0:
+            raise TransportError(f"take {take!r} has no frames: no MCAP written")
+        try:
+            poses = load_take(local)
+        except ExportError as exc:
+            raise TransportError(f"take {take!r}: {exc}") from None
+        with _atomic_binary(str(out)) as fh:
+            return write_mcap(fh, poses, start_ns(sidecar_of(local).get("started")))
+
+
 def add_take_arguments(sub: Any) -> None:
     rec = sub.add_parser("record", help="record a rig's frames into a JetStream take")
     rec.add_argument("--rig", required=True)
@@ -187,6 +209,7 @@ def add_take_arguments(sub: Any) -> None:
     rec.add_argument("--seconds", type=float, default=10.0)
     rec.add_argument("--max-age", type=float, default=7 * 86400.0, help="retention: seconds (default 7 days)")
     rec.add_argument("--max-mb", type=float, default=256.0, help="retention: megabytes (default 256)")
+    rec.add_argument("--mcap", type=Path, metavar="FILE", help="also write the take as MCAP (docs/foxglove.md)")
     sub.add_parser("takes", help="list the stage's JetStream takes")
     rep = sub.add_parser("replay", help="replay a JetStream take into a rig (as a NATS producer)")
     rep.add_argument("--take", required=True)
@@ -205,6 +228,9 @@ async def run_take_action(transport: Transport, stage: Stage, args: argparse.Nam
             transport, stage, args.rig, args.take, seconds=args.seconds, max_age=args.max_age, max_bytes=max_bytes
         )
         print(f"take {got.name!r}: {got.frames} frames of rig {got.rig!r}, {got.bytes} bytes")
+        if args.mcap is not None:
+            written = await export_mcap(transport, stage, args.take, args.mcap)
+            print(f"wrote {written} MCAP messages to {args.mcap}")
         return 0
     if args.action == "takes":
         for t in await list_takes(transport, stage):

@@ -11,7 +11,8 @@ skeleton as its own armature (Blender: two armatures, each with one ``hips``). T
 per node, a ``rotation`` channel (local, relative to the rest) and, for the root node
 and every bone that translates, a ``translation`` channel (the full local position),
 sampled ``LINEAR`` at the take's frames. The asset's ``extras.riderlive`` names the
-take, its rate and the skeleton version.
+take, its rate, the skeleton version and the start timecode (``timecode``,
+``timecode_rate``, ``timecode_source``: docs/timecode.md) when the take has one.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import orjson
 
 from riderlive import __version__
 from riderlive.export import axes
-from riderlive.export.take import SkeletonTrack, TakePoses
+from riderlive.export.take import SkeletonTrack, TakePoses, timecode_fields
 from riderlive.skeleton import SKELETON_VERSION
 
 FloatArray = npt.NDArray[np.float64]
@@ -118,7 +119,14 @@ def write_glb(fh: IO[bytes], take: TakePoses) -> None:
         "asset": {
             "version": "2.0",
             "generator": f"riderlive {__version__}",
-            "extras": {"riderlive": {"take": take.name, "rate": take.rate, "skeleton_version": SKELETON_VERSION}},
+            "extras": {
+                "riderlive": {
+                    "take": take.name,
+                    "rate": take.rate,
+                    "skeleton_version": SKELETON_VERSION,
+                    **timecode_fields(take),
+                }
+            },
         },
         "scene": 0,
         "scenes": [{"name": take.name, "nodes": []}],

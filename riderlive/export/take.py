@@ -13,7 +13,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,8 @@ from riderlive.horse import DEFAULT_SCALE
 from riderlive.skeleton import HORSE_RIG, rider_rig
 from riderlive.skeleton.rig import PoseArrays, Rig, solve_frames
 from riderlive.takes import take_path
+from riderlive.takes.stamp import TakeTimecode, take_timecode
+from riderlive.timecode import TimecodeError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -58,6 +60,28 @@ class TakePoses:
     rider: SkeletonTrack | None
     ignored: tuple[str, ...]
     """Known channels that pose neither skeleton (``hair.*``, ``tail_NN.*``...)."""
+    timecode: TakeTimecode | None = None
+    """The label of the first frame (sidecar), None for a take from before timecode."""
+    values: dict[str, FloatArray] = field(default_factory=dict)
+    """The horse and rider channels that pose the skeletons, metres and degrees, on the grid ``t``."""
+
+    @property
+    def horse_channels(self) -> tuple[str, ...]:
+        return HORSE_NAMES if self.horse is not None else ()
+
+    @property
+    def rider_channels(self) -> tuple[str, ...]:
+        return RIDER_NAMES if self.rider is not None else ()
+
+    def matrix(self, names: tuple[str, ...]) -> FloatArray:
+        """(N, len(names)) of those channels."""
+        return np.stack([self.values[n] for n in names], axis=1) if names else np.zeros((len(self.t), 0))
+
+
+def timecode_fields(take: TakePoses) -> dict[str, str]:
+    """The take's start timecode for a file's metadata (glTF ``extras``, the BVH export's
+    sidecar, MCAP's metadata): ``timecode``, ``timecode_rate``, ``timecode_source``; {} when none."""
+    return {} if take.timecode is None else take.timecode.as_meta()
 
 
 def resolve_take(take: str, directory: str | Path) -> Path:
@@ -87,7 +111,7 @@ def check_not_recording(path: Path) -> None:
         os.close(fd)
 
 
-def _sidecar(path: Path) -> dict[str, object]:
+def sidecar_of(path: Path) -> dict[str, object]:
     meta = path.with_suffix(".json")
     if not meta.is_file():
         return {}
@@ -116,7 +140,7 @@ def load_take(path: Path, length_scale: float | None = None, rate: float | None 
         raise ExportError(str(exc)) from None
     if len(table) == 0:
         raise ExportError(f"{path}: the take has no frames")
-    meta = _sidecar(path)
+    meta = sidecar_of(path)
     scale = float(length_scale or meta.get("length_scale") or DEFAULT_SCALE)  # type: ignore[arg-type]
     has_horse = _complete(path, table, HORSE_NAMES, "horse")
     has_rider = _complete(path, table, RIDER_NAMES, "rider")
@@ -147,17 +171,25 @@ def load_take(path: Path, length_scale: float | None = None, rate: float | None 
             out[name] = column * to_metres if lookup(name).kind is Kind.TRANSLATION else column
         return out
 
+    try:
+        stamp = take_timecode(meta)
+    except TimecodeError as exc:
+        raise ExportError(f"{path}: the sidecar's timecode is unusable: {exc}") from None
     n = len(grid)
+    values: dict[str, FloatArray] = {}
     horse = rider = None
     saddle_pos = np.zeros((n, 3))
     saddle_rot = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
     if has_horse:
-        poses = solve_frames(HORSE_RIG, columns(HORSE_NAMES), n)
+        values |= columns(HORSE_NAMES)
+        poses = solve_frames(HORSE_RIG, {name: values[name] for name in HORSE_NAMES}, n)
         horse = SkeletonTrack(HORSE_RIG, poses, np.zeros((n, 3)), saddle_rot.copy())
         saddle = HORSE_RIG.index["saddle"]
         saddle_pos = poses.world_positions[saddle]
         saddle_rot = poses.world_rotations[saddle]
     if has_rider:
         rig = rider_rig()
-        rider = SkeletonTrack(rig, solve_frames(rig, columns(RIDER_NAMES), n), saddle_pos, saddle_rot)
-    return TakePoses(path.stem, grid - grid[0], rate, horse, rider, ignored)
+        values |= columns(RIDER_NAMES)
+        poses = solve_frames(rig, {name: values[name] for name in RIDER_NAMES}, n)
+        rider = SkeletonTrack(rig, poses, saddle_pos, saddle_rot)
+    return TakePoses(path.stem, grid - grid[0], rate, horse, rider, ignored, stamp, values)

@@ -14,7 +14,7 @@ import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from fastapi import Depends, FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
@@ -202,9 +202,10 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def record_stop() -> dict[str, Any]:
         return {"take": service.stop_recording()}
 
-    @app.get("/api/takes", dependencies=obs, summary="Recorded takes, newest first")
-    async def takes() -> dict[str, Any]:
-        return {"takes": list_takes(config.takes.directory)}
+    @app.get("/api/takes", dependencies=obs, summary="Recorded takes with their start timecode, newest first")
+    async def takes(order: Literal["modified", "timecode"] = "modified") -> dict[str, Any]:
+        """``?order=timecode``: by start timecode (earliest first; takes without one last)."""
+        return {"takes": list_takes(config.takes.directory, order)}
 
     add_take_routes(app, service, obs)  # take download and bake, parameter groups (the page)
 

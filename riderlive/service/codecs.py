@@ -38,6 +38,8 @@ FLAG_HORSE = 1
 FLAG_BONES = 2
 FLAG_POSE = 4
 FLAG_SADDLE = 8
+FLAG_TIMECODE = 16
+"""The header's last (reserved) u32 is the frame's timecode: frames since 00:00:00:00 at the hello's rate."""
 NO_CODE = 255
 SKELETONS = ("rider", "horse")
 """Skeletons a ``pose`` subscription can ask for, in the order frames carry them."""
@@ -165,11 +167,13 @@ class Subscription:
     """Skeletons (of :data:`SKELETONS`) whose full local pose, 7 floats per bone, each frame carries."""
     saddle: bool = False
     """Add the saddle pose of the tick's horse and, while a saddle input drives, its estimate."""
+    timecode: bool = False
+    """Add the frame's SMPTE timecode (JSON ``tc`` label; binary: frames in the header, docs/timecode.md)."""
 
     @property
     def key(self) -> tuple[Any, ...]:
         """Clients with the same key share one encoded frame per tick."""
-        return (self.encoding, self.rider, self.horse, self.bones, self.pose, self.saddle)
+        return (self.encoding, self.rider, self.horse, self.bones, self.pose, self.saddle, self.timecode)
 
     def describe(self, tick_rate: float, names: Sequence[str] = RIDER_NAMES) -> dict[str, Any]:
         return {
@@ -182,6 +186,7 @@ class Subscription:
             "bones": self.bones,
             "pose": list(self.pose),
             "saddle": self.saddle,
+            "timecode": self.timecode,
         }
 
 
@@ -236,7 +241,10 @@ def decode_subscription(
     saddle = obj.get("saddle", current.saddle)
     if not isinstance(saddle, bool):
         raise BadFrame("wrong_type", "'saddle' must be true or false")
-    return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose), saddle)
+    timecode = obj.get("timecode", current.timecode)
+    if not isinstance(timecode, bool):
+        raise BadFrame("wrong_type", "'timecode' must be true or false")
+    return Subscription(rider, horse, decimation, encoding, bones, _pose(obj, current.pose), saddle, timecode)
 
 
 def decode_ping_id(obj: dict[str, Any]) -> str | int | float | None:
@@ -289,8 +297,11 @@ def encode_frame(
     record: np.ndarray,
     bones: np.ndarray | None = None,
     pose: dict[str, np.ndarray] | None = None,
+    timecode: tuple[int, str] | None = None,
 ) -> str | bytes:
     """One output-ring record as a frame for ``sub``: JSON text or the binary layout (docs/protocol.md).
+
+    ``timecode``: the record's (frames, label), added when ``sub.timecode``.
 
     ``bones``: the rider's bone quaternions for this record, added when ``sub.bones``.
     ``pose``: skeleton -> its pose floats (7 per bone) for this record, added for ``sub.pose``.
@@ -310,6 +321,8 @@ def encode_frame(
     if sub.encoding == "binary":
         flags = (FLAG_HORSE if horse_values is not None else 0) | (FLAG_BONES if bone_values is not None else 0)
         flags |= (FLAG_POSE if sub.pose else 0) | (FLAG_SADDLE if sub.saddle else 0)
+        stamped = sub.timecode and timecode is not None
+        flags |= FLAG_TIMECODE if stamped else 0
         size = BINARY_HEADER.size + (BONES_HEADER.size if bone_values is not None else 0)
         size += (POSE_HEADER.size if sub.pose else 0) + (SADDLE_HEADER.size if sub.saddle else 0)
         header = BINARY_HEADER.pack(
@@ -322,7 +335,7 @@ def encode_frame(
             source_t,
             len(rider_values),
             0 if horse_values is None else len(horse_values),
-            0,
+            timecode[0] if stamped and timecode is not None else 0,
         )
         if bone_values is not None:
             header += BONES_HEADER.pack(len(bone_values), 0, 0)
@@ -357,12 +370,14 @@ def encode_frame(
     if sub.saddle:
         message["saddle"] = saddle.tolist()
         message["estimate"] = saddle_estimate(estimate)
+    if sub.timecode and timecode is not None:
+        message["tc"] = timecode[1]
     return orjson.dumps(message).decode()
 
 
 def decode_binary_frame(data: bytes) -> dict[str, Any]:
     """The inverse of the binary layout (for clients and tests)."""
-    magic, size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, _ = BINARY_HEADER.unpack_from(data)
+    magic, size, driver, flags, seq, engine_t, source_t, n_rider, n_horse, tc_frames = BINARY_HEADER.unpack_from(data)
     if magic != BINARY_MAGIC:
         raise ValueError("not a riderlive binary frame")
     rider = np.frombuffer(data, dtype="<f8", count=n_rider, offset=size)
@@ -374,6 +389,8 @@ def decode_binary_frame(data: bytes) -> dict[str, Any]:
         "driver": DRIVERS[driver] if driver < len(DRIVERS) else driver,
         "values": rider.tolist(),
     }
+    if flags & FLAG_TIMECODE:
+        out["tc_frames"] = tc_frames
     if flags & FLAG_HORSE:
         out["horse"] = np.frombuffer(data, dtype="<f8", count=n_horse, offset=size + 8 * n_rider).tolist()
     offset = size + 8 * (n_rider + (n_horse if flags & FLAG_HORSE else 0))

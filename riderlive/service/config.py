@@ -18,6 +18,7 @@ from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS, TerrainConfig, gait_speed
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 from riderlive.saddle.pose import SaddlePoint
+from riderlive.timecode import Rate
 
 
 class ServerSection(StrictModel):
@@ -265,6 +266,30 @@ class VmcSection(StrictModel):
         return value
 
 
+class TimecodeSection(StrictModel):
+    """SMPTE timecode of frames, takes and exports (docs/timecode.md)."""
+
+    rate: Rate = Rate.FPS_25
+    """One of 23.976, 24, 25, 29.97df, 30, 48, 50, 59.94df, 60; a producer's ``tc`` must be at this rate."""
+    offset: float = pydantic.Field(default=0.0, ge=-86400.0, le=86400.0)
+    """Seconds added to the host clock's time of day when no producer (or stage) gives the timecode."""
+    clock: Literal["utc", "local"] = "local"
+    """The host clock's time of day: local (with its time zone) or UTC."""
+    stage_timeout: float = pydantic.Field(default=2.0, gt=0.0, le=60.0)
+    """Seconds a stage heartbeat's timecode stays the reference after the last one arrived."""
+
+
+class FoxgloveSection(StrictModel):
+    """The Foxglove WebSocket server (docs/foxglove.md); also ``serve --foxglove PORT``."""
+
+    port: int | None = pydantic.Field(default=None, ge=0, le=65535)
+    """Unset: off; 0: any free port. It listens on ``server.host`` and has no token: read-only data."""
+    tf_rate: float = pydantic.Field(default=30.0, gt=0.0, le=1000.0)
+    """``/tf`` (both skeletons) messages per second (every ``round(tick.rate / tf_rate)``-th tick)."""
+    backlog: int = pydantic.Field(default=1024, ge=16, le=1_000_000)
+    """Messages the SDK queues per client before it drops that client's messages."""
+
+
 class ServiceConfig(StrictModel):
     server: ServerSection = ServerSection()
     security: SecuritySection = SecuritySection()
@@ -282,6 +307,8 @@ class ServiceConfig(StrictModel):
     saddle: SaddlePoint = SaddlePoint()
     """Where the saddle point sits on the horse's back (docs/saddle.md): the published
     saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""
+    timecode: TimecodeSection = TimecodeSection()
+    foxglove: FoxgloveSection = FoxgloveSection()
     nats: NatsSection = NatsSection()
     """Join a stage over NATS (docs/deployment.md); unset ``url``: brokerless."""
 

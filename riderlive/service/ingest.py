@@ -50,6 +50,7 @@ from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
 from riderlive.service.clocks import ClockStep, ProducerClock, clock_step
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
+from riderlive.timecode import TimecodeError
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -125,6 +126,8 @@ class Producer:
     window_start: float = 0.0
     window_frames: int = 0
     websocket: WebSocket | None = None
+    timecode_error_at: float = -1e9
+    """When the producer was last told its ``tc`` is unusable (at most once a second)."""
 
     def __post_init__(self) -> None:
         self.stream = self.stream or self.id
@@ -275,6 +278,7 @@ class IngestEndpoint:
         except WebSocketDisconnect:
             pass
         finally:
+            service.timecode.forget(producer.stream)
             if service.arbiter.remove(producer.id):
                 service.link.tell(cmd.ProducerGone(producer.stream))
 
@@ -315,6 +319,8 @@ class IngestEndpoint:
         producer.clock = step.clock
         if step.event is not None:
             self.new_segment(producer, frame.t, step)
+        if "tc" in obj:
+            self.timecode(producer, frame.t, obj, now)
         producer.accepted += 1
         self.service.metrics.count_frame_in(producer.name)
         arbiter = self.service.arbiter
@@ -323,6 +329,20 @@ class IngestEndpoint:
         if drives:
             self.service.link.push_input(producer.stream, step.t, now - self.service.link.start, values, spec.kind)
         return drives
+
+    def timecode(self, producer: Producer, t: float, obj: dict[str, Any], now: float) -> None:
+        """A frame's ``tc`` (and ``tc_rate``; docs/protocol.md, "Timecode"). An unusable one
+        (malformed, another rate) is counted and answered at most once a second, and ignored:
+        the frame still drives (its motion is valid). A jump is counted and told."""
+        try:
+            jump = self.service.timecode.producer_label(producer.stream, t, obj["tc"], obj.get("tc_rate"))
+        except TimecodeError as exc:
+            if now - producer.timecode_error_at >= 1.0:
+                producer.timecode_error_at = now
+                producer.outbox.append({"type": "error", "reason": exc.reason, "message": str(exc)})
+            return
+        if jump is not None:
+            producer.outbox.append({"type": "timecode", "reason": "jump", "frames": jump, "tc": obj["tc"]})
 
     def new_segment(self, producer: Producer, t: float, step: ClockStep) -> None:
         """Tell the producer; after a jump the tick gets a new stream id (a fresh clock

@@ -37,6 +37,8 @@ class ServiceMetrics:
     ingest_to_send: LatencyHistogram = field(default_factory=LatencyHistogram)
     """Horse frame received (decoded) to the first rider frame computed from it written to every
     client due that tick (``Hub.publish``)."""
+    timecode: Counter[str] = field(default_factory=Counter)
+    """Unusable or jumping timecodes by reason (``service.timecodes``; docs/timecode.md)."""
     vmc: Counter[str] = field(default_factory=Counter)
     """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed),
     ``skipped`` (a chosen tick that got none)."""
@@ -225,6 +227,12 @@ def render(
         "counter",
         "Ticks not sent because the web process fell more than 0.25 s behind (publish.CATCH_UP).",
         [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
+    )
+    metric(
+        "riderlive_timecode_errors_total",
+        "counter",
+        "Producer or stage timecodes unusable (malformed, another rate) or jumping, by reason.",
+        [f'riderlive_timecode_errors_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.timecode.items())],
     )
     if metrics.vmc:
         metric(

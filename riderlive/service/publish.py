@@ -204,6 +204,7 @@ class Hub:
                 "frame": "local: position in the parent's frame, rotation from the rest (identity); skeletons.axes",
             },
             "saddle": self._saddle_hello(),
+            "timecode": {"rate": self.service.timecode.rate.value, "subscribe": "timecode: true"},
         }
 
     def _saddle_hello(self) -> dict[str, Any]:
@@ -261,7 +262,9 @@ class Hub:
                 if data is None:
                     bones = np.asarray(poses.rider(record).local_rotations).ravel() if sub.bones else None
                     skeleton_poses = {name: pose_floats(self._pose(name, record)) for name in sub.pose}
-                    message = encode_frame(sub, record, bones, skeleton_poses)
+                    stamp = self.service.timecode.of_record(record) if sub.timecode else None
+                    label = None if stamp is None else (stamp.frames, stamp.label)
+                    message = encode_frame(sub, record, bones, skeleton_poses, label)
                     data = encoded[sub.key] = (message, wire_frame(message))
                 if client.transport is None:
                     client.offer_frame(data[0], unsent_rx)  # its sender observes the latency

@@ -63,6 +63,8 @@ class ReplaySource(Body):
     kind: Literal["replay"]
     take: Name
     loop: bool = False
+    from_tc: str | None = pydantic.Field(default=None, max_length=11, pattern=r"^\d{2}:\d{2}:\d{2}[:;.,]\d{2}$")
+    """Start at this timecode of the take (``HH:MM:SS:FF``, ``;`` at drop-frame rates: docs/timecode.md)."""
 
 
 class LiveSource(Body):

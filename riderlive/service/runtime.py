@@ -33,11 +33,14 @@ from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.service.supervisor import TickSupervisor
-from riderlive.takes.recorder import TakeExists, TakeRecorder, recover_take, replay_path, take_path
+from riderlive.service.timecodes import host_timecode
+from riderlive.takes.recorder import TakeExists, TakeRecorder, read_sidecar, recover_take, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
+from riderlive.takes.stamp import start_index, take_timecode
 
 if TYPE_CHECKING:
     from riderlive.bus.rig import RigNode
+    from riderlive.service.foxglove import FoxgloveLive
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +111,8 @@ class Service:
         self.animator: AnimatorLayer
         """Both set by ``_report_configured`` below, with the source."""
         self.metrics = ServiceMetrics()
+        self.timecode = host_timecode(config.timecode, time.perf_counter(), self.metrics.timecode)
+        """Each record's SMPTE timecode (producer, stage or host clock); re-anchored on the tick link at start."""
         self.poses = RecordPoses(config.tick.length_scale)
         """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
         self.vmc = None
@@ -115,6 +120,7 @@ class Service:
             from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
 
             self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
+            self.vmc.timecode = lambda record: self.timecode.of_record(record).label
         self.arbiter = Arbiter(config.input.producer_timeout)
         self.hub = Hub(self)
         self.ranges = config.ranges.ranges()
@@ -139,6 +145,7 @@ class Service:
         self.arm_checks: list[Callable[[], str | None]] = []
         """Each says why arming must wait (e.g. no stage heartbeat), or None."""
         self.stage: RigNode | None = None
+        self.foxglove: FoxgloveLive | None = None
 
     def _report_configured(self) -> None:
         """Preset, animator layer and source as configured (at start, and when a restarted
@@ -161,10 +168,17 @@ class Service:
     async def start(self) -> None:
         self.recover_takes()
         self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
+        self.timecode = host_timecode(self.config.timecode, self.link.start, self.metrics.timecode)
         self.supervisor = TickSupervisor(
             self.link, self.config, self.on_tick, self.hub.publish_status, self._tick_fell_back
         )
         await self.supervisor.start()
+        section = self.config.foxglove
+        if section.port is not None:
+            from riderlive.service.foxglove import FoxgloveLive
+
+            self.foxglove = FoxgloveLive(self, self.config.server.host, section.port, section.tf_rate, section.backlog)
+            self.sinks.append(self.foxglove.publish)
         if self.config.nats.url is not None:
             from riderlive.bus.rig import join_stage
 
@@ -185,6 +199,8 @@ class Service:
         self.link.close()
         if self.vmc is not None:
             self.vmc.close()
+        if self.foxglove is not None:
+            self.foxglove.stop()
 
     # -- the tick's records ---------------------------------------------------
     def on_tick(self) -> None:
@@ -196,6 +212,8 @@ class Service:
             start = link.start
             for record in records:
                 engine_t = float(record[L.OUT_ENGINE_T])
+                if self.recorder.rows == 0:  # the take's start timecode, in its sidecar from the first flush
+                    self.recorder.meta.update(self.timecode.of_record(record).as_meta())
                 rider = np.concatenate(  # the rider and the physics (not the rider parts), then the saddle
                     (
                         record[L.OUT_RIDER : L.OUTPUT_WIDTH + len(self.physics_channels)],
@@ -245,11 +263,20 @@ class Service:
             await asyncio.to_thread(recover_take, path)
             length_scale = self.config.tick.length_scale
             replay = await asyncio.to_thread(load_replay, path, self.config.tick.rate, limits, length_scale)
+            stamp = take_timecode(read_sidecar(path))  # TimecodeError (a ValueError): a broken sidecar
+            first_t = float(replay.t[0])
+            if request.get("from_tc") is not None:
+                start = start_index(replay.t, stamp, request["from_tc"], replay.name)
+                replay = Replay(replay.name, replay.t[start:], replay.horse[start:])
             producer = Producer(id=next_producer_id(), name=f"replay:{replay.name}")
+            if stamp is not None:  # the replay's records carry the take's own labels
+                self.timecode.streams[producer.id] = stamp.at_rate(self.timecode.rate).anchor(float(first_t))
             self.arbiter.replay_id = producer.id
             self.arbiter.selection = "replay"
             self.link.apply(cmd.SetMode(Mode.INPUT), mode=Mode.INPUT)
             self.source = {"kind": "replay", "take": replay.name, "loop": bool(request.get("loop", False))}
+            if request.get("from_tc") is not None:
+                self.source["from_tc"] = request["from_tc"]
             self._replay_task = asyncio.get_running_loop().create_task(
                 self._play(replay, producer, bool(request.get("loop", False)))
             )
@@ -388,4 +415,6 @@ class Service:
             "preset": self.params.name,
             "horse_channels": list(HORSE_NAMES),
             "vmc": None if self.vmc is None else self.vmc.status(),
+            "timecode": self.timecode.status(link.engine_time()),
+            "foxglove": None if self.foxglove is None else self.foxglove.status(),
         }

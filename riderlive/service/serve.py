@@ -76,6 +76,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stage", metavar="NAME", help="the stage to join (nats.stage)")
     parser.add_argument("--rig", metavar="NAME", help="this rig's name on the stage (nats.rig; must be unique)")
     parser.add_argument(
+        "--foxglove",
+        type=int,
+        metavar="PORT",
+        help="serve the Foxglove WebSocket protocol (docs/foxglove.md; 0: any port)",
+    )
+    parser.add_argument(
         "--arm",
         action="store_true",
         help="arm the rig once connected, at start only (rig.arm = true): unattended use, it moves unwatched",
@@ -117,8 +123,18 @@ def run(args: argparse.Namespace) -> int:
             )
             if v is not None
         }
-        if overrides or vmc or stage or getattr(args, "tail", False) or getattr(args, "arm", False):
+        foxglove = getattr(args, "foxglove", None)
+        if (
+            overrides
+            or vmc
+            or stage
+            or foxglove is not None
+            or getattr(args, "tail", False)
+            or getattr(args, "arm", False)
+        ):
             data = config.model_dump()
+            if foxglove is not None:
+                data["foxglove"]["port"] = foxglove
             data["nats"].update(stage)
             data["server"].update(overrides)
             data["vmc"].update(vmc)

@@ -73,8 +73,10 @@ def replay_path(directory: str | Path, name: str) -> Path:
     return parquet if not path.exists() and parquet.exists() else path
 
 
-def list_takes(directory: str | Path) -> list[dict[str, object]]:
-    """Takes in ``directory``, newest first: name, bytes, modification time, rows and complete (sidecar)."""
+def list_takes(directory: str | Path, order: str = "modified") -> list[dict[str, object]]:
+    """Takes in ``directory``: name, bytes, modification time, rows, complete and the start
+    timecode (sidecar). ``order``: ``modified`` (newest first) or ``timecode`` (earliest
+    start label first, as seconds of the day; takes without a timecode last)."""
     folder = Path(directory)
     if not folder.is_dir():
         return []
@@ -88,8 +90,24 @@ def list_takes(directory: str | Path) -> list[dict[str, object]]:
             continue
         meta = read_sidecar(path) or {}
         entry = {"name": path.stem, "bytes": stat.st_size, "modified": stat.st_mtime}
-        out.append((stat.st_mtime, {**entry, "rows": meta.get("rows"), "complete": meta.get("complete")}))
-    return [entry for _, entry in sorted(out, key=lambda item: item[0], reverse=True)]
+        entry |= {"rows": meta.get("rows"), "complete": meta.get("complete")}
+        entry |= {key: meta.get(key) for key in ("timecode", "timecode_rate", "timecode_source")}
+        out.append((stat.st_mtime, entry))
+    newest = [entry for _, entry in sorted(out, key=lambda item: item[0], reverse=True)]
+    return newest if order == "modified" else sorted(newest, key=_timecode_key)
+
+
+def _timecode_key(entry: dict[str, object]) -> tuple[float, str]:
+    """Seconds of the day of a listed take's start label (inf: none or unreadable), then the name."""
+    from riderlive.takes.stamp import take_timecode
+    from riderlive.timecode import TimecodeError, frames_to_seconds
+
+    try:
+        stamp = take_timecode(entry)
+    except TimecodeError:
+        stamp = None
+    seconds = float("inf") if stamp is None else frames_to_seconds(stamp.frames, stamp.rate)
+    return seconds, str(entry["name"])
 
 
 def recover_take(path: Path) -> bool:

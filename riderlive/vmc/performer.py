@@ -106,8 +106,10 @@ _ROOT = osc.MessageTemplate(ROOT, "root", 7)
 _OK_ELEMENT = osc.element(osc.message(OK, OK_ARGS))
 
 
-def _time_element(t: float) -> bytes:
-    return osc.element(osc.message(TIME, (float(t),)))
+def _time_element(t: float, timecode: str = "") -> bytes:
+    """``/VMC/Ext/T`` seconds, then (appended: receivers ignore arguments they do not know) the
+    frame's SMPTE timecode label when there is one (docs/timecode.md)."""
+    return osc.element(osc.message(TIME, (float(t), timecode) if timecode else (float(t),)))
 
 
 def _pose_message(template: osc.MessageTemplate, p: Vec3, q: Quat) -> bytes:
@@ -135,10 +137,10 @@ def rider_elements(pose: Pose) -> list[bytes]:
     return out
 
 
-def rider_bundle(pose: Pose, root_position: Vec3, root_rotation: Quat, t: float) -> bytes:
-    """The rider's frame: OK, time, root (the seat in the world), every humanoid bone."""
+def rider_bundle(pose: Pose, root_position: Vec3, root_rotation: Quat, t: float, timecode: str = "") -> bytes:
+    """The rider's frame: OK, time (and timecode), root (the seat in the world), every humanoid bone."""
     root = _pose_message(_ROOT, root_position, root_rotation)
-    return osc.bundle_of_elements([_OK_ELEMENT, _time_element(t), root, *rider_elements(pose)])
+    return osc.bundle_of_elements([_OK_ELEMENT, _time_element(t, timecode), root, *rider_elements(pose)])
 
 
 @functools.cache
@@ -146,11 +148,11 @@ def _horse_templates(names: tuple[str, ...]) -> tuple[osc.MessageTemplate, ...]:
     return tuple(osc.MessageTemplate(BONE, name, 7) for name in names)
 
 
-def horse_bundle(pose: Pose, names: Sequence[str], t: float) -> bytes:
-    """The horse's frame: OK, time, root at the origin, every bone's local pose by its own name."""
+def horse_bundle(pose: Pose, names: Sequence[str], t: float, timecode: str = "") -> bytes:
+    """The horse's frame: OK, time (and timecode), root at the origin, every bone's local pose by its own name."""
     root = _pose_message(_ROOT, (0.0, 0.0, 0.0), IDENTITY)
     bones = [
         _pose_message(template, pose.local_offsets[i], pose.local_rotations[i])
         for i, template in enumerate(_horse_templates(tuple(names)))
     ]
-    return osc.bundle_of_elements([_OK_ELEMENT, _time_element(t), root, *bones])
+    return osc.bundle_of_elements([_OK_ELEMENT, _time_element(t, timecode), root, *bones])

@@ -21,6 +21,7 @@ from __future__ import annotations
 import errno
 import socket
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,6 +75,8 @@ class VmcSender:
     last_seq: int | None = None
     """The last chosen tick a bundle was made for."""
     last_error: str | None = None
+    timecode: Callable[[np.ndarray], str] | None = None
+    """A record's SMPTE label, appended to ``/VMC/Ext/T`` (None: time only)."""
     _socket: socket.socket = field(init=False)
     _start: float | None = field(init=False, default=None)
 
@@ -122,12 +125,11 @@ class VmcSender:
         t = engine_t - self._start
         horse = self.poses.horse(record)
         saddle = HORSE_RIG.index["saddle"]
-        self._send(
-            rider_bundle(self.poses.rider(record), horse.world_positions[saddle], horse.world_rotations[saddle], t),
-            self.rider[1],
-        )
+        label = "" if self.timecode is None else self.timecode(record)
+        root = (horse.world_positions[saddle], horse.world_rotations[saddle])
+        self._send(rider_bundle(self.poses.rider(record), *root, t, label), self.rider[1])
         if self.horse is not None:
-            self._send(horse_bundle(horse, HORSE_RIG.names, t), self.horse[1])
+            self._send(horse_bundle(horse, HORSE_RIG.names, t, label), self.horse[1])
 
     def _send(self, data: bytes, address: tuple[str, int]) -> None:
         try:

@@ -106,7 +106,7 @@ export class RiderLink {
     }
   }
 
-  /** A frame as {seq, t, sourceT, driver, values: {name: value}, saddle, estimate}. */
+  /** A frame as {seq, t, sourceT, driver, values: {name: value}, saddle, estimate, tc (timecode label)}. */
   toFrame(msg) {
     const values = {};
     const put = (names, list) => {
@@ -115,7 +115,7 @@ export class RiderLink {
     };
     put(this.riderNames, msg.values);
     put(this.horseNames, msg.horse);
-    return { seq: msg.seq, t: msg.t, sourceT: msg.source_t, driver: msg.driver, values, saddle: msg.saddle, estimate: msg.estimate };
+    return { seq: msg.seq, t: msg.t, sourceT: msg.source_t, driver: msg.driver, values, saddle: msg.saddle, estimate: msg.estimate, tc: msg.tc };
   }
 
   send(obj) {

@@ -236,7 +236,7 @@ async function start() {
       emit("state", state);
     },
   }, 120, controlToken());
-  link.subscription = SaddlePanel.subscription();
+  link.subscription = { ...SaddlePanel.subscription(), timecode: true }; // frames carry `tc` (docs/timecode.md)
   page.link = link;
   setInterval(() => controls.refresh(), 1000);
   setInterval(() => (page.horseText = horseNow.show()), 250);
@@ -358,6 +358,10 @@ async function start() {
       lastSecond = now;
       adaptScale();
       $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
+    }
+    if (latest && latest.tc !== undefined && latest.tc !== page.timecode) {
+      page.timecode = latest.tc;
+      $("timecode").textContent = `TC ${latest.tc}`;
     }
     try {
       if (latest && (latest !== lastLatest || page.exaggeration !== 1)) {
