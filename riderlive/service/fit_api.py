@@ -197,6 +197,8 @@ def add_fit_routes(app: FastAPI, service: Service, control: list[Any], observe: 
     @app.post("/api/takes/{name}/fit", dependencies=control, summary="Fit a preset to a take's reference rider")
     async def fit_take(name: TakeName, body: FitRequest) -> dict[str, Any]:
         take = take_file(name)
+        if busy.locked():  # first: a second fit is refused whatever it asks
+            raise HTTPException(409, "a fit is running: try again when it is done")
         if not preset_dirs:
             raise HTTPException(409, "no directory to save a preset in: set tick.preset_dirs in the service config")
         if find_preset(body.preset) is not None:
@@ -225,8 +227,6 @@ def add_fit_routes(app: FastAPI, service: Service, control: list[Any], observe: 
             name=body.preset,
             drift=body.drift,
         )
-        if busy.locked():
-            raise HTTPException(409, "a fit is running: try again when it is done")
         async with busy:
             output.parent.mkdir(parents=True, exist_ok=True)
             code, out, err = await _run(job, timeout)
