@@ -197,7 +197,7 @@ def test_a_take_the_fit_cannot_use_is_a_422_with_the_reason(server: LiveServer, 
 
 
 def test_one_fit_at_a_time(server: LiveServer) -> None:
-    rows = horse_rows("canter", 20.0, seed=11)
+    rows = horse_rows("canter", 4.0, seed=11)
     write_take(server, "long-take", rows, bake(rows, TRUE))
     first: dict[str, httpx.Response] = {}
 
