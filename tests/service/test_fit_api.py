@@ -218,3 +218,24 @@ def test_one_fit_at_a_time(server: LiveServer) -> None:
     assert refused is not None and "a fit is running" in refused.text, "refused while the first ran"
     assert first["reply"].status_code == 200, first["reply"].text
     assert recovered(first["reply"].json()["fit"], TRUE) == []
+
+
+def test_the_schema_probe_covers_the_fit_routes_with_a_real_take(server: LiveServer, take: np.ndarray) -> None:
+    """test_rest_safety's OpenAPI walk, on the new routes with a take that exists (not ``{name}``):
+    a broken body is a 4xx JSON error, never a 500, and starts no fit."""
+    from tests.service.test_rest_safety import endpoints, prober
+
+    write_take(server, "probe-take", take[:240])  # no reference rider: a valid body would be a 404
+    doc = server.get("/openapi.json").json()
+    routes = [r for r in endpoints(doc) if r[1] in ("/api/takes/{name}/fit", "/api/takes/{name}/reference")]
+    assert {(m, p) for m, p, _ in routes} == {
+        ("POST", "/api/takes/{name}/fit"),
+        ("PUT", "/api/takes/{name}/reference"),
+        ("GET", "/api/takes/{name}/reference"),
+    }
+    seen: dict[str, set[int]] = {}
+    with httpx.Client(base_url=server.base, timeout=10.0) as client:
+        for method, path, schema in routes:
+            prober(client, method, path.replace("{name}", "probe-take"), schema, doc, seen)()
+    assert all(400 <= code < 500 for codes in seen.values() for code in codes), seen
+    assert not list((server.workdir / "presets").glob("*probe*"))
