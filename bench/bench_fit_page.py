@@ -78,11 +78,15 @@ def main() -> None:
         (root / "presets").mkdir()
         take = write_take(root / "takes", "bench-take", args.seconds)
         config = root / "service.toml"
-        config.write_text('[tick]\nrealtime_priority = false\npreset_dirs = ["presets"]\n[takes]\ndirectory = "takes"\n')
+        config.write_text(
+            '[tick]\nrealtime_priority = false\npreset_dirs = ["presets"]\n[takes]\ndirectory = "takes"\n'
+        )
         proc, port = start_server(config)
         base = f"http://127.0.0.1:{port}"
         try:
-            job = FitJob(horse=str(take), start=str(PRESET_DIR / "kuhnel2003.toml"), output=str(root / "a.toml"), name="a")
+            job = FitJob(
+                horse=str(take), start=str(PRESET_DIR / "kuhnel2003.toml"), output=str(root / "a.toml"), name="a"
+            )
             run(job)  # imports and first-use costs out of the way
             wall, cpu = time.perf_counter(), time.process_time()
             report = json.loads(run(job))
@@ -91,19 +95,24 @@ def main() -> None:
             time.sleep(max(5.0, wall))  # an idle window as long as a fit, for the tick's lateness
             idle = tick_window(base, time.perf_counter() - idle_t)
             post = time.perf_counter()
-            reply = httpx.post(f"{base}/api/takes/bench-take/fit", json={"preset": "b", "start": "kuhnel2003"}, timeout=600)
+            reply = httpx.post(
+                f"{base}/api/takes/bench-take/fit", json={"preset": "b", "start": "kuhnel2003"}, timeout=600
+            )
             post = time.perf_counter() - post
             during = tick_window(base, post)
             assert reply.status_code == 200, reply.text
             load = os.getloadavg()[0]
             print(f"bench_fit_page: a {args.seconds:g} s canter take, english rider recorded; {state}; load {load:.1f}")
             identified = sum(p["identified"] for p in report["parameters"])
-            print(f"  in this process (a worker thread's cost): {wall:.2f} s wall, {cpu:.2f} s CPU; {identified} identified")
+            print(
+                f"  in this process (a worker thread's cost): {wall:.2f} s wall, {cpu:.2f} s CPU; {identified} identified"
+            )
             print(f"  POST /api/takes/NAME/fit (niced child process, with its imports): {post:.2f} s wall")
             print(f"  ratio POST / in-process: {post / wall:.2f}x wall")
             for label, w in (("idle", idle), ("during the fit", during)):
                 print(
-                    f"  tick lateness {label}: {int(w['count'])} ticks, p99 {w['p99'] * 1e3:.2f} ms, max {w['max'] * 1e3:.2f} ms"
+                    f"  tick lateness {label}: {int(w['count'])} ticks, "
+                    f"p99 {w['p99'] * 1e3:.2f} ms, max {w['max'] * 1e3:.2f} ms"
                 )
         finally:
             proc.terminate()
