@@ -104,9 +104,7 @@ def main() -> None:
             load = os.getloadavg()[0]
             print(f"bench_fit_page: a {args.seconds:g} s canter take, english rider recorded; {state}; load {load:.1f}")
             identified = sum(p["identified"] for p in report["parameters"])
-            print(
-                f"  in this process (a worker thread's cost): {wall:.2f} s wall, {cpu:.2f} s CPU; {identified} found"
-            )
+            print(f"  in this process (a worker thread's cost): {wall:.2f} s wall, {cpu:.2f} s CPU; {identified} found")
             print(f"  POST /api/takes/NAME/fit (niced child process, with its imports): {post:.2f} s wall")
             print(f"  ratio POST / in-process: {post / wall:.2f}x wall")
             for label, w in (("idle", idle), ("during the fit", during)):
