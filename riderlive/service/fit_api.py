@@ -248,6 +248,7 @@ async def _run(job: FitJob, timeout: float) -> tuple[int, bytes, str]:
         "-m",
         "riderlive.service.fit_worker",
         job.model_dump_json(),
+        stdin=asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
         env=env,

@@ -63,9 +63,10 @@ def run(job: FitJob) -> bytes:
     return orjson.dumps(data, option=orjson.OPT_SERIALIZE_NUMPY)
 
 
-def main(argv: list[str]) -> int:
+def main(argv: list[str], nice: int = NICE) -> int:
+    """Run the job in ``argv[1]`` at ``nice`` more niceness; the exit status (see the module docstring)."""
     with contextlib.suppress(OSError):  # a host that refuses: run at the service's priority
-        os.nice(NICE)
+        os.nice(nice)
     try:
         job = FitJob.model_validate_json(argv[1])
         out = run(job)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import threading
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -239,3 +240,31 @@ def test_the_schema_probe_covers_the_fit_routes_with_a_real_take(server: LiveSer
             prober(client, method, path.replace("{name}", "probe-take"), schema, doc, seen)()
     assert all(400 <= code < 500 for codes in seen.values() for code in codes), seen
     assert not list((server.workdir / "presets").glob("*probe*"))
+
+
+def test_a_fit_over_its_time_is_killed_and_writes_nothing(tmp_path: Path) -> None:
+    """``takes.fit_timeout``: the child process is killed (no preset, no process left) and the reason given."""
+    import asyncio
+
+    from riderlive.rules.params import PRESET_DIR
+    from riderlive.service.fit_api import _run
+    from riderlive.service.fit_worker import FitJob
+
+    rows = horse_rows("canter", 4.0, seed=2)
+    take = tmp_path / "t.csv"
+    take.write_text(csv_text(list(HORSE_NAMES) + list(RIDER_NAMES), np.hstack([rows, bake(rows, TRUE)])))
+    (tmp_path / "t.json").write_text(json.dumps({"length_scale": DEFAULT_SCALE}))
+    output = tmp_path / "out.toml"
+    job = FitJob(horse=str(take), start=str(PRESET_DIR / "kuhnel2003.toml"), output=str(output), name="out")
+    code, out, reason = asyncio.run(_run(job, 0.05))  # far less than the child's imports take
+    assert (code, out) == (-1, b"") and "takes.fit_timeout" in reason
+    assert not output.exists() and not list(tmp_path.glob(".out.toml.*")), "nothing written, nothing partial"
+
+
+def test_the_worker_refuses_a_bad_job_with_status_2(capsys: pytest.CaptureFixture[str]) -> None:
+    from riderlive.service.fit_worker import main
+
+    assert main(["fit_worker", '{"horse": "x.csv", "unknown": 1}'], nice=0) == 2
+    job = '{"horse": "/nonexistent/x.csv", "start": "kuhnel2003", "output": "o", "name": "o"}'
+    assert main(["fit_worker", job], nice=0) == 2
+    assert "nonexistent" in capsys.readouterr().err
