@@ -113,8 +113,16 @@ export class FitPanel {
     go.disabled = true;
     status.textContent = "fitting… (seconds to a minute)";
     report.innerHTML = "";
-    const body = { preset, drift, overwrite: true };
-    const out = await this.attempt(`fit ${take}`, () => this.api("POST", `/api/takes/${encodeURIComponent(take)}/fit`, body));
+    const fit = (overwrite) => this.api("POST", `/api/takes/${encodeURIComponent(take)}/fit`, { preset, drift, overwrite });
+    const out = await this.attempt(`fit ${take}`, async () => {
+      try {
+        return await fit(false);
+      } catch (err) {
+        // A preset of that name exists (perhaps a hand-written one): replace it only when confirmed.
+        if (/ 409 .*exists/.test(err.message) && confirm(`replace the preset ${preset}?`)) return fit(true);
+        throw err;
+      }
+    });
     go.disabled = false;
     status.textContent = out ? "" : "the fit failed: see the message below";
     if (out && out.fit) this.show(out.fit, report);
