@@ -245,6 +245,7 @@ def test_the_schema_probe_covers_the_fit_routes_with_a_real_take(server: LiveSer
 def test_a_fit_over_its_time_is_killed_and_writes_nothing(tmp_path: Path) -> None:
     """``takes.fit_timeout``: the child process is killed (no preset, no process left) and the reason given."""
     import asyncio
+    from concurrent.futures import ThreadPoolExecutor
 
     from riderlive.rules.params import PRESET_DIR
     from riderlive.service.fit_api import _run
@@ -256,7 +257,8 @@ def test_a_fit_over_its_time_is_killed_and_writes_nothing(tmp_path: Path) -> Non
     (tmp_path / "t.json").write_text(json.dumps({"length_scale": DEFAULT_SCALE}))
     output = tmp_path / "out.toml"
     job = FitJob(horse=str(take), start=str(PRESET_DIR / "kuhnel2003.toml"), output=str(output), name="out")
-    code, out, reason = asyncio.run(_run(job, 0.05))  # far less than the child's imports take
+    with ThreadPoolExecutor(1) as pool:  # its own event loop (another test's may be running in this thread)
+        code, out, reason = pool.submit(lambda: asyncio.run(_run(job, 0.05))).result()  # far under its imports
     assert (code, out) == (-1, b"") and "takes.fit_timeout" in reason
     assert not output.exists() and not list(tmp_path.glob(".out.toml.*")), "nothing written, nothing partial"
 
