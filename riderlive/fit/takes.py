@@ -111,3 +111,16 @@ def read_rider(
     elif own is None:
         notes.append(f"{path}: no length_scale recorded: lengths read in the horse take's unit")
     return RiderTake(Path(path).name, t, names, values, sha256(path)), notes
+
+
+def read_recorded_rider(path: str, rate: float = DEFAULT_RATE) -> tuple[RiderTake, list[str]]:
+    """The rider a take recorded beside its horse (``riderlive serve``'s takes): its rider channels, in
+    the take's own length unit (the horse's), so no conversion."""
+    table = read_frames(path)
+    names = tuple(n for n in table.names if n in RIDER_INDEX)
+    if not names:
+        raise FitInputError(f"{path}: no rider channel recorded in this take: give it a reference rider")
+    t = _times(table, path, rate)
+    values = np.column_stack([table.column(n) for n in names]).astype(np.float64)
+    note = f"{path}: the rider recorded with the take ({len(names)} channels)"
+    return RiderTake(f"{Path(path).name} (recorded rider)", t, names, values, sha256(path)), [note]

@@ -32,6 +32,7 @@ from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
+from riderlive.service.fit_api import REFERENCE_LIMIT, REFERENCE_PATH, add_fit_routes, with_references
 from riderlive.service.ingest import SADDLE_INPUT
 from riderlive.service.latency_api import add_latency_routes
 from riderlive.service.metrics import render
@@ -82,7 +83,12 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     app.add_middleware(
         auth.WriteGuard, token=config.security.token, required=config.token_required, refused=unauthorized
     )
-    app.add_middleware(RestGuard, limit=config.input.max_message_bytes, rejected=service.metrics.rest_rejected)
+    app.add_middleware(
+        RestGuard,
+        limit=config.input.max_message_bytes,
+        rejected=service.metrics.rest_rejected,
+        larger=((REFERENCE_PATH, REFERENCE_LIMIT),),  # a take's reference rider is a file
+    )
     if config.server.cors_origins:
         app.add_middleware(
             CORSMiddleware,
@@ -205,9 +211,10 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     @app.get("/api/takes", dependencies=obs, summary="Recorded takes with their start timecode, newest first")
     async def takes(order: Literal["modified", "timecode"] = "modified") -> dict[str, Any]:
         """``?order=timecode``: by start timecode (earliest first; takes without one last)."""
-        return {"takes": list_takes(config.takes.directory, order)}
+        return {"takes": with_references(list_takes(config.takes.directory, order), config.takes.directory)}
 
     add_take_routes(app, service, obs)  # take download and bake, parameter groups (the page)
+    add_fit_routes(app, service, obs)  # a take's reference rider, fit a preset to it
 
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
     add_platform_routes(app, service, obs)  # GET and PATCH /api/platform

@@ -185,6 +185,8 @@ class TakesSection(StrictModel):
     directory: str = "takes"
     flush_interval: float = pydantic.Field(default=0.25, gt=0.0, le=1.0)
     """Seconds between writes of a take: a killed server loses at most this plus one tick."""
+    fit_timeout: float = pydantic.Field(default=600.0, gt=0.0, le=3600.0)
+    """Seconds a fit of a take (``POST /api/takes/NAME/fit``) may run before it is killed."""
 
 
 class RigSection(StrictModel):

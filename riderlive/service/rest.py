@@ -13,7 +13,9 @@
 
 from __future__ import annotations
 
+import re
 from collections import Counter
+from collections.abc import Sequence
 from typing import Annotated, Literal
 
 import orjson
@@ -113,12 +115,18 @@ class BodyTooLarge(Exception):
 
 
 class RestGuard:
-    """ASGI middleware: request bodies of at most ``limit`` bytes; every 4xx counted in ``rejected``."""
+    """ASGI middleware: request bodies of at most ``limit`` bytes; every 4xx counted in ``rejected``.
 
-    def __init__(self, app: ASGIApp, limit: int, rejected: Counter[int]) -> None:
+    ``larger``: ``(path regex, limit)`` pairs for the few routes that take files (uploads).
+    """
+
+    def __init__(
+        self, app: ASGIApp, limit: int, rejected: Counter[int], larger: Sequence[tuple[str, int]] = ()
+    ) -> None:
         self.app = app
         self.limit = limit
         self.rejected = rejected
+        self.larger = [(re.compile(pattern), size) for pattern, size in larger]
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -130,14 +138,15 @@ class RestGuard:
                 self.rejected[message["status"]] += 1
             await send(message)
 
+        limit = next((size for pattern, size in self.larger if pattern.match(scope.get("path", ""))), self.limit)
         length = dict(scope.get("headers", ())).get(b"content-length")
-        if length is not None and (not length.isdigit() or int(length) > self.limit):
+        if length is not None and (not length.isdigit() or int(length) > limit):
             # A body up to 16 x the limit is read and dropped, so the answer is not lost to
             # a TCP reset and the connection stays usable; a larger one closes it.
-            drained = length.isdigit() and int(length) <= 16 * self.limit
+            drained = length.isdigit() and int(length) <= 16 * limit
             while drained and (await receive()).get("more_body", False):
                 pass
-            body = orjson.dumps({"detail": f"request body over {self.limit} bytes"})
+            body = orjson.dumps({"detail": f"request body over {limit} bytes"})
             headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
             if not drained:
                 headers.append((b"connection", b"close"))
@@ -150,8 +159,8 @@ class RestGuard:
             nonlocal received
             message = await receive()
             received += len(message.get("body", b""))
-            if received > self.limit:
-                raise BodyTooLarge(f"request body over {self.limit} bytes")
+            if received > limit:
+                raise BodyTooLarge(f"request body over {limit} bytes")
             return message
 
         await self.app(scope, limited, counted)

@@ -9,6 +9,7 @@ import { HorseNow } from "./horsenow.js";
 import { emit, on } from "./panels.js";
 import { PlatformView } from "./platform.js";
 import { Plots } from "./plots.js";
+import { FitPanel } from "./fit.js";
 import { DEFAULTS, initial as initialResolution, next as nextResolution, pin as pinResolution, scaleOf } from "./resolution.js";
 import { compileRig, solve } from "./rig.js";
 import { SaddlePanel } from "./saddle.js";
@@ -81,6 +82,8 @@ async function start() {
   page.horseNow = horseNow;
   const takes = new Takes(api, attempt, (name) => controls.applySource(name), () => page.tickRate || 120);
   controls.takes = takes;
+  takes.fit = new FitPanel(api, attempt, () => { takes.shown = null; return takes.refresh(); });
+  page.fit = takes.fit;
   controls.onState = (state) => status.fromState(state);
   page.history = (name, seconds) => plots.recent(name, seconds);
   page.plots = plots;

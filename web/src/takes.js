@@ -19,6 +19,7 @@ export class Takes {
     this.replay = replay;
     this.shown = null;
     this.baked = new Set();
+    this.fit = null; // FitPanel (fit.js): a row's "fit" and "⬆ rider" buttons
   }
 
   async download(path, filename) {
@@ -53,7 +54,7 @@ export class Takes {
     } catch {
       return null;
     }
-    const key = JSON.stringify(takes.map((t) => [t.name, t.rows, t.complete]));
+    const key = JSON.stringify(takes.map((t) => [t.name, t.rows, t.complete, t.reference]));
     if (key === this.shown) return takes.map((t) => t.name);
     this.shown = key;
     const ul = $("takes");
@@ -79,6 +80,7 @@ export class Takes {
       button("⬇ take", "download the take as recorded", "take-download", () => this.download(`/api/takes/${encodeURIComponent(t.name)}/file`, `${t.name}.csv`));
       const baked = button("⬇ rider", "download the last bake", "take-baked", () => this.download(`/api/takes/${encodeURIComponent(t.name)}/baked`, `${t.name}.rider.csv`));
       baked.hidden = !this.baked.has(t.name);
+      if (this.fit) buttons.append(...this.fit.buttons(t));
       const info = document.createElement("span");
       info.className = "take-info";
       const when = t.modified ? new Date(t.modified * 1000).toLocaleString() : "";
