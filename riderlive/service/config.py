@@ -112,6 +112,10 @@ class InputSection(StrictModel):
     clock_jump: float = pydantic.Field(default=0.5, ge=0.05, le=60.0)
     """A producer clock that moves this many seconds more or less than the service's
     between two frames starts a new stream segment (docs/protocol.md)."""
+    saddle: bool = True
+    """Accept saddle producers (``/ws/saddle``, the stage's saddle subjects). Off: the
+    tick never drives from a saddle stream, so no saddle estimate exists, and a device
+    that consumes it is refused at start (``riderlive.tickframe.MissingPart``)."""
 
 
 class SourceSection(StrictModel):
