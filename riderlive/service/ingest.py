@@ -48,7 +48,7 @@ from riderlive.service import auth
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
 
 if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
+    from riderlive.service.ports import IngestPort
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
@@ -210,7 +210,7 @@ async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: f
 class IngestEndpoint:
     """The ``/ws/horse`` (or, with ``SADDLE_INPUT``, ``/ws/saddle``) handler, bound to the running service."""
 
-    def __init__(self, service: Service, ranges: Ranges, spec: InputSpec = HORSE_INPUT) -> None:
+    def __init__(self, service: IngestPort, ranges: Ranges, spec: InputSpec = HORSE_INPUT) -> None:
         self.service = service
         self.spec = spec
         self.low, self.high = ranges.limits(spec.names, service.config.tick.length_scale)
