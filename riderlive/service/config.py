@@ -18,6 +18,7 @@ from riderlive.configfile import StrictModel, load
 from riderlive.horse import DEFAULT_SCALE, GAITS, TerrainConfig, gait_speed
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 from riderlive.saddle.pose import SaddlePoint
+from riderlive.vmc.target import parse_target
 
 
 class ServerSection(StrictModel):
@@ -263,8 +264,6 @@ class VmcSection(StrictModel):
     @classmethod
     def _host_port(cls, value: str | None) -> str | None:
         if value is not None:
-            from riderlive.vmc.sender import parse_target
-
             parse_target(value)
         return value
 

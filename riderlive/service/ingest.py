@@ -36,7 +36,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
@@ -46,9 +46,7 @@ from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
-
-if TYPE_CHECKING:
-    from riderlive.service.ports import IngestPort
+from riderlive.service.ports import ServicePort
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
@@ -199,6 +197,13 @@ class Arbiter:
         if self.active == producer_id:
             self.active = None
         return was_active
+
+
+class IngestPort(ServicePort, Protocol):
+    """What an input endpoint reads of the service (``service.ports``), and the one arbiter."""
+
+    @property
+    def arbiter(self) -> Arbiter: ...
 
 
 async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: float) -> None:

@@ -7,8 +7,9 @@ what it is told and a clock they set (``tests/service/fakes.py``).
 - :class:`TickPort`: the tick as the web side reaches it (input, commands, time, status);
   :class:`~riderlive.realtime.link.TickLink` is the real one.
 - :class:`StopPort`: who latches an e-stop (the supervisor).
-- :class:`IngestPort` (``/ws/horse``, ``/ws/saddle``) and :class:`PublishPort`
-  (``/ws/rider``): what each endpoint reads of the service.
+- :class:`ServicePort`: what every endpoint reads of the service; :class:`PublishPort`
+  (``/ws/rider``) adds to it, and so does ``service.ingest.IngestPort`` (``/ws/horse``,
+  ``/ws/saddle``: the arbiter), defined beside the arbiter.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ if TYPE_CHECKING:
     from riderlive.realtime import commands as cmd
     from riderlive.realtime.layout import InputKind
     from riderlive.service.config import ServiceConfig
-    from riderlive.service.ingest import Arbiter
     from riderlive.service.metrics import ServiceMetrics
     from riderlive.skeleton.rig import Pose
 
@@ -72,13 +72,6 @@ class ServicePort(Protocol):
 
     @property
     def link(self) -> TickPort: ...
-
-
-class IngestPort(ServicePort, Protocol):
-    """What an input endpoint reads of the service."""
-
-    @property
-    def arbiter(self) -> Arbiter: ...
 
 
 class PublishPort(ServicePort, Protocol):
