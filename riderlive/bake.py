@@ -24,6 +24,7 @@ import numpy as np
 from riderlive.channels import HORSE_INDEX, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.configfile import ConfigError
 from riderlive.framefile import (
+    DEFAULT_RATE,
     FORMATS,
     FrameFileError,
     FrameTable,
@@ -41,9 +42,6 @@ from riderlive.rules.params import load_preset
 from riderlive.rules.parts import RiderParts
 from riderlive.saddle.takes import add_point_arguments
 from riderlive.units import RIG_UNITS_PER_METRE, metres_per_unit
-
-DEFAULT_RATE = 120.0
-"""Frame rate assumed for a take without a ``t`` column (Hz)."""
 
 
 def bake_table(

@@ -33,6 +33,9 @@ import orjson
 
 from riderlive.channels import HORSE, HORSE_INDEX, is_known
 
+DEFAULT_RATE = 120.0
+"""Frame rate assumed for a take without a ``t`` column (Hz): ``bake``, ``tail``, ``platform``."""
+
 if TYPE_CHECKING:
     import polars as pl
 

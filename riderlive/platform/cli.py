@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.framefile import DEFAULT_RATE, FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.frameunits import METRES, recorded_scale
 from riderlive.platform.config import PlatformConfig, load_platform
 from riderlive.platform.geometry import POSE_AXES
@@ -35,8 +35,6 @@ from riderlive.platform.pipeline import Bake, PlatformModel, bake
 from riderlive.platform.saddle_input import saddle_pose
 from riderlive.saddle.takes import add_point_arguments, point_of
 from riderlive.units import metres_per_unit
-
-DEFAULT_RATE = 120.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
