@@ -21,9 +21,17 @@ from typing import TypeVar
 
 import numpy as np
 
-from riderlive.channels import HORSE, HORSE_INDEX, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES
+from riderlive.channels import HORSE_INDEX, RIDER_INDEX, RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FORMATS, FrameFileError, FrameTable, file_format, read_frames, write_frames
+from riderlive.framefile import (
+    DEFAULT_RATE,
+    FORMATS,
+    FrameFileError,
+    FrameTable,
+    file_format,
+    read_frames,
+    write_frames,
+)
 from riderlive.frameunits import HOOF_HEIGHTS, recorded_scale, resolve_scale
 from riderlive.parquetstream import ParquetTake, open_parquet, read_chunks, read_columns, write_chunks
 from riderlive.rules.animator import AnimatorLayer
@@ -32,18 +40,8 @@ from riderlive.rules.filters import SeriesState, damp_rows, spring_rows
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.rules.params import load_preset
 from riderlive.rules.parts import RiderParts
-
-DEFAULT_RATE = 120.0
-"""Frame rate assumed for a take without a ``t`` column (Hz)."""
-
-
-def horse_matrix(table: FrameTable) -> np.ndarray:
-    """The take's horse channels in canonical order; omitted channels are zero."""
-    out = np.zeros((len(table), len(HORSE)), dtype=np.float64)
-    for j, name in enumerate(table.names):
-        if name in HORSE_INDEX:
-            out[:, HORSE_INDEX[name]] = table.values[:, j]
-    return out
+from riderlive.saddle.takes import add_point_arguments
+from riderlive.units import RIG_UNITS_PER_METRE, metres_per_unit
 
 
 def bake_table(
@@ -61,9 +59,7 @@ def bake_table(
         horse = np.zeros((len(table), len(HORSE_INDEX)))
         for name, column in columns.items():
             horse[:, HORSE_INDEX[name]] = column
-        from riderlive.horse import DEFAULT_SCALE
-
-        parts = RiderParts(model.params, model.scale / DEFAULT_SCALE).evaluate_batch(horse, rider)
+        parts = RiderParts(model.params, metres_per_unit(model.scale)).evaluate_batch(horse, rider)
         rider = np.column_stack([rider, parts])
         index = {**RIDER_INDEX, **{n: len(RIDER_NAMES) + i for i, n in enumerate(RIDER_PART_NAMES)}}
         return FrameTable(tuple(channels), np.asfortranarray(rider[:, [index[n] for n in channels]]), times)
@@ -174,7 +170,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--offsets", help="TOML with [offsets] and [gains] per rider channel")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
     parser.add_argument("--format", choices=FORMATS, help="format for - (default csv)")
-    parser.add_argument("--saddle", action="store_true", help="also write the saddle channels (saddle.tx .. rz)")
+    parser.add_argument(
+        "--saddle", action="store_true", help="also write the saddle channels (saddle.tx .. rz; m, deg)"
+    )
+    add_point_arguments(parser)
     parser.add_argument("--timings", action="store_true", help="print where the time went (read, rules, write)")
 
 
@@ -197,13 +196,13 @@ def run(args: argparse.Namespace) -> int:
         table = read_frames(args.input, fmt=args.format)
         read = time.perf_counter()
         saddle = None
-        from riderlive.saddle.takes import horse_take, is_saddle_take, saddle_take
+        from riderlive.saddle.estimator import Model
+        from riderlive.saddle.takes import horse_take, is_saddle_take, point_of, saddle_take
 
+        point = point_of(args)  # the live service's saddle point (--config's [saddle], --forward, --up)
         if is_saddle_take(table):  # a rider from the saddle alone (docs/saddle.md): metres in
-            from riderlive.horse import DEFAULT_SCALE
-
-            saddle, scale = FrameTable(table.names, table.values, table.t), DEFAULT_SCALE
-            table, _ = horse_take(table, rate=args.rate)
+            saddle, scale = FrameTable(table.names, table.values, table.t), RIG_UNITS_PER_METRE
+            table, _ = horse_take(table, Model(point=point), rate=args.rate)
             if args.scale is not None:
                 scale = args.scale
         else:
@@ -217,7 +216,8 @@ def run(args: argparse.Namespace) -> int:
         result = bake_table(table, model, channels, rate=args.rate)
         rules = time.perf_counter()
         if args.saddle:
-            result = with_saddle(result, saddle_take(table) if saddle is None else _saddle_columns(saddle))
+            columns = saddle_take(table, point, metres_per_unit(scale)) if saddle is None else _saddle_columns(saddle)
+            result = with_saddle(result, columns)
         _write_with_progress(args.output, result, args.format)
         timings = Timings(len(table), read - started, rules - read, time.perf_counter() - rules)
     except (FrameFileError, ConfigError, ValueError) as exc:

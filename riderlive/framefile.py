@@ -31,7 +31,10 @@ import numpy as np
 import numpy.typing as npt
 import orjson
 
-from riderlive.channels import is_known
+from riderlive.channels import HORSE, HORSE_INDEX, is_known
+
+DEFAULT_RATE = 120.0
+"""Frame rate assumed for a take without a ``t`` column (Hz): ``bake``, ``tail``, ``platform``."""
 
 if TYPE_CHECKING:
     import polars as pl
@@ -366,3 +369,12 @@ def _write_parquet(path: str, columns: dict[str, FloatArray]) -> None:
         return
     with atomic_path(path) as tmp:
         frame.write_parquet(tmp, compression=PARQUET_COMPRESSION)
+
+
+def horse_matrix(table: FrameTable) -> npt.NDArray[np.float64]:
+    """The table's horse channels in canonical order (``channels.HORSE``); omitted channels are zero."""
+    out = np.zeros((len(table), len(HORSE)), dtype=np.float64)
+    for j, name in enumerate(table.names):
+        if name in HORSE_INDEX:
+            out[:, HORSE_INDEX[name]] = table.values[:, j]
+    return out

@@ -193,3 +193,26 @@ def test_timings_print_in_units_that_keep_three_figures() -> None:
     )
     assert "(250 frames/s)" in str(Timings(250, 0.5, 0.25, 0.25))
     assert "(too fast to time)" in str(Timings(10, 0.0, 0.0, 0.0))
+
+
+def test_the_saddle_columns_are_at_the_services_saddle_point_in_metres(tmp_path: Path) -> None:
+    from riderlive.saddle import SaddlePoint, saddle_from_horse
+    from riderlive.units import HORSE_LENGTHS
+
+    horse = horse_take(20, seed=4)  # +-5 deg
+    horse[:, list(HORSE_LENGTHS)] *= 0.02  # +-10 cm: a plausible horse in metres
+    src, out = tmp_path / "h.csv", tmp_path / "r.csv"
+    in_rig_units = horse.copy()
+    in_rig_units[:, list(HORSE_LENGTHS)] *= 25.0  # the take in thesis rig units (--scale 1)
+    write_csv(src, in_rig_units)
+    service = tmp_path / "service.toml"
+    service.write_text("[saddle]\nforward = 0.9\nup = 0.3\n")
+    done = run_cli("bake", str(src), "-o", str(out), "--scale", "1", "--saddle", "--config", str(service))
+    assert done.returncode == 0, done.stderr
+    header, values = read_csv(out)
+    assert header[-6:] == ["saddle.tx", "saddle.ty", "saddle.tz", "saddle.rx", "saddle.ry", "saddle.rz"]
+    point = SaddlePoint(forward=0.9, up=0.3)
+    expected = np.array([saddle_from_horse(row, point) for row in horse])  # m, deg
+    np.testing.assert_allclose(values[:, -6:], expected, atol=1e-9)
+    default = np.array([saddle_from_horse(row) for row in horse])
+    assert np.abs(default[:, :3] - expected[:, :3]).max() > 1e-3

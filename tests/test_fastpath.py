@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from riderlive import fastpath
+from riderlive import fastpath, fastpath_cache
 
 HELPER = """
 from riderlive.fastpath import inline
@@ -48,7 +48,7 @@ def test_the_stamp_covers_helpers_in_other_files_and_module_constants(tmp_path: 
             _package(tmp_path, step, offset)
             for name in ("helper_mod", "kernel_mod"):
                 sys.modules.pop(name, None)
-            fastpath._file_digest.cache_clear()
+            fastpath_cache._file_digest.cache_clear()
             module = importlib.import_module("kernel_mod")
             stamps.append(fastpath.sources_stamp(module.run.py_func))
         assert stamps[0] == stamps[1]  # nothing changed
@@ -100,7 +100,7 @@ PYTHON_PATH = """
 import sys
 sys.modules["numba"] = None  # as if numba were not installed
 import numpy as np
-from riderlive import fastpath
+from riderlive import fastpath, fastpath_cache
 from tests.test_fastpath import CASE_FRAMES, GAIN_IN, GAIN_OUT, OFFSET_OUT, case_columns, mixed
 assert not fastpath.AVAILABLE
 for block in (fastpath.BLOCK, 6):
@@ -160,3 +160,32 @@ def test_batch_writes_an_output_that_is_not_8_byte_aligned() -> None:
     expected = np.empty((5, n))
     run(case_columns(n), expected)
     np.testing.assert_array_equal(out, expected)
+
+
+def test_the_numba_internals_the_cache_uses_are_there_or_the_failure_names_the_version() -> None:
+    """riderlive.fastpath_cache extends numba's FunctionCache; a numba without those internals fails
+    here (and at the first kernel) with its version and the tested range, never with a stale cache."""
+    import numba
+
+    from riderlive import fastpath_cache
+
+    version = tuple(int(p) for p in numba.__version__.split(".")[:2])
+    lo, hi = fastpath_cache.TESTED
+    assert lo <= version <= hi, f"numba {numba.__version__} is outside the tested {lo}-{hi} (pyproject.toml)"
+    fastpath_cache.check_internals.cache_clear()
+    fastpath_cache.check_internals()  # raises NumbaChanged naming numba's version when they moved
+
+
+def test_a_moved_internal_is_reported_with_numba_s_version(monkeypatch: pytest.MonkeyPatch) -> None:
+    import numba
+    from numba.core import caching
+
+    from riderlive import fastpath_cache
+
+    monkeypatch.setattr(caching, "FunctionCache", type("FunctionCache", (), {}))  # a numba that reorganised it
+    fastpath_cache.check_internals.cache_clear()
+    try:
+        with pytest.raises(fastpath_cache.NumbaChanged, match=rf"numba {numba.__version__} lacks .*load_overload"):
+            fastpath_cache.check_internals()
+    finally:
+        fastpath_cache.check_internals.cache_clear()

@@ -80,8 +80,10 @@ class ProducerInput:
         self.transport = transport
         self.trust_broker = trust_broker
         self.forget = forget
-        self.endpoints: dict[str, IngestEndpoint] = {Kind.HORSE: service.ingest, Kind.SADDLE: service.saddle_ingest}
-        """The websocket endpoints' own validation, one per input kind."""
+        self.endpoints: dict[str, IngestEndpoint] = {Kind.HORSE: service.ingest}
+        """The websocket endpoints' own validation, one per input kind accepted (``input.saddle``)."""
+        if service.config.input.saddle:
+            self.endpoints[Kind.SADDLE] = service.saddle_ingest
         self.producers: dict[ProducerKey, Producer] = {}
         self.authorized: set[ProducerKey] = set()
         self.driving: dict[ProducerKey, bool] = {}

@@ -46,6 +46,7 @@ from riderlive.devices.lifecycle import (
     Transition,
 )
 from riderlive.devices.plug import Motion, Move, Plug
+from riderlive.tickframe import TickFrame
 
 log = logging.getLogger("riderlive.devices")
 S = DeviceState
@@ -258,10 +259,9 @@ class Device:
         if self.state.armed:
             self.disarm(by)
         limit = time.perf_counter() + (self.plug.park_timeout_s if timeout_s is None else timeout_s)
-        hold: tuple[float, ...] = ()  # parking needs no frame
         next_tick = time.perf_counter()
         while self.state is S.PARKING and time.perf_counter() < limit:
-            self.tick(hold, time.perf_counter())
+            self.tick(None, time.perf_counter())  # parking needs no frame
             next_tick += self.period_s
             time.sleep(max(0.0, next_tick - time.perf_counter()))
         self._setup = None
@@ -277,9 +277,9 @@ class Device:
 
     # -- the tick -----------------------------------------------------------------------
 
-    def tick(self, frame: Sequence[float], now: float) -> DeviceStatus:
-        """One tick: ``frame`` is what the plug maps to goals (the rider, channels.RIDER
-        order), ``now`` perf_counter seconds. Never raises."""
+    def tick(self, frame: TickFrame | None, now: float) -> DeviceStatus:
+        """One tick: ``frame`` is the tick's frame the plug maps to goals (None outside a
+        tick: parking needs none), ``now`` perf_counter seconds. Never raises."""
         self.counters["ticks"] += 1
         wrote = False
         try:
@@ -364,7 +364,7 @@ class Device:
         self._move_t0 = None
         self._go(target, reason, by, now)
 
-    def _move(self, frame: Sequence[float], now: float) -> bool:
+    def _move(self, frame: TickFrame | None, now: float) -> bool:
         state = self.state
         first = self._move_t0 is None
         if self._move_t0 is None:
@@ -421,8 +421,8 @@ class Device:
         try:
             if self.plug.is_open:
                 self.plug.outputs_off()
-                first = getattr(self.plug, "off_written_at", None)  # a plug that writes twice: the first
-                record.off_written_at = first if isinstance(first, float) else time.perf_counter()
+                first = self.plug.off_written_at  # a plug that writes twice: the first
+                record.off_written_at = first if first is not None else time.perf_counter()
                 self._next_check = now + self.period_s
         except Exception as exc:
             log.error("%s: e-stop: outputs-off failed: %s", self.name, exc)

@@ -194,7 +194,7 @@ class Guardian:
         started = next_tick = time.perf_counter()
         try:
             while True:
-                status = device.tick((), time.perf_counter())
+                status = device.tick(None, time.perf_counter())
                 if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
                     log.error("%s: the port went away during the stop", spec.name)
                     return

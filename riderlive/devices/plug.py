@@ -10,9 +10,11 @@ one short piece of bus work, called from the thread that ticks; none sleeps.
   ``next()``, and leaves every output **off**. ``detail`` says which step it is on.
 - ``arm()``: outputs on, holding the present pose: the soft start begins there.
 - ``drive(frame, now, motion)``: one tick of ``motion`` (home, soft start, run, park):
-  compute the goal, write it inside ``self.stops.gate()`` (so no goal leaves after an
-  e-stop request), read back when due. True when the move is complete (homed, soft
-  start over, parked and settled). Raises the lifecycle's errors.
+  compute the goal from the tick's :class:`~riderlive.tickframe.TickFrame` (metres and
+  degrees; the parts the plug's kind declares in ``DeviceInfo.consumes``; None when
+  parking outside a tick: close, the guardian), write it inside ``self.stops.gate()``
+  (so no goal leaves after an e-stop request), read back when due. True when the move is
+  complete (homed, soft start over, parked and settled). Raises the lifecycle's errors.
 - ``outputs_off()``: the fastest "everything off" the transport has, no reply awaited
   (a broadcast); ``outputs_confirmed_off()``: read back, True when every unit is off.
 - ``on_fault(error)``: first aid for one unit (torque off the servo that reported an
@@ -25,6 +27,12 @@ one short piece of bus work, called from the thread that ticks; none sleeps.
 - ``pose``: the last goal sent (device units), published for the guardian;
   ``park_timeout_s``: the longest a park may take before outputs go off regardless;
   ``status()``: what to publish besides the lifecycle (per-unit values); ``counters``.
+
+Optional capabilities are part of the interface too, with defaults in :class:`PlugBase`
+(a plug inherits them): ``goal_written_at`` / ``off_written_at`` (``perf_counter`` s the
+last goal or outputs-off write returned; None: not tracked, the caller's clock stands
+in), ``idle(now)`` (nothing by default) and ``tune(**changes)`` (live parameters:
+:class:`NotTunable` by default).
 
 Hardware-specific timing (soft start and park durations, slew limits, read dividers)
 lives in the plug's own configuration.
@@ -39,6 +47,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from riderlive.devices.latch import StopView
+from riderlive.tickframe import TickFrame
 
 T = TypeVar("T")
 Steps = Generator[None, None, T]
@@ -69,6 +78,10 @@ class Motion:
     """Parking after a fault: skip what may fail again (reads), keep the goals going."""
 
 
+class NotTunable(Exception):
+    """The plug has no live parameters."""
+
+
 class Plug(Protocol):
     """The narrow interface between one device and the lifecycle (see the module docstring)."""
 
@@ -77,6 +90,8 @@ class Plug(Protocol):
     stops: StopView | None
     needs_homing: bool
     counters: Counter[str]
+    goal_written_at: float | None
+    off_written_at: float | None
 
     @property
     def is_open(self) -> bool: ...
@@ -93,7 +108,7 @@ class Plug(Protocol):
 
     def arm(self) -> None: ...
 
-    def drive(self, frame: Sequence[float], now: float, motion: Motion) -> bool: ...
+    def drive(self, frame: TickFrame | None, now: float, motion: Motion) -> bool: ...
 
     def outputs_off(self) -> None: ...
 
@@ -106,6 +121,22 @@ class Plug(Protocol):
     def takeover(self, pose: Sequence[float]) -> None: ...
 
     def status(self) -> dict[str, Any]: ...
+
+    def tune(self, **changes: Any) -> None: ...
+
+
+class PlugBase:
+    """The defaults of a plug's optional capabilities (see the module docstring)."""
+
+    name: str
+    goal_written_at: float | None = None
+    off_written_at: float | None = None
+
+    def idle(self, now: float) -> None:
+        """Nothing to keep alive between the lifecycle's read-backs."""
+
+    def tune(self, **changes: Any) -> None:
+        raise NotTunable(f"{self.name} has no live parameters")
 
 
 def smoothstep(x: float) -> float:

@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 from riderlive.devices.plug import Plug
+from riderlive.tickframe import ALWAYS, Part, check_parts, parse_parts
 
 KINDS: dict[str, str] = {"dynamixel": "riderlive.dynamixel.driver", "platform": "riderlive.platform.device"}
 """Device kind -> the module with ``describe`` and ``make_plug``."""
@@ -34,8 +35,8 @@ class DeviceInfo:
     """The highest tick rate the device's configuration was validated for."""
     budget: str
     """A few lines for the start-up log: the wire budget per tick."""
-    input: Literal["rider", "horse"] = "rider"
-    """Which frame of the tick the device is driven from (the rig: the rider; a platform: the horse)."""
+    consumes: frozenset[Part] = frozenset({Part.RIDER})
+    """The parts of the tick's frame the device reads (the rig: the rider; a platform: the saddle)."""
     longest_wait_s: float = 0.0
     """The longest one tick may block in this device's calls (s; a reply awaited to its ceiling)."""
 
@@ -52,8 +53,8 @@ class DeviceSpec:
     """Driven every ``divider``-th tick of the service."""
     period_s: float
     """Seconds between the device's ticks (``divider`` / tick rate)."""
-    input: str = "rider"
-    """``rider`` or ``horse``: the frame the tick passes to the device."""
+    consumes: tuple[str, ...] = (Part.RIDER.value,)
+    """:attr:`DeviceInfo.consumes` by name (:class:`~riderlive.tickframe.Part` values; JSON-able)."""
     options: dict[str, Any] = field(default_factory=dict)
     """Kind-specific settings for ``make_plug`` (JSON values), from the service configuration."""
     longest_wait_s: float = 0.0
@@ -65,7 +66,13 @@ class DeviceSpec:
     @classmethod
     def from_json(cls, text: str) -> DeviceSpec:
         data: dict[str, Any] = json.loads(text)
+        data["consumes"] = tuple(data.get("consumes", ()))
         return cls(**data)
+
+    @property
+    def parts(self) -> frozenset[Part]:
+        """:attr:`consumes` as parts (a wrong name is a ValueError naming it)."""
+        return parse_parts(self.consumes)
 
 
 class RateMismatch(ValueError):
@@ -86,9 +93,15 @@ def plan(
     policy: RatePolicy = "divide",
     *,
     options: dict[str, Any] | None = None,
+    computed: frozenset[Part] = ALWAYS,
 ) -> tuple[DeviceSpec, str]:
-    """Validate a device and fit it to ``tick_hz``; returns the spec and what to print."""
+    """Validate a device and fit it to ``tick_hz``; returns the spec and what to print.
+
+    ``computed``: the frame parts the tick computes (:func:`riderlive.tickframe.computed_parts`);
+    a device consuming another is refused (:class:`~riderlive.tickframe.MissingPart`).
+    """
     info: DeviceInfo = _module(kind).describe(file, port)
+    check_parts(info.name, sorted(info.consumes, key=lambda p: p.value), computed)
     divider = max(1, math.ceil(tick_hz / info.validated_hz - 1e-9))
     lines = [info.budget]
     if divider > 1:
@@ -99,8 +112,9 @@ def plan(
                 f"{message}: set tick.rate <= {info.validated_hz:g} (or {section}.rate_policy = 'divide')"
             )
         lines.append(f"{message}: driving it every {divider} ticks ({tick_hz / divider:g} ticks/s)")
+    consumes = tuple(sorted(p.value for p in info.consumes))
     spec = DeviceSpec(
-        kind, file, port, info.name, divider, divider / tick_hz, info.input, dict(options or {}), info.longest_wait_s
+        kind, file, port, info.name, divider, divider / tick_hz, consumes, dict(options or {}), info.longest_wait_s
     )
     return spec, "\n".join(lines)
 

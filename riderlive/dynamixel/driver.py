@@ -31,7 +31,7 @@ from riderlive.devices.budget import ReplyTimer
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch, StopView
 from riderlive.devices.lifecycle import DeviceError, HardwareFault, NoReply, Rejected, TickGap
-from riderlive.devices.plug import Motion, Move, Steps, ramp
+from riderlive.devices.plug import Motion, Move, PlugBase, Steps, ramp
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
 from riderlive.devices.stall import usable_between
 from riderlive.dynamixel.bringup import arm_watchdog, bring_up, first_spec, read_present, torque_on_here
@@ -39,6 +39,7 @@ from riderlive.dynamixel.readback import Readback, raise_hardware_error
 from riderlive.dynamixel.rig import RigConfig, ServoMap, deg_to_pulses, load_rig, longest_tick_wait_s, wire_budget
 from riderlive.dynamixel.sdkbus import SdkBus
 from riderlive.dynamixel.tables import Item
+from riderlive.tickframe import TickFrame
 
 TAKEOVER_QUIET_S = 0.012
 """After taking over a bus whose writer died mid-packet: silence longer than a servo's
@@ -46,7 +47,7 @@ partial-packet timeout (the emulator's 10 ms; the e-manual's 1.5 ms) so the firs
 packet is parsed whole."""
 
 
-class RigPlug:
+class RigPlug(PlugBase):
     """One Dynamixel bus of a rig map (``config/rigs/*.toml``); see the module docstring."""
 
     kind = "dynamixel"
@@ -137,7 +138,7 @@ class RigPlug:
             self.goals = torque_on_here(self.bus, self.config, ids, present)
         self._arm_state()
 
-    def drive(self, frame: Sequence[float], now: float, motion: Motion) -> bool:
+    def drive(self, frame: TickFrame | None, now: float, motion: Motion) -> bool:
         bus = self.config.bus
         self.read_this_tick = False
         if motion.first:
@@ -147,7 +148,7 @@ class RigPlug:
         if motion.move is Move.PARK:
             targets, arrived = ramp(self._ramp_from, self.map.park, motion.elapsed, bus.park_s)
         else:
-            targets = self.map.targets(self._valid(frame), self.goals)
+            targets = self.map.targets(self._valid(() if frame is None else frame.rider), self.goals)
             if motion.move is Move.SOFT_START:
                 targets, arrived = ramp(self._ramp_from, targets, motion.elapsed, bus.soft_start_s)
         goals, clamped = self.map.limit(targets, self.goals, motion.dt)
@@ -251,7 +252,7 @@ class RigPlug:
         self._last_read = None
 
     def _valid(self, frame: Sequence[float]) -> Sequence[float]:
-        """A rider frame of the wrong length or with non-finite values holds the goals."""
+        """A rider frame (m, deg) of the wrong length or with non-finite values holds the goals."""
         if len(frame) == len(RIDER) and all(map(math.isfinite, frame)):
             return frame
         self.counters["bad_inputs"] += 1

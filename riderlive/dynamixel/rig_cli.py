@@ -68,6 +68,7 @@ def drive(rig: RigConfig, seconds: float, gait: str, arm: bool = False, rig_file
     from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
     from riderlive.realtime.pacing import DeadlineClock
     from riderlive.rules import RiderModel
+    from riderlive.tickframe import Flag, TickFrame
 
     horse, model = ProceduralHorse(gait), RiderModel(scale=DEFAULT_SCALE)
     latch, board = StopLatch(), SafetyBoard()
@@ -97,7 +98,9 @@ def drive(rig: RigConfig, seconds: float, gait: str, arm: bool = False, rig_file
             if woke is None:
                 _drain(wake_read)
                 device.poll_stop(now)
-            status = device.tick(model.evaluate(horse.sample(now - start)), now)
+            rider = model.evaluate(horse.sample(now - start))  # the horse in metres: the rider too
+            frame = TickFrame.build(clock.tick, now - start, now, now - start, Flag.PROCEDURAL, rider)
+            status = device.tick(frame, now)
             board.publish(0, device.state, device.plug.pose)
             for t in status.transitions:
                 say(f"{now - start:7.2f} s  {t.source.value} -> {t.target.value}: {t.reason} (by {t.by})")

@@ -31,8 +31,8 @@ import pydantic
 from riderlive.channels import RIDER_INDEX, RIDER_NAMES, Kind, lookup
 from riderlive.configfile import CONFIG_DIR, StrictModel, load
 from riderlive.fit.bvh import BvhTake, read_bvh
+from riderlive.fit.digest import sha256
 from riderlive.fit.problem import FitInputError, RiderTake
-from riderlive.fit.takes import sha256
 from riderlive.frameunits import METRES
 from riderlive.names import check_name
 from riderlive.skeleton import rider_rig

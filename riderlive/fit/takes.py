@@ -15,12 +15,12 @@
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from riderlive.channels import RIDER_INDEX, RIDER_PART_NAMES, SADDLE_NAMES, Kind, lookup
+from riderlive.fit.digest import sha256
 from riderlive.fit.problem import HORSE_READ, FitInputError, HorseTake, RiderTake
 from riderlive.framefile import FrameTable, read_frames
 from riderlive.frameunits import recorded_scale, resolve_scale
@@ -30,14 +30,6 @@ DEFAULT_RATE = 120.0
 """Hz of a take without a ``t`` column."""
 IGNORED: frozenset[str] = frozenset((*RIDER_PART_NAMES, *SADDLE_NAMES))
 """Known channels a rider take may carry that the fit does not read."""
-
-
-def sha256(path: str) -> str:
-    digest = hashlib.sha256()
-    with Path(path).open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _times(table: FrameTable, path: str, rate: float) -> np.ndarray:

@@ -15,9 +15,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from riderlive.bake import DEFAULT_RATE, horse_matrix
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FORMATS, FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.framefile import (
+    DEFAULT_RATE,
+    FORMATS,
+    FrameFileError,
+    FrameTable,
+    horse_matrix,
+    read_frames,
+    write_frames,
+)
 from riderlive.frameunits import recorded_scale, rescale_lengths
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.physics.config import PhysicsConfig, load_physics

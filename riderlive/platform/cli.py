@@ -6,8 +6,10 @@
     riderlive platform stewart_linear take.csv -o tracks.csv --plot tracks.png
     riderlive platform heave_pitch_roll saddle.csv --preset gentle --intensity 80 -o tracks.csv
 
-The input is a frame file of saddle frames (``saddle.tx ty tz rx ry rz``) or horse
-frames (turned into the saddle pose first). The output has ``t``, the platform's pose
+The input is a frame file of saddle frames (``saddle.tx ty tz rx ry rz``, m and deg) or
+horse frames, turned into the saddle pose first at the live service's saddle point
+(``--config SERVICE.toml``: its ``[saddle]``; ``--forward``/``--up``), lengths in the
+unit recorded beside the take (``NAME.json``) or ``--scale``, else metres. The output has ``t``, the platform's pose
 relative to home (``platform.tx`` ... ``platform.rz``, after the workspace scale-back)
 and one column per actuator (``platform.a1`` ...: m of extension or deg of crank),
 after the safety stage. Bad input exits with status 2 and a message; nothing is written.
@@ -24,14 +26,15 @@ from typing import Any
 import numpy as np
 
 from riderlive.configfile import ConfigError
-from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.framefile import DEFAULT_RATE, FrameFileError, FrameTable, read_frames, write_frames
+from riderlive.frameunits import METRES, recorded_scale
 from riderlive.platform.config import PlatformConfig, load_platform
 from riderlive.platform.geometry import POSE_AXES
 from riderlive.platform.ik import axis_ranges
 from riderlive.platform.pipeline import Bake, PlatformModel, bake
 from riderlive.platform.saddle_input import saddle_pose
-
-DEFAULT_RATE = 120.0
+from riderlive.saddle.takes import add_point_arguments, point_of
+from riderlive.units import metres_per_unit
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,6 +47,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--intensity", type=float, help="cueing intensity, 0-100 %%")
     parser.add_argument("--rate", type=float, default=DEFAULT_RATE, help="Hz, for input without a t column")
     parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
+    parser.add_argument(
+        "--scale",
+        type=float,
+        help="horse frames: thesis rig units per length unit (25: metres); default: NAME.json, else metres",
+    )
+    add_point_arguments(parser)
 
 
 def describe(cfg: PlatformConfig, model: PlatformModel) -> str:
@@ -142,7 +151,8 @@ def run(args: argparse.Namespace) -> int:
         if len(table) < 2:
             raise FrameFileError(args.input, "a take needs at least two frames")
         dt = np.diff(times, prepend=times[0] - (times[1] - times[0]))
-        saddle = saddle_pose(table, args.input)
+        scale = args.scale if args.scale is not None else recorded_scale(args.input) or METRES
+        saddle = saddle_pose(table, args.input, point_of(args), metres_per_unit(scale))
         result = bake(model, saddle, dt)
         if args.output:
             write_frames(args.output, tracks_table(model, result, times), args.format)

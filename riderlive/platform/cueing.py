@@ -57,7 +57,7 @@ import pydantic
 from pydantic import Field
 
 from riderlive.configfile import StrictModel
-from riderlive.platform.compiled import jit
+from riderlive.fastpath import jit
 
 FloatArray = npt.NDArray[np.float64]
 GRAVITY = 9.80665

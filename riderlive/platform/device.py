@@ -14,10 +14,10 @@ park and dead-man (docs/platform-link.md). Per step of the lifecycle:
   per actuator; a value the firmware's profile cannot take is a ``Mismatch`` naming the
   actuator). Ends with the device disarmed, outputs off.
 - **arm**: ARM naming the device (its firmware homes first when it must: ``needs_homing``).
-- **drive**: the saddle pose of the tick's horse frame (:func:`riderlive.saddle.
-  saddle_from_horse`, one call) -> cueing -> IK -> safety follower -> one TARGET in counts of
-  stroke from fully retracted (0.01 mm; 0.01 deg for a rotary arm), then the link's
-  ``service`` (telemetry in, heartbeat out). Soft start: eased on this side over the
+- **drive**: the tick frame's saddle pose (``TickFrame.saddle``: the tick computes it once,
+  at the service's configured saddle point, in metres and degrees) -> cueing -> IK ->
+  safety follower -> one TARGET in counts of stroke from fully retracted (0.01 mm; 0.01 deg
+  for a rotary arm), then the link's ``service`` (telemetry in, heartbeat out). Soft start: eased on this side over the
   platform's ``soft_start_s`` while the firmware blends too; done when both are.
   Park: a PARK frame, then the firmware's own eased park until it reports parked.
 - **faults**: a fault or e-stop the firmware latched by itself (its e-stop input, its
@@ -38,10 +38,10 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from riderlive.channels import HORSE, Kind
+from riderlive.channels import SADDLE
 from riderlive.devices.latch import StopView
 from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply, PortBusy, PortLost, Rejected
-from riderlive.devices.plug import Motion, Move, Steps
+from riderlive.devices.plug import Motion, Move, PlugBase, Steps
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
 from riderlive.platform import limits, link, pipeline
 from riderlive.platform.config import load_platform
@@ -58,7 +58,7 @@ from riderlive.platform.serial_link import (
 )
 from riderlive.platform.serial_link import PortBusy as LinkBusy
 from riderlive.platform.serial_link import PortLost as LinkLost
-from riderlive.saddle import saddle_from_horse
+from riderlive.tickframe import Part, TickFrame
 
 HOMING_PROFILES = frozenset({link.Profile.PLATFORM6, link.Profile.PLATFORM3})
 """Profiles whose firmware homes on its first arm (firmware_proto/src/profile.c)."""
@@ -81,7 +81,7 @@ def position_units(model: PlatformModel) -> float:
     return 1.0 if model.geometry.kind.rotary else 1000.0
 
 
-class PlatformPlug:
+class PlatformPlug(PlugBase):
     """One platform on one serial port; see the module docstring."""
 
     kind = "platform"
@@ -94,7 +94,6 @@ class PlatformPlug:
         device: str | None = None,
         heartbeat_ms: int = 200,
         period_s: float = 0.01,
-        metres_per_unit: float = 1.0,
         make_link: Callable[[str], SerialPlatformLink] = SerialPlatformLink,
     ) -> None:
         self.model = model
@@ -103,8 +102,6 @@ class PlatformPlug:
         self.expected_device = device
         self.heartbeat_ms = heartbeat_ms
         self.period_s = period_s
-        self.metres_per_unit = metres_per_unit
-        """Metres per length unit of the tick's horse frames (``tick.length_scale / 25``)."""
         self.link = make_link(port)
         self.stops: StopView | None = None
         self.needs_homing = False
@@ -219,7 +216,7 @@ class PlatformPlug:
         self._before_arm = self.link.telemetry  # says what the device was before: not trusted after
         self._start_at(self._measured() or self.positions)
 
-    def drive(self, frame: Sequence[float], now: float, motion: Motion) -> bool:
+    def drive(self, frame: TickFrame | None, now: float, motion: Motion) -> bool:
         self._call(self.link.service)
         fw = self._firmware_state()
         if motion.move is Move.PARK:
@@ -396,13 +393,11 @@ class PlatformPlug:
         self._ramp_from = list(positions)
         self.state = pipeline.initial(self.model, positions)
 
-    def _saddle(self, frame: Sequence[float]) -> list[float]:
-        """The saddle pose of the tick's horse frame (m, deg); a bad frame holds the last one."""
-        if len(frame) == len(HORSE) and all(map(math.isfinite, frame)):
-            k = self.metres_per_unit
-            if k != 1.0:
-                frame = [v * k if c.kind is Kind.TRANSLATION else v for v, c in zip(frame, HORSE, strict=True)]
-            self.saddle = saddle_from_horse(frame)
+    def _saddle(self, frame: TickFrame | None) -> list[float]:
+        """The tick frame's saddle pose (m, deg, at the configured point); a bad one holds the last."""
+        saddle = () if frame is None else frame.saddle
+        if len(saddle) == len(SADDLE) and all(map(math.isfinite, saddle)):
+            self.saddle = list(saddle)
         else:
             self.counters["bad_inputs"] += 1
         return self.saddle
@@ -503,7 +498,7 @@ def describe(file: str, port: str | None) -> DeviceInfo:
         f"{cfg.name} on {port}: {legs} actuators, one TARGET of {8 + 2 * legs} bytes a tick "
         f"({model.geometry.kind.value}, cueing {cfg.cueing.preset} at {cfg.cueing.intensity:g} %)"
     )
-    return DeviceInfo(cfg.name, 250.0, budget, input="horse")
+    return DeviceInfo(cfg.name, 250.0, budget, consumes=frozenset({Part.SADDLE}))
 
 
 def make_plug(spec: DeviceSpec) -> PlatformPlug:
@@ -517,5 +512,4 @@ def make_plug(spec: DeviceSpec) -> PlatformPlug:
         device=options.get("device"),
         heartbeat_ms=int(options.get("heartbeat_ms", 200)),
         period_s=spec.period_s,
-        metres_per_unit=float(options.get("metres_per_unit", 1.0)),
     )

@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.platform.compiled import jit
+from riderlive.fastpath import jit
 from riderlive.platform.geometry import Geometry
 
 FloatArray = npt.NDArray[np.float64]

@@ -21,9 +21,11 @@ from riderlive.devices.board import SafetyBoard
 from riderlive.devices.device import Device, DeviceStatus
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
+from riderlive.devices.plug import NotTunable
 from riderlive.devices.registry import DeviceSpec, make_plug
 from riderlive.devices.shared import pid_alive
 from riderlive.realtime import commands as cmd
+from riderlive.tickframe import TickFrame
 
 log = logging.getLogger(__name__)
 REST_STATES = frozenset({DeviceState.DISCONNECTED, DeviceState.DISARMED, DeviceState.PARKED})
@@ -75,18 +77,19 @@ class TickDevices:
 
     # -- the tick ------------------------------------------------------------------------
 
-    def tick(self, frame: Sequence[float], now: float, tick_index: int, horse: Sequence[float] = ()) -> bool:
-        """Tick each device that is due (``frame`` the rider, ``horse`` the horse frame, for
-        devices driven by it: the platform); True when a state changed (publish now)."""
+    def tick(self, frame: TickFrame) -> bool:
+        """Tick each device that is due at ``frame.tick`` with the tick's frame (each reads the
+        parts it consumes) at ``frame.at``; True when a state changed (publish now)."""
         changed = False
         self.goal_written_at = None
+        now = frame.at
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
-            if tick_index % spec.divider:
+            if frame.tick % spec.divider:
                 continue
             before = device.state
-            status = device.tick(horse if spec.input == "horse" else frame, now)
+            status = device.tick(frame, now)
             if status.wrote:
-                self.goal_written_at = getattr(device.plug, "goal_written_at", None) or time.perf_counter()
+                self.goal_written_at = device.plug.goal_written_at or time.perf_counter()
             self.statuses[i] = status
             changed |= status.state is not before or bool(status.transitions)
             if self.board is not None:
@@ -155,11 +158,10 @@ class TickDevices:
         return f"reset: {', '.join(done) or 'nothing latched'}"
 
     def _tune(self, device: Device, command: cmd.Tune) -> str:
-        tune = getattr(device.plug, "tune", None)
-        if tune is None:
-            raise Refused(Refusal.BAD_CONFIG, f"{device.name} has no live parameters")
         try:
-            tune(**command.changes)
+            device.plug.tune(**command.changes)
+        except NotTunable as exc:
+            raise Refused(Refusal.BAD_CONFIG, str(exc)) from None
         except ValueError as exc:  # pydantic's ValidationError: out of range, or against another value
             raise Refused(Refusal.BAD_CONFIG, f"{device.name}: {exc}") from None
         log.info("%s: cueing tuned by %s: %s", device.name, command.by, command.changes)

@@ -38,7 +38,7 @@ from riderlive.horse import ProceduralHorse, TerrainConfig
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import latency
 from riderlive.realtime import layout as L
-from riderlive.realtime.core import Driver, TickCore, TickResult
+from riderlive.realtime.core import Driver, TickCore, TickResult, frame_of
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of, try_realtime_priority
 from riderlive.realtime.phase_follow import PhaseFollower
@@ -46,6 +46,7 @@ from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.rules.engine import RiderModel
 from riderlive.saddle import estimate as saddle_estimate
+from riderlive.units import metres_per_unit
 
 if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
@@ -107,6 +108,9 @@ class TickLoop:
         self.device_status: dict[str, Any] = {}
         self._status_dirty = True
         self._last_good: TickResult | None = None
+        self._held = False
+        """The last ``_step`` repeated the last good result (flagged in the tick's frame)."""
+        self.metres_per_unit = metres_per_unit(setup.length_scale)
         self.physics: TickPhysics | None = None
         if setup.tail:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
@@ -291,7 +295,7 @@ class TickLoop:
             self._count_saddle(result, values, index)
             values[index["hands_full_reach"]] = self.core.full_reach
             if devices is not None:
-                changed = devices.tick(result.rider, deadline, clock.tick, result.horse)
+                changed = devices.tick(frame_of(result, clock.tick, now, deadline, self.metres_per_unit, self._held))
                 self._unsent_rx = max(self._unsent_rx, newest_rx)
                 if devices.goal_written_at is not None and self._unsent_rx >= 0.0:
                     wire = devices.goal_written_at - setup.start - self._unsent_rx
@@ -374,6 +378,7 @@ class TickLoop:
         A failure or a NaN/inf (from a parameter change, say) repeats the last good
         frame, counted and reported: the rig must never be sent a non-finite goal.
         """
+        self._held = False
         try:
             result = self.core.step(now)
             if all(math.isfinite(v) for v in result.rider):
@@ -387,6 +392,7 @@ class TickLoop:
         if not self.events or self.events[-1] != problem:
             self.events.append(problem)
             self._status_dirty = True
+        self._held = True
         if self._last_good is None:
             neutral = self.core.neutral_rider
             self._last_good = TickResult(Driver.NEUTRAL, now, -1, list(self.core.neutral_horse), list(neutral))

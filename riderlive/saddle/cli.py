@@ -16,14 +16,13 @@ import argparse
 import sys
 from collections import Counter
 
-from riderlive.configfile import ConfigError, validate
+from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.horse.gaits import GAITS
 from riderlive.horse.script import ShotScript, gait_script, load_script
 from riderlive.saddle.estimator import Model, estimate
-from riderlive.saddle.pose import SaddlePoint
 from riderlive.saddle.synthetic import IMU_STRAP, Imperfections, record
-from riderlive.saddle.takes import horse_take, saddle_take
+from riderlive.saddle.takes import add_point_arguments, horse_take, point_of, saddle_take
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,10 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source.add_argument("--rebuild", metavar="SADDLE", help="saddle take: write the horse the estimator rebuilds")
     parser.add_argument("-o", "--output", required=True, help="file to write (.csv, .jsonl, or -)")
     parser.add_argument("--format", choices=("csv", "jsonl"), help="format for - (default csv)")
-    parser.add_argument(
-        "--forward", type=float, default=SaddlePoint().forward, help="saddle point: m ahead of the hips"
-    )
-    parser.add_argument("--up", type=float, default=SaddlePoint().up, help="saddle point: m above the hips")
+    add_point_arguments(parser)
     procedural = parser.add_argument_group("procedural horse")
     procedural.add_argument("--seconds", type=float, default=10.0, help="length of a --gait take (default 10)")
     procedural.add_argument("--speed", type=float, help="m/s for --gait (default: the gait's)")
@@ -75,7 +71,7 @@ def _summary(run_estimates: Counter[str], final: dict[str, int]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        point = validate(SaddlePoint, {"forward": args.forward, "up": args.up}, "saddle point (--forward, --up)")
+        point = point_of(args)
         table: FrameTable
         if args.rebuild:
             table, run_ = horse_take(read_frames(args.rebuild, fmt=args.format), Model(point=point))

@@ -110,7 +110,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     preset_dirs = [Path(d) for d in config.tick.preset_dirs]
     obs = [Depends(observe)]
     app.add_api_websocket_route("/ws/horse", service.ingest)
-    app.add_api_websocket_route("/ws/saddle", service.saddle_ingest)
+    if config.input.saddle:
+        app.add_api_websocket_route("/ws/saddle", service.saddle_ingest)
     app.add_api_websocket_route("/ws/rider", service.hub)
 
     @app.get("/api/state", dependencies=obs, summary="Everything about the running service")

@@ -19,6 +19,7 @@ from riderlive.horse import DEFAULT_SCALE, GAITS, TerrainConfig, gait_speed
 from riderlive.ranges import KIND_DEFAULTS, Range, Ranges, check_range
 from riderlive.saddle.pose import SaddlePoint
 from riderlive.timecode import Rate
+from riderlive.vmc.target import parse_target
 
 
 class ServerSection(StrictModel):
@@ -113,6 +114,10 @@ class InputSection(StrictModel):
     clock_jump: float = pydantic.Field(default=0.5, ge=0.05, le=60.0)
     """A producer clock that moves this many seconds more or less than the service's
     between two frames starts a new stream segment (docs/protocol.md)."""
+    saddle: bool = True
+    """Accept saddle producers (``/ws/saddle``, the stage's saddle subjects). Off: the
+    tick never drives from a saddle stream, so no saddle estimate exists, and a device
+    that consumes it is refused at start (``riderlive.tickframe.MissingPart``)."""
 
 
 class SourceSection(StrictModel):
@@ -262,8 +267,6 @@ class VmcSection(StrictModel):
     @classmethod
     def _host_port(cls, value: str | None) -> str | None:
         if value is not None:
-            from riderlive.vmc.sender import parse_target
-
             parse_target(value)
         return value
 

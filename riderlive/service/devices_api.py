@@ -31,11 +31,11 @@ from fastapi.responses import JSONResponse
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import REFUSAL_STATUS, DeviceState, Refusal
 from riderlive.devices.registry import DeviceSpec, plan
-from riderlive.horse import DEFAULT_SCALE
 from riderlive.names import NAME_PATTERN
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
+from riderlive.tickframe import computed_parts
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
@@ -59,18 +59,27 @@ class AnyDeviceRequest(pydantic.BaseModel):
 
 
 def plan_devices(config: ServiceConfig) -> tuple[DeviceSpec, ...]:
-    """The configured devices, validated and fitted to the tick rate; prints the wire budget."""
+    """The configured devices, validated (the frame parts each consumes, too: ``MissingPart``)
+    and fitted to the tick rate; prints the wire budget."""
     specs = []
+    computed = computed_parts(saddle_input=config.input.saddle)
     if config.rig.file:
-        spec, text = plan("dynamixel", config.rig.file, config.rig.port, config.tick.rate, config.rig.rate_policy)
+        spec, text = plan(
+            "dynamixel", config.rig.file, config.rig.port, config.tick.rate, config.rig.rate_policy, computed=computed
+        )
         print(f"riderlive serve: rig {text}", file=sys.stderr, flush=True)
         specs.append(spec)
     platform = config.platform
     if platform.file:
         options: dict[str, Any] = {"device": platform.device, "heartbeat_ms": platform.heartbeat_ms}
-        options["metres_per_unit"] = config.tick.length_scale / DEFAULT_SCALE
         spec, text = plan(
-            "platform", platform.file, platform.port, config.tick.rate, platform.rate_policy, options=options
+            "platform",
+            platform.file,
+            platform.port,
+            config.tick.rate,
+            platform.rate_policy,
+            options=options,
+            computed=computed,
         )
         print(f"riderlive serve: platform {text}", file=sys.stderr, flush=True)
         specs.append(spec)

@@ -2,7 +2,7 @@
 with the official SDK (PyPI ``foxglove-sdk``), fed from the same tick records as ``/ws/rider``.
 
 The SDK's server runs in its own (Rust) threads inside the web process; :meth:`FoxgloveLive.publish`
-is a sink of :class:`~riderlive.service.runtime.Service` (called on the event loop with each
+is a sink of the service (:class:`~riderlive.service.ports.PublishPort`) (called on the event loop with each
 batch of new records) and only hands bytes to the SDK, which queues them per client and never
 blocks the caller. Topics and schemas are :mod:`riderlive.export.foxglove`'s (the same as
 ``export --format mcap``): the joints at every tick, ``/tf`` at ``foxglove.tf_rate``, ``/status``
@@ -34,7 +34,7 @@ from riderlive.realtime import layout as L
 if TYPE_CHECKING:
     import foxglove
 
-    from riderlive.service.runtime import Service
+    from riderlive.service.ports import PublishPort
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ class _Listener(ServerListener):
 class FoxgloveLive:
     """One SDK server and its channels, on one service."""
 
-    def __init__(self, service: Service, host: str, port: int, tf_rate: float, backlog: int) -> None:
+    def __init__(self, service: PublishPort, host: str, port: int, tf_rate: float, backlog: int) -> None:
         import foxglove
 
         self.service = service

@@ -39,7 +39,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
@@ -50,10 +50,8 @@ from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
 from riderlive.service.clocks import ClockStep, ProducerClock, clock_step
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
+from riderlive.service.ports import ServicePort
 from riderlive.timecode import TimecodeError
-
-if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
@@ -198,6 +196,13 @@ class Arbiter:
         return was_active
 
 
+class IngestPort(ServicePort, Protocol):
+    """What an input endpoint reads of the service (``service.ports``), and the one arbiter."""
+
+    @property
+    def arbiter(self) -> Arbiter: ...
+
+
 async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: float) -> None:
     """Send a JSON message; a client that does not read or has left is ignored."""
     with contextlib.suppress(Exception):  # gone or stuck: its receive loop will end it
@@ -207,7 +212,7 @@ async def send_quietly(websocket: WebSocket, message: dict[str, Any], timeout: f
 class IngestEndpoint:
     """The ``/ws/horse`` (or, with ``SADDLE_INPUT``, ``/ws/saddle``) handler, bound to the running service."""
 
-    def __init__(self, service: Service, ranges: Ranges, spec: InputSpec = HORSE_INPUT) -> None:
+    def __init__(self, service: IngestPort, ranges: Ranges, spec: InputSpec = HORSE_INPUT) -> None:
         self.service = service
         self.spec = spec
         self.low, self.high = ranges.limits(spec.names, service.config.tick.length_scale)

@@ -52,7 +52,7 @@ from riderlive.skeleton import hello_skeletons
 from riderlive.skeleton.rig import Pose
 
 if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
+    from riderlive.service.ports import PublishPort
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
@@ -161,7 +161,7 @@ async def _send(websocket: WebSocket, data: str | bytes) -> None:
 class Hub:
     """The set of /ws/rider clients and the fan-out of tick records."""
 
-    def __init__(self, service: Service) -> None:
+    def __init__(self, service: PublishPort) -> None:
         self.service = service
         self.clients: dict[str, Subscriber] = {}
         self._unsent_rx = -1.0
@@ -223,7 +223,7 @@ class Hub:
         parts = set(RIDER_PART_NAMES)
         return [*RIDER, *(lookup(name) for name in self.service.extra_channels if name not in parts)]
 
-    def publish(self, records: list[np.ndarray]) -> None:
+    def publish(self, records: list[np.ndarray], now: float | None = None) -> None:
         """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.
 
         A client with decimation N gets every record whose ``seq % N`` is its phase, in order:
@@ -231,6 +231,7 @@ class Hub:
         keeps up still gets all of them (those of the last :data:`CATCH_UP` seconds;
         older ones are counted as coalesced). Each (subscription, record) is encoded
         once. A client that is behind has frames dropped in :meth:`_write`, not here.
+        ``now``: ``perf_counter`` seconds (None: the clock's), for the behind clients' timeout.
         """
         metrics = self.service.metrics
         oldest = float(records[-1][L.OUT_ENGINE_T]) - CATCH_UP if records else 0.0
@@ -240,7 +241,7 @@ class Hub:
             records = kept
         clients = [c for c in self.clients.values() if not c.closed]
         poses = self.service.poses
-        now = time.perf_counter()
+        now = time.perf_counter() if now is None else now
         timeout = self.service.config.publish.send_timeout
         for record in records:
             seq = int(record[L.OUT_SEQ])

@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.bake import horse_matrix
 from riderlive.channels import HORSE_NAMES
-from riderlive.framefile import read_frames
+from riderlive.framefile import horse_matrix, read_frames
 from riderlive.frameunits import recorded_scale, rescale_lengths
 
 FloatArray = npt.NDArray[np.float64]

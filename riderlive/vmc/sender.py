@@ -31,23 +31,12 @@ from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
 from riderlive.skeleton import HORSE_RIG
 from riderlive.vmc.performer import horse_bundle, rider_bundle
+from riderlive.vmc.target import DEFAULT_PORT, VmcError, parse_target
 
-DEFAULT_PORT = 39539
-"""The marionettes' usual port."""
 OUTCOMES = ("sent", "dropped", "error", "skipped")
 """What became of each bundle the rate asked for (``VmcSender.counts``)."""
 
-
-class VmcError(ValueError):
-    """A VMC target or local port that cannot be used; the message names it."""
-
-
-def parse_target(text: str, what: str = "VMC target") -> tuple[str, int]:
-    """``HOST:PORT`` (``[v6]:PORT`` for IPv6 literals) -> (host, port)."""
-    host, sep, port_text = text.rpartition(":")
-    if not sep or not host or not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
-        raise VmcError(f"{what} {text!r}: expected HOST:PORT with a port 1..65535 (e.g. 127.0.0.1:{DEFAULT_PORT})")
-    return host.removeprefix("[").removesuffix("]"), int(port_text)
+__all__ = ["DEFAULT_PORT", "VmcError", "VmcSender", "parse_target", "resolve"]
 
 
 def resolve(host: str, port: int, what: str = "VMC target") -> tuple[int, tuple[str, int]]:

@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 from riderlive.bus.nats import Credentials, NatsTransport, connect
 from riderlive.bus.transport import Message
 from tests.service.live_server import LiveServer
+from tests.waiting import wait_until
 
 T = TypeVar("T")
 TOKEN = "stage-token-123"
@@ -110,10 +111,12 @@ def start_rig(
 
 
 def wait_for(what: Callable[[], Any], timeout: float = 10.0, say: Callable[[], object] = lambda: None) -> Any:
-    deadline = time.perf_counter() + timeout
-    while time.perf_counter() < deadline:
+    value = None
+
+    def check() -> bool:
+        nonlocal value
         value = what()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError(f"timed out: {say()}")
+        return bool(value)
+
+    wait_until(check, timeout, say, poll=0.02)
+    return value

@@ -10,6 +10,7 @@ container without CAP_SYS_ADMIN).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -26,6 +27,7 @@ import pytest
 
 from riderlive.bus.broker import Broker
 from tests.service.live_server import ROOT
+from tests.waiting import wait_until
 
 pytestmark = pytest.mark.slow
 SUFFIX = f"{os.getpid() % 100000}"
@@ -67,12 +69,11 @@ class Process:
 
     def wait_for(self, pattern: str, timeout: float) -> None:
         deadline = time.perf_counter() + timeout
-        while time.perf_counter() < deadline:
-            if any(re.search(pattern, line) for line in self.lines):
-                return
-            if self.proc.poll() is not None:
-                break
-            time.sleep(0.05)
+        found = lambda: any(re.search(pattern, line) for line in self.lines)  # noqa: E731
+        with contextlib.suppress(AssertionError):
+            wait_until(lambda: found() or self.proc.poll() is not None, max(0.0, deadline - time.perf_counter()))
+        if found():
+            return
         raise AssertionError(f"no {pattern!r} in:\n{''.join(self.lines)[-3000:]}")
 
     def stop(self) -> None:

@@ -50,6 +50,11 @@ class Rig:
     def state(self) -> str:
         return str(self.status().get("state"))
 
+    def wait_ticks(self, ticks: int) -> None:
+        """Until the rig has been ticked ``ticks`` more times (a span of its tick's own time)."""
+        start = self.status()["counters"]["ticks"]
+        wait_for(lambda: self.status()["counters"]["ticks"] >= start + ticks, 10.0, self.status)
+
     def torque_off(self) -> bool:
         """The rig read torque-enable back as 0 on every servo."""
         return self.status().get("outputs_off_confirmed") is True
@@ -162,7 +167,8 @@ def test_the_stage_estop_reaches_every_rig_and_turns_every_torque_off(stage3: St
     for rig in stage3.rigs:
         assert rig.post("/api/reset").status_code == 200
     stage3.wait_all("disarmed")
-    time.sleep(0.3)
+    for rig in stage3.rigs:
+        rig.wait_ticks(30)
     assert all(rig.state() == "disarmed" and rig.torque_off() for rig in stage3.rigs)
 
 
@@ -186,9 +192,9 @@ def test_a_dead_broker_parks_every_rig_keeps_the_take_and_nothing_rearms(stage3:
         wait_for(rig.torque_off, 3.0, rig.status)  # parked: torque off, read back
         assert seen[rig.name] <= {"running", "parking", "parked"}, seen  # a controlled stop, no e-stop, no fault
         assert rig.metric("riderlive_nats_events_total", 'event="heartbeat_stops"') >= 1
-    rows = first.live.get("/api/state", headers=AUTH).json()["recording"]["rows"]
-    time.sleep(0.3)
-    assert first.live.get("/api/state", headers=AUTH).json()["recording"]["rows"] > rows  # the take goes on
+    rows = lambda: first.live.get("/api/state", headers=AUTH).json()["recording"]["rows"]  # noqa: E731
+    before = rows()
+    wait_for(lambda: rows() > before, 5.0, rows)  # the take goes on
     # arming is refused while the stage is silent
     refused = first.post("/api/arm", {"device": "bench3"})
     assert refused.status_code == 409 and "heartbeat" in refused.json()["detail"]["message"]
@@ -197,7 +203,8 @@ def test_a_dead_broker_parks_every_rig_keeps_the_take_and_nothing_rearms(stage3:
     for rig in stage3.rigs:
         wait_for(lambda r=rig: r.metric("riderlive_nats_events_total", 'event="reconnects"') >= 1, 15.0)
         wait_for(lambda r=rig: r.metric("riderlive_nats_events_total", 'event="heartbeat_back"') >= 1, 15.0)
-    time.sleep(0.5)
+    for rig in stage3.rigs:
+        rig.wait_ticks(50)
     assert all(rig.state() == "parked" for rig in stage3.rigs)  # nothing re-arms
     take = first.post("/api/record/stop").json()["take"]
     meta = read_sidecar(Path(take["path"]) if Path(take["path"]).is_absolute() else first.live.workdir / take["path"])

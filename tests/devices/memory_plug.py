@@ -15,10 +15,16 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from riderlive.devices.latch import StopView
-from riderlive.devices.plug import Motion, Move, Steps, ramp
+from riderlive.devices.plug import Motion, Move, PlugBase, Steps, ramp
+from riderlive.tickframe import Flag, TickFrame
 
 
-class MemoryPlug:
+def rider_frame(*rider: float, tick: int = 0, at: float = 0.0) -> TickFrame:
+    """A tick frame carrying only a rider (what the memory plug maps to its goals)."""
+    return TickFrame.build(tick, at, at, at, Flag.PROCEDURAL, rider)
+
+
+class MemoryPlug(PlugBase):
     kind = "memory"
 
     def __init__(self, name: str = "mem", units: int = 3, soft_start_s: float = 0.05, park_s: float = 0.05) -> None:
@@ -74,11 +80,11 @@ class MemoryPlug:
             self.outputs = [True] * self.units
         self.log.append("arm")
 
-    def drive(self, frame: Sequence[float], now: float, motion: Motion) -> bool:
+    def drive(self, frame: TickFrame | None, now: float, motion: Motion) -> bool:
         self._maybe_fail("drive")
         if motion.first:
             self._from = list(self.goals)
-        target = [frame[0] if frame else 0.0] * self.units
+        target = [frame.rider[0] if frame is not None and frame.rider else 0.0] * self.units
         done = False
         if motion.move is Move.PARK:
             target, done = ramp(self._from, [0.0] * self.units, motion.elapsed, self.park_s)

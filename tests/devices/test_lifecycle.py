@@ -28,7 +28,7 @@ from riderlive.devices.lifecycle import (
     Refused,
 )
 from riderlive.devices.plug import smoothstep
-from tests.devices.memory_plug import MemoryPlug
+from tests.devices.memory_plug import MemoryPlug, rider_frame
 
 S = DeviceState
 PERIOD = 0.01
@@ -49,7 +49,7 @@ def make(latch: StopLatch, **plug: object) -> tuple[Device, MemoryPlug]:
 
 def ticks(device: Device, n: int = 1, frame: tuple[float, ...] = (1.0,)) -> None:
     for _ in range(n):
-        device.tick(frame, time.perf_counter())
+        device.tick(rider_frame(*frame), time.perf_counter())
         time.sleep(PERIOD / 4)
 
 
@@ -113,7 +113,7 @@ def test_connect_ends_disarmed_with_outputs_off_and_read_back(latch: StopLatch) 
     assert device.state is S.CONNECTING
     until(device, S.DISARMED)
     assert mem.outputs == [False] * 3 and mem.counters["goal_writes"] == 0
-    status = device.tick((1.0,), time.perf_counter())
+    status = device.tick(rider_frame(1.0), time.perf_counter())
     assert status.outputs_off_confirmed and not status.wrote
     ticks(device, 20)
     assert device.state is S.DISARMED and mem.counters["goal_writes"] == 0  # nothing moves unasked
@@ -136,7 +136,7 @@ def test_arm_soft_starts_runs_and_disarm_parks(latch: StopLatch) -> None:
     device, mem = connected(latch)
     assert device.arm("mem", "rest 127.0.0.1 (page)") is S.SOFT_START
     assert mem.outputs == [True] * 3
-    status = device.tick((1.0,), time.perf_counter())
+    status = device.tick(rider_frame(1.0), time.perf_counter())
     assert status.armed_by == "rest 127.0.0.1 (page)" and status.wrote
     until(device, S.RUNNING)
     ticks(device, 3)
@@ -302,7 +302,7 @@ def test_unconfirmed_outputs_off_is_repeated(latch: StopLatch) -> None:
     mem.confirm = True
     ticks(device, 8)
     assert device.last_stop.confirmed_at is not None
-    assert device.tick((1.0,), time.perf_counter()).outputs_off_confirmed
+    assert device.tick(rider_frame(1.0), time.perf_counter()).outputs_off_confirmed
 
 
 def test_takeover_parks_a_moving_device_from_its_last_pose(latch: StopLatch) -> None:

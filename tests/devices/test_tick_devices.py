@@ -16,6 +16,7 @@ from riderlive.devices.registry import RateMismatch, plan
 from riderlive.dynamixel.rig import RIG_DIR
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import TickDevices
+from tests.devices.memory_plug import rider_frame
 
 S = DeviceState
 
@@ -50,7 +51,7 @@ def tick_devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[TickDevices,
 
 def run(devices: TickDevices, ticks: int, start: int = 0) -> None:
     for i in range(start, start + ticks):
-        devices.tick((1.0,), time.perf_counter(), i)
+        devices.tick(rider_frame(1.0, tick=i, at=time.perf_counter()))
         time.sleep(0.001)
 
 
@@ -91,3 +92,18 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     run(devices, 20, 80)
     assert devices.states()["right"] == "disarmed"
     assert devices.status()["devices"][0]["name"] == "left"
+
+
+def test_a_device_consuming_a_part_the_tick_lacks_is_refused_at_plan_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    from riderlive.devices.registry import DeviceInfo, DeviceSpec
+    from riderlive.tickframe import MissingPart, Part, computed_parts
+    from tests.devices import memory_plug
+
+    wants = frozenset({Part.RIDER, Part.ESTIMATE})
+    monkeypatch.setitem(registry.KINDS, "memory", "tests.devices.memory_plug")
+    monkeypatch.setattr(memory_plug, "describe", lambda file, port: DeviceInfo(file, 100.0, "", consumes=wants))
+    with pytest.raises(MissingPart, match=r"'seat'.*'estimate'"):
+        plan("memory", "seat", None, 100.0, computed=computed_parts(saddle_input=False))
+    spec, _ = plan("memory", "seat", None, 100.0, computed=computed_parts(saddle_input=True))
+    assert spec.consumes == ("estimate", "rider") and spec.parts == wants
+    assert DeviceSpec.from_json(spec.to_json()) == spec

@@ -14,6 +14,7 @@ from riderlive.dynamixel.driver import RigPlug
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item
+from tests.devices.memory_plug import rider_frame
 
 TORQUE_ENABLE_ADDRESS = 64
 
@@ -95,7 +96,7 @@ def drive(
     while time.perf_counter() - start < seconds:
         now = time.perf_counter()
         frame = list(rider(now - start)) if rider else neutral
-        status = device.tick(frame, now)
+        status = device.tick(rider_frame(*frame), now)
         run.statuses.append(status)
         run.riders.append(frame)
         if until is not None and until(status):

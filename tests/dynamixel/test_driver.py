@@ -27,6 +27,7 @@ from riderlive.dynamixel.rig import ServoMap, deg_to_pulses, profile_velocity, p
 from riderlive.dynamixel.tables import Item
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
+from tests.devices.memory_plug import rider_frame
 from tests.dynamixel.rig_harness import (
     connect,
     drive,
@@ -137,7 +138,7 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
     # the servos hold the last goal once the horse stops
     hold = run.riders[-1]
     drive(device, 0.4, lambda t: hold)
-    for servo_id, goal in zip(smap.ids, goal_deg(device.tick(hold, time.perf_counter())), strict=True):
+    for servo_id, goal in zip(smap.ids, goal_deg(device.tick(rider_frame(*hold), time.perf_counter())), strict=True):
         assert abs(pulses_to_deg(bus.read_item(servo_id, Item.PRESENT_POSITION)) - goal) < FINAL_TOLERANCE_DEG
 
     # disarm: ramp to the park pose, torque off, PARKED
@@ -196,15 +197,15 @@ def test_bad_rider_frames_are_held_not_raised(bus_factory: Callable[..., Emulate
     device, _ = bench_device(bus_factory)
     start_running(device)
     rider = [1.0] * len(RIDER)
-    before = goal_deg(device.tick(rider, time.perf_counter()))
+    before = goal_deg(device.tick(rider_frame(*rider), time.perf_counter()))
     time.sleep(0.01)
     bad = list(rider)
     bad[0] = math.nan
-    status = device.tick(bad, time.perf_counter())
+    status = device.tick(rider_frame(*bad), time.perf_counter())
     assert goal_deg(status)[0] == before[0]  # lower_back.rz held
     held = goal_deg(status)
     time.sleep(0.01)
-    status = device.tick([1.0, 2.0], time.perf_counter())  # wrong length: everything held
+    status = device.tick(rider_frame(*[1.0, 2.0]), time.perf_counter())  # wrong length: everything held
     assert goal_deg(status) == pytest.approx(held, abs=1e-9)
     assert status.state is S.RUNNING
     assert status.counters["bad_inputs"] == 2

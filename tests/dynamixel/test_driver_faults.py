@@ -35,6 +35,7 @@ from riderlive.dynamixel.emulator_faults import FaultKind as EmuFault
 from riderlive.dynamixel.emulator_faults import FaultSpec
 from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
 from riderlive.dynamixel.tables import HardwareError, Instruction, Item
+from tests.devices.memory_plug import rider_frame
 from tests.dynamixel.rig_harness import (
     TimedBus,
     connect,
@@ -47,6 +48,7 @@ from tests.dynamixel.rig_harness import (
     start_running,
     torque,
 )
+from tests.waiting import wait_until
 
 NEUTRAL = [0.0] * len(RIDER)
 S = DeviceState
@@ -150,7 +152,7 @@ def test_estop_from_another_thread_wakes_and_no_goal_follows(timed_buses: Callab
         if clock.wait_or_wake([wake_read], lambda: device.stops.pending) is None:
             os.read(wake_read, 16)
             device.poll_stop(time.perf_counter())
-        device.tick(NEUTRAL, time.perf_counter())
+        device.tick(rider_frame(*NEUTRAL), time.perf_counter())
     presser.join()
     os.close(wake_read)
     os.close(wake_write)
@@ -284,7 +286,7 @@ def test_hardware_error_parks_and_reports(timed_buses: Callable[..., TimedBus], 
     assert fault.unit == 2 and bit in fault.bits
     emu.settle()
     assert torque(emu, 2) == 0
-    status = device.tick(NEUTRAL, time.perf_counter())
+    status = device.tick(rider_frame(*NEUTRAL), time.perf_counter())
     assert status.extra["servos"][1]["hardware_error"] == list(fault.bits)
     assert status.to_dict()["fault"]["bits"] == list(fault.bits)
 
@@ -470,8 +472,9 @@ def test_stalled_ticks_trip_the_watchdog_then_park(timed_buses: Callable[..., Ti
     rider[RIDER.index(next(c for c in RIDER if c.name == "hip.ry"))] = 15.0
     start_running(device)
     drive(device, 0.05, lambda t: rider)  # servo 2 starts moving toward 210 deg
-    time.sleep(0.7)  # the service hangs
-    assert emu.read_item(2, Item.BUS_WATCHDOG) == -1  # the servos stopped themselves...
+    hung = time.perf_counter()  # the service hangs: no goals until its watchdog (300 ms) trips
+    wait_until(lambda: emu.read_item(2, Item.BUS_WATCHDOG) == -1, 5.0, "the bus watchdog never tripped")
+    assert time.perf_counter() - hung >= 0.25  # the servos stopped themselves, at its time (after a goal)...
     assert torque(emu, 2) == 1  # ...but keep their torque on (X-series e-manual)
     stopped_at = emu.position(2)
     time.sleep(0.05)
@@ -492,11 +495,11 @@ def test_tick_never_raises_without_a_port() -> None:
     rig: RigConfig = short_rig("bench3").with_port("/nonexistent/ttyUSB9")
     device = rig_device(rig)
     device.connect("test")
-    status = device.tick(NEUTRAL, time.perf_counter())
+    status = device.tick(rider_frame(*NEUTRAL), time.perf_counter())
     assert status.state is S.FAULT
     assert status.fault is not None and status.fault.kind is FaultKind.PORT_LOST
     assert "/nonexistent/ttyUSB9" in status.fault.message
     for _ in range(3):
-        assert device.tick(NEUTRAL, time.perf_counter()).state is S.FAULT
+        assert device.tick(rider_frame(*NEUTRAL), time.perf_counter()).state is S.FAULT
     device.close()
     assert device.state is S.DISCONNECTED

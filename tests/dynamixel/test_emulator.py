@@ -16,6 +16,7 @@ from dynamixel_sdk import (
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.protocol import PacketReader, decode_status, encode_instruction, encode_status
 from riderlive.dynamixel.tables import ALERT_BIT, HardwareError, Instruction, Item, StatusError
+from tests.waiting import wait_until
 
 from .conftest import SdkLink, open_sdk
 
@@ -69,9 +70,7 @@ def test_read_write_round_trip_and_motion(bus: EmulatedBus, sdk: SdkLink) -> Non
     assert sdk.ph.write1ByteTxRx(sdk.port, 1, 64, 1) == (COMM_SUCCESS, 0)
     assert sdk.ph.write4ByteTxRx(sdk.port, 1, GOAL, 2300) == (COMM_SUCCESS, 0)
     assert sdk.ph.read4ByteTxRx(sdk.port, 1, GOAL) == (2300, COMM_SUCCESS, 0)
-    deadline = time.monotonic() + 1.0
-    while sdk.ph.read4ByteTxRx(sdk.port, 1, PRESENT)[0] != 2300 and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(lambda: sdk.ph.read4ByteTxRx(sdk.port, 1, PRESENT)[0] == 2300, 1.0, "it never got there")
     assert sdk.ph.read4ByteTxRx(sdk.port, 1, PRESENT) == (2300, COMM_SUCCESS, 0)
     assert sdk.ph.read1ByteTxRx(sdk.port, 1, 122)[0] == 0  # Moving
 
@@ -206,7 +205,8 @@ def test_sync_write_and_sync_read(bus: EmulatedBus, sdk: SdkLink) -> None:
         reader.addParam(i)
     assert reader.txRxPacket() == COMM_SUCCESS
     assert [reader.getData(i, GOAL, 4) for i in (1, 2, 3)] == [2100, 1900, 2050]
-    time.sleep(0.2)
+    positions = lambda: [bus.read_item(i, Item.PRESENT_POSITION) for i in (1, 2, 3)]  # noqa: E731 - off the wire
+    wait_until(lambda: positions() == [2100, 1900, 2050], 5.0, positions, poll=0.02)  # moving in emulated time
     assert reader.fastSyncRead() == COMM_SUCCESS
     present = GroupSyncRead(sdk.port, sdk.ph, PRESENT, 4)
     for i in (1, 2, 3):
@@ -267,10 +267,11 @@ def test_reboot_time_keeps_the_servo_deaf(bus_factory: object) -> None:
     bus = make([ServoSetup(5, "XM430-W350")], reboot_time_s=0.2)  # type: ignore[operator]
     link = open_sdk(bus)
     try:
+        rebooted = time.perf_counter()
         assert link.ph.reboot(link.port, 5) == (COMM_SUCCESS, 0)
         assert link.ph.ping(link.port, 5)[1] == COMM_RX_TIMEOUT
-        time.sleep(0.2)
-        assert link.ph.ping(link.port, 5) == (1020, COMM_SUCCESS, 0)
+        wait_until(lambda: link.ph.ping(link.port, 5) == (1020, COMM_SUCCESS, 0), 5.0, "the servo never came back")
+        assert time.perf_counter() - rebooted >= 0.2 - 0.01  # deaf for its reboot time
     finally:
         link.close()
 

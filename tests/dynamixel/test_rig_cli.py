@@ -20,6 +20,7 @@ from riderlive.dynamixel.rig_cli import EXIT_ESTOP, drive
 from riderlive.dynamixel.tables import Instruction, Item
 from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups, short_rig
 from tests.service.live_server import ROOT
+from tests.waiting import wait_until
 
 GOAL_POSITION = 116
 
@@ -95,7 +96,8 @@ def test_ctrl_c_of_a_driving_cli_is_an_estop(bus_factory: Callable[..., Emulated
     rig = load_rig(path)
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
     cli = start_cli(path, emu.port)
-    time.sleep(0.2)
+    running = len(goal_writes(emu))
+    wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
     pressed = time.perf_counter()
     cli.send_signal(sig)
     out, _ = cli.communicate(timeout=20)
@@ -113,13 +115,13 @@ def test_a_killed_driver_is_parked_by_its_guardian(bus_factory: Callable[..., Em
     rig = load_rig(path)
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
     cli = start_cli(path, emu.port)
-    time.sleep(0.3)
+    running = len(goal_writes(emu))
+    wait_until(lambda: len(goal_writes(emu)) >= running + 30, 10.0, "the CLI stopped writing goals")
     killed = time.perf_counter()
     cli.kill()  # SIGKILL: no handler, no goodbye
     cli.communicate(timeout=10)
-    deadline = time.perf_counter() + 10.0
-    while time.perf_counter() < deadline and any(emu.read_item(i, Item.TORQUE_ENABLE) for i in (1, 2, 3)):
-        time.sleep(0.02)
+    torque_on = lambda: any(emu.read_item(i, Item.TORQUE_ENABLE) for i in (1, 2, 3))  # noqa: E731
+    wait_until(lambda: not torque_on(), 10.0, "the guardian never turned torque off", poll=0.02)
     emu.settle()
     writes = [t for t, _ in goal_writes(emu) if t > killed]
     off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > killed]

@@ -57,3 +57,63 @@ def test_bad_input_exits_2_and_writes_nothing(tmp_path: Path, capsys: pytest.Cap
     assert "unknown cueing preset" in capsys.readouterr().err
     assert main(["platform", "stewart_linear", "--intensity", "150", "--info"]) == 2
     assert not out.exists()
+
+
+def _tracks(tmp_path: Path, take: Path, *flags: str) -> np.ndarray:
+    out = tmp_path / f"tracks{len(list(tmp_path.iterdir()))}.csv"
+    assert main(["platform", "stewart_compact", str(take), "-o", str(out), *flags]) == 0
+    return read_frames(str(out)).values
+
+
+def test_the_saddle_point_is_the_live_services_and_lengths_come_in_their_recorded_unit(tmp_path: Path) -> None:
+    from riderlive.channels import HORSE_NAMES
+    from riderlive.framefile import horse_matrix
+    from riderlive.frameunits import record_scale
+    from riderlive.platform.cli import tracks_table
+    from riderlive.platform.pipeline import PlatformModel, bake
+    from riderlive.saddle import SaddlePoint, saddle_from_horse
+
+    table = generate(gait_script("canter", 2.0), rate=100.0)
+    take = tmp_path / "canter.csv"
+    write_frames(str(take), table)
+    service = tmp_path / "service.toml"
+    service.write_text("[tick]\nrate = 100.0\n[saddle]\nforward = 0.9\nup = 0.3\n")
+    # the oracle: the scalar saddle pose of each frame at that point, through the platform's pipeline
+    point = SaddlePoint(forward=0.9, up=0.3)
+    saddle = np.array([saddle_from_horse(row, point) for row in horse_matrix(table)])
+    model = PlatformModel.load("stewart_compact")
+    times = table.times(100.0)
+    dt = np.diff(times, prepend=times[0] - (times[1] - times[0]))
+    expected = tracks_table(model, bake(model, saddle, dt), times).values
+
+    configured = _tracks(tmp_path, take, "--config", str(service))
+    np.testing.assert_allclose(configured, expected, atol=1e-9)
+    np.testing.assert_allclose(_tracks(tmp_path, take, "--forward", "0.9", "--up", "0.3"), expected, atol=1e-9)
+    default = _tracks(tmp_path, take)
+    assert np.abs(default[:, 6:] - configured[:, 6:]).max() > 1e-3  # the saddle point moves the actuators by mm
+
+    # the same take in decimetres, its unit recorded beside it (or given): the same tracks
+    dm = FrameTable(table.names, table.values.copy(), table.t)
+    lengths = [j for j, n in enumerate(dm.names) if n in HORSE_NAMES and n.split(".")[1].startswith("t")]
+    dm.values[:, lengths] *= 10.0
+    take_dm = tmp_path / "canter_dm.csv"
+    write_frames(str(take_dm), dm)
+    np.testing.assert_allclose(
+        _tracks(tmp_path, take_dm, "--config", str(service), "--scale", "2.5"), expected, atol=1e-7
+    )
+    record_scale(str(take_dm), 2.5)
+    np.testing.assert_allclose(_tracks(tmp_path, take_dm, "--config", str(service)), expected, atol=1e-7)
+
+
+def test_a_bad_saddle_point_names_the_file_and_key(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    take = tmp_path / "trot.csv"
+    write_frames(str(take), generate(gait_script("trot", 0.5), rate=100.0))
+    service = tmp_path / "service.toml"
+    service.write_text("[saddle]\nforward = 2.0\n")
+    assert (
+        main(["platform", "stewart_compact", str(take), "-o", str(tmp_path / "o.csv"), "--config", str(service)]) == 2
+    )
+    err = capsys.readouterr().err
+    assert f"{service} [saddle]: forward" in err and "0.95" in err
+    assert main(["platform", "stewart_compact", str(take), "-o", str(tmp_path / "o.csv"), "--up", "9"]) == 2
+    assert "--up): up" in capsys.readouterr().err

@@ -21,11 +21,19 @@ from riderlive.platform import link
 from riderlive.platform.device import PlatformPlug, describe
 from riderlive.platform.firmware_host import FirmwareHost
 from riderlive.platform.pipeline import PlatformModel
+from riderlive.saddle import SaddlePoint, saddle_from_horse
+from riderlive.tickframe import Flag, Part, TickFrame
 from tests.platform.fake_device import FakeDevice, reply_hello
 
 S = DeviceState
 PERIOD = 0.01
 COUNTS = 1e5  # counts per m of stroke (0.01 mm)
+
+
+def horse_frame(horse: list[float], now: float, point: SaddlePoint | None = None) -> TickFrame:
+    """The tick's frame of a horse in metres, its saddle at ``point`` (as the tick computes it)."""
+    saddle = saddle_from_horse(horse, point)
+    return TickFrame.build(0, now, now, now, Flag.PROCEDURAL, (), horse, saddle)
 
 
 @dataclass
@@ -52,7 +60,7 @@ class Bench:
     def tick(self) -> DeviceStatus:
         now = time.perf_counter()
         before = self.plug.counters["targets_sent"]
-        self.last = self.device.tick(self.horse.sample(now - self.t0), now)
+        self.last = self.device.tick(horse_frame(self.horse.sample(now - self.t0), now), now)
         if self.plug.counters["targets_sent"] > before:
             self.sent.append((now, tuple(self.plug.positions)))
         if not self.states or self.states[-1] is not self.device.state:
@@ -222,7 +230,7 @@ def test_a_device_speaking_another_version_is_refused_clearly() -> None:
         device.connect("test")
         deadline = time.perf_counter() + 5.0
         while device.state is S.CONNECTING and time.perf_counter() < deadline:
-            device.tick((), time.perf_counter())
+            device.tick(None, time.perf_counter())
         assert device.state is S.FAULT and device.fault is not None and device.fault.kind is FaultKind.MISMATCH
         assert "v2" in device.fault.message and "v1" in device.fault.message
         assert [f.message.TYPE for f in fake.frames] == [link.FrameType.HELLO]  # nothing else was sent
@@ -235,4 +243,4 @@ def test_a_device_speaking_another_version_is_refused_clearly() -> None:
 
 def test_describe_names_the_platform_and_its_input() -> None:
     info = describe("stewart_compact", "/dev/null")
-    assert info.name == "stewart_compact" and info.input == "horse" and "6 actuators" in info.budget
+    assert info.name == "stewart_compact" and info.consumes == {Part.SADDLE} and "6 actuators" in info.budget

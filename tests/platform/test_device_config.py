@@ -50,14 +50,14 @@ def test_a_bad_platform_section_names_file_key_and_range(tmp_path: Path, section
 def test_the_service_plans_a_platform_beside_a_rig_or_alone(tmp_path: Path) -> None:
     config = load_config(write(tmp_path, '[platform]\nfile = "stewart_compact"\nport = "/dev/ttyACM0"\n'))
     (spec,) = plan_devices(config)
-    assert (spec.kind, spec.name, spec.input, spec.port, spec.divider) == (
+    assert (spec.kind, spec.name, spec.consumes, spec.port, spec.divider) == (
         "platform",
         "stewart_compact",
-        "horse",
+        ("saddle",),
         "/dev/ttyACM0",
         1,
     )
-    assert spec.options == {"device": None, "heartbeat_ms": 200, "metres_per_unit": 1.0}
+    assert spec.options == {"device": None, "heartbeat_ms": 200}  # lengths reach it in metres (TickFrame)
     assert DeviceSpec.from_json(spec.to_json()) == spec  # the guardian gets it as JSON
     both = load_config(
         write(
@@ -111,7 +111,7 @@ def test_a_platform_takes_live_cueing_and_refuses_a_contradiction() -> None:
         plug = PlatformPlug(PlatformModel.load("stewart_compact"), "/dev/null")
         devices = TickDevices([], latch)
         devices.devices = [Device(plug, 0.01, latch)]
-        devices.specs = [DeviceSpec("platform", "stewart_compact", "/dev/null", plug.name, 1, 0.01, "horse")]
+        devices.specs = [DeviceSpec("platform", "stewart_compact", "/dev/null", plug.name, 1, 0.01, ("saddle",))]
         assert devices.request(cmd.Tune(plug.name, {"intensity": 40.0}, "test", 1)).ok
         assert plug.status()["platform"]["cueing"]["intensity"] == 40.0
         worse = devices.request(cmd.Tune(plug.name, {"drift_cutoff_hz": 0.45, "washout_rotation_hz": 0.4}, "t", 2))

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import httpx
 
+from tests.waiting import wait_until
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -57,16 +59,18 @@ class LiveServer:
 
     def wait_for_ticks(self, timeout: float = 30.0) -> None:
         """The tick process is spawned at startup and needs a moment to import."""
-        deadline = time.perf_counter() + timeout
-        while time.perf_counter() < deadline:
+
+        def ticking() -> bool:
             try:
-                if self.get("/api/state", headers=self.auth).json()["counters"].get("ticks", 0) > 10:
-                    return
+                return bool(self.get("/api/state", headers=self.auth).json()["counters"].get("ticks", 0) > 10)
             except (httpx.HTTPError, ValueError, KeyError):
-                pass
-            time.sleep(0.05)
-        self.stop()
-        raise RuntimeError("the tick never started:\n" + "".join(self.log))
+                return False
+
+        try:
+            wait_until(ticking, timeout, poll=0.05)
+        except AssertionError:
+            self.stop()
+            raise RuntimeError("the tick never started:\n" + "".join(self.log)) from None
 
     def _read(self) -> None:
         assert self.proc.stderr is not None

@@ -12,6 +12,7 @@ import msgpack
 from websockets.sync.client import ClientConnection, connect
 
 from riderlive.channels import HORSE_NAMES
+from tests.waiting import Inbox
 
 
 class Producer:
@@ -30,7 +31,8 @@ class Producer:
         self.ws: ClientConnection = connect(url + path, **connect_kwargs).__enter__()
         self.welcome = json.loads(self.ws.recv(timeout=5))
         self.make, self.rate, self.binary = make, rate, binary
-        self.messages: list[dict[str, Any]] = []
+        self.inbox: Inbox[dict[str, Any]] = Inbox()
+        self.messages = self.inbox.items
         self.sending = threading.Event()
         self.sending.set()
         self.closed = threading.Event()
@@ -56,13 +58,18 @@ class Producer:
     def _recv(self) -> None:
         try:
             for message in self.ws:
-                self.messages.append(json.loads(message))
+                self.inbox.append(json.loads(message))
         except Exception:
             pass
 
     def driving(self) -> bool | None:
         controls = [m["driving"] for m in self.messages if m.get("type") == "control"]
         return controls[-1] if controls else None
+
+    def wait_control(self, timeout: float = 5.0) -> bool:
+        """Whether it drives, once the service has said (its answer to the first frame, or a change)."""
+        self.inbox.wait_for(lambda m: m.get("type") == "control", timeout)
+        return bool(self.driving())
 
     def close(self) -> None:
         self.closed.set()
@@ -110,13 +117,14 @@ def constant(values: dict[str, float]) -> Callable[[float], dict[str, Any]]:
 
 
 class Follower:
-    """Collects every frame of /ws/rider (all rider and horse channels) in a thread."""
+    """Collects every frame of /ws/rider (all rider and horse channels) in a thread; tests wait on its arrivals."""
 
     def __init__(self, url: str) -> None:
         self.ws = connect(url + "/ws/rider").__enter__()
         self.hello = json.loads(self.ws.recv(timeout=5))
         self.ws.send(json.dumps({"type": "subscribe", "horse_channels": list(HORSE_NAMES)}))
-        self.frames: list[dict[str, Any]] = []
+        self.inbox: Inbox[dict[str, Any]] = Inbox()
+        self.frames = self.inbox.items
         threading.Thread(target=self._recv, daemon=True).start()
 
     def _recv(self) -> None:
@@ -125,20 +133,25 @@ class Follower:
                 obj = json.loads(message)
                 if obj["type"] == "frame" and "horse" in obj:
                     obj["at"] = time.perf_counter()
-                    self.frames.append(obj)
+                    self.inbox.append(obj)
         except Exception:
             pass
 
     def wait_for(self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 5.0) -> dict[str, Any]:
-        start = len(self.frames)
-        deadline = time.perf_counter() + timeout
-        while time.perf_counter() < deadline:
-            for frame in self.frames[start:]:
-                if predicate(frame):
-                    return frame
-            time.sleep(0.01)
-        last = self.frames[-1] if self.frames else None
-        raise AssertionError(f"no frame matched within {timeout} s; last: {last}")
+        """The first frame from now on that matches (woken by each arrival)."""
+        return self.inbox.wait_for(predicate, timeout, start=len(self.frames))
+
+    def after(
+        self,
+        frame: dict[str, Any],
+        count: int,
+        where: Callable[[dict[str, Any]], bool] = lambda f: True,
+        timeout: float = 10.0,
+    ) -> list[dict[str, Any]]:
+        """``frame`` and the frames after it, once ``count`` of them match ``where`` (ticks, not seconds)."""
+        seq = frame["seq"]
+        self.inbox.wait_count(lambda f: f["seq"] > seq and where(f), count, timeout)
+        return self.since(frame)
 
     def since(self, frame: dict[str, Any]) -> list[dict[str, Any]]:
         return [f for f in self.frames if f["seq"] >= frame["seq"]]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import time
 from pathlib import Path
@@ -22,6 +23,7 @@ from riderlive.takes import list_takes, load_replay, recover_take
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
+from tests.waiting import wait_until
 
 PARAM_BLEND = 0.5
 """``tick.param_blend_time`` (the default)."""
@@ -114,24 +116,18 @@ def test_the_procedural_horse_performs_a_move(server: LiveServer) -> None:
     try:
         assert server.request("POST", "/api/horse/perform", json={"move": "fly"}).status_code == 422
         assert server.request("POST", "/api/horse/perform", json={"move": "jump"}).status_code == 200
-        deadline = time.perf_counter() + 3
-        while server.get("/api/state").json()["tick"].get("move") != "jump":
-            assert time.perf_counter() < deadline, server.get("/api/state").json()["tick"]
-            time.sleep(0.05)
+        tick = lambda: server.get("/api/state").json()["tick"]  # noqa: E731
+        wait_until(lambda: tick().get("move") == "jump", 3.0, tick)
     finally:
         server.request("PUT", "/api/source", json={"kind": "live"})
 
 
 def test_estop_and_reset_reach_the_tick(server: LiveServer) -> None:
     assert server.request("POST", "/api/estop").json()["estop"] is True
-    deadline = time.perf_counter() + 3
-    while not server.get("/api/state").json()["tick"]["estop"]:
-        assert time.perf_counter() < deadline
-        time.sleep(0.05)
+    estop = lambda: server.get("/api/state").json()["tick"]["estop"]  # noqa: E731
+    wait_until(estop, 3.0, "the tick never reported the e-stop")
     server.request("POST", "/api/reset")
-    while server.get("/api/state").json()["tick"]["estop"]:
-        assert time.perf_counter() < deadline
-        time.sleep(0.05)
+    wait_until(lambda: not estop(), 3.0, "the tick never reported the reset")
 
 
 def test_record_then_replay_at_original_timing(server: LiveServer) -> None:
@@ -143,7 +139,8 @@ def test_record_then_replay_at_original_timing(server: LiveServer) -> None:
     finally:
         watcher.close()
     assert server.request("POST", "/api/record/start", json={"name": name}).json() == {"recording": name}
-    time.sleep(1.0)
+    rows = lambda: server.get("/api/state").json()["recording"]["rows"]  # noqa: E731
+    wait_until(lambda: rows() > 200, 10.0, rows)  # a second of ticks on disk
     stopped = server.request("POST", "/api/record/stop").json()["take"]
     assert stopped["name"] == name and stopped["rows"] > 150
     assert name in [t["name"] for t in server.get("/api/takes").json()["takes"]]
@@ -180,7 +177,8 @@ def test_a_take_survives_kill_9(tmp_path: Path) -> None:
     live = LiveServer(BASE_CONFIG, tmp_path)
     try:
         live.request("POST", "/api/record/start", json={"name": "crash"})
-        time.sleep(1.5)
+        rows = lambda: live.get("/api/state").json()["recording"]["rows"]  # noqa: E731
+        wait_until(lambda: rows() > 250, 15.0, rows)  # more than a flush interval on disk
         rows_before = live.get("/api/state").json()["recording"]["rows"]
         killed_at = time.perf_counter()  # CLOCK_MONOTONIC, as the sidecar's monotonic_t0
         live.proc.send_signal(signal.SIGKILL)
@@ -208,7 +206,9 @@ def test_sigterm_says_goodbye_and_closes_the_take(tmp_path: Path) -> None:
         live.request("POST", "/api/record/start", json={"name": "clean"})
         with connect(live.ws + "/ws/rider") as ws:
             ws.recv(timeout=5)
-            time.sleep(0.3)
+            frames = 0
+            while frames < 20:  # streaming
+                frames += '"frame"' in str(ws.recv(timeout=5))
             live.proc.send_signal(signal.SIGTERM)
             messages = []
             try:
@@ -236,8 +236,10 @@ def test_a_restarted_tick_keeps_preset_animator_and_source_and_requests_never_fa
         fast_trot = {"kind": "procedural", "gait": "trot", "speed": 4.5}
         assert live.request("PUT", "/api/source", json=fast_trot).status_code == 200
         supervision = live.get("/api/devices").json()["supervision"]
+        tick = os.pidfd_open(int(supervision["tick_pid"]))
         os.kill(int(supervision["tick_pid"]), signal.SIGKILL)
-        time.sleep(0.05)  # dead, its pipe broken; the supervisor may not have noticed yet
+        assert select.select([tick], [], [], 5.0)[0], "the tick did not die"  # dead, its pipe broken;
+        os.close(tick)  # the supervisor may not have noticed yet
         animator = {"offsets": {"head.rz": 3.0}, "gains": {}}
         assert live.request("PUT", "/api/animator", json=animator).status_code == 200
         # A gait alone: the walk's own speed, not the trot's 4.5 m/s kept from before (a
@@ -245,10 +247,8 @@ def test_a_restarted_tick_keeps_preset_animator_and_source_and_requests_never_fa
         walk = {"kind": "procedural", "gait": "walk"}
         assert live.request("PUT", "/api/source", json=walk).status_code == 200
         assert live.request("POST", "/api/horse/perform", json={"move": "rear"}).status_code in (200, 503)
-        deadline = time.perf_counter() + 20.0
-        while (now := live.get("/api/devices").json()["supervision"])["restarts"] <= supervision["restarts"]:
-            assert time.perf_counter() < deadline, now
-            time.sleep(0.05)
+        now = lambda: live.get("/api/devices").json()["supervision"]  # noqa: E731
+        wait_until(lambda: now()["restarts"] > supervision["restarts"], 20.0, now)
         restarted = time.perf_counter()
         frame = follower.wait_for(lambda f: f["at"] > restarted + 0.3, timeout=10.0)
         model = RiderModel(params=load_preset("child"), scale=25.0)

@@ -12,6 +12,7 @@ import time
 from websockets.sync.client import connect
 
 from tests.service.live_server import LiveServer
+from tests.waiting import Inbox
 
 
 def test_ticks_that_arrive_together_are_all_sent(server: LiveServer) -> None:
@@ -22,7 +23,8 @@ def test_ticks_that_arrive_together_are_all_sent(server: LiveServer) -> None:
     counted: a loaded machine may add that much delay of its own, so the count of
     delivered ticks is checked against the ticks run minus those counted.
     """
-    seqs: list[int] = []
+    arrived: Inbox[int] = Inbox()
+    seqs = arrived.items
     with connect(server.ws + "/ws/rider") as ws:
         ws.recv(timeout=5)
         ws.send(json.dumps({"type": "subscribe", "channels": ["head.rz"], "encoding": "binary"}))
@@ -34,18 +36,18 @@ def test_ticks_that_arrive_together_are_all_sent(server: LiveServer) -> None:
             while not done.is_set():
                 message = ws.recv(timeout=5)
                 if isinstance(message, bytes):
-                    seqs.append(struct.unpack_from("<Q", message, 8)[0])
+                    arrived.append(struct.unpack_from("<Q", message, 8)[0])
 
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
-        time.sleep(0.3)
+        arrived.wait_count(lambda s: True, 60, 10.0)  # streaming (0.3 s of ticks)
         skipped_before = server.metric("riderlive_tick_skipped_total")
         coalesced_before = server.metric("riderlive_ticks_coalesced_total")
         first = seqs[-1]
         os.kill(server.proc.pid, signal.SIGSTOP)
         time.sleep(0.1)  # 20 ticks at 200 Hz pile up in the ring
         os.kill(server.proc.pid, signal.SIGCONT)
-        time.sleep(0.5)
+        arrived.wait_for(lambda s: s > first + 120, 10.0)  # 0.6 s of ticks after the stall began
         last = seqs[-1]
         skipped = server.metric("riderlive_tick_skipped_total") - skipped_before
         coalesced = server.metric("riderlive_ticks_coalesced_total") - coalesced_before

@@ -36,8 +36,7 @@ def test_live_json_frames_drive_and_equal_bake(server: LiveServer, follower: Fol
     producer = Producer(server.ws, constant(POSE))
     try:
         first = follower.wait_for(lambda f: f["driver"] == "input")
-        time.sleep(0.2)
-        steady = [f for f in follower.since(first) if f["driver"] == "input"][5:]
+        steady = [f for f in follower.after(first, 40, lambda f: f["driver"] == "input") if f["driver"] == "input"][5:]
         assert len(steady) > 10
         for frame in steady:
             np.testing.assert_allclose(frame["horse"], full(POSE), atol=1e-12)
@@ -64,8 +63,7 @@ def test_interpolation_never_leaves_the_input_line(server: LiveServer, follower:
     producer = Producer(server.ws, lambda t: {"t": t, "values": {"rearPivot.rz": 10.0 * t}}, rate=40.0)
     try:
         first = follower.wait_for(lambda f: f["driver"] == "input")
-        time.sleep(0.5)
-        frames = [f for f in follower.since(first) if f["driver"] == "input"][3:]
+        frames = [f for f in follower.after(first, 100, lambda f: f["driver"] == "input") if f["driver"] == "input"][3:]
         values = np.array([f["horse"][HORSE_INDEX["rearPivot.rz"]] for f in frames])
         source = np.array([f["source_t"] for f in frames])
         np.testing.assert_allclose(values, 10.0 * source, atol=1e-9)
@@ -81,9 +79,9 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
     try:
         follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == 1.0)
         b = Producer(server.ws, constant({"rearPivot.rz": 2.0}), hello={"name": "b"})
-        time.sleep(0.3)
-        assert b.driving() is False, "an equal priority does not take over a live incumbent"
-        assert all(f["horse"][rz] == 1.0 for f in follower.frames[-20:])
+        assert b.wait_control() is False, "an equal priority does not take over a live incumbent"
+        told = follower.wait_for(lambda f: True)
+        assert all(f["horse"][rz] == 1.0 for f in follower.after(told, 40))  # b keeps sending all along
         c = Producer(server.ws, constant({"rearPivot.rz": 3.0}), hello={"name": "c", "priority": 5})
         follower.wait_for(lambda f: f["horse"][rz] == 3.0, timeout=2)
         assert c.driving() is True
@@ -106,8 +104,8 @@ def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, fo
     posed = np.array(MODEL.evaluate(full(POSE)))
     producer = Producer(server.ws, constant(POSE))
     try:
-        follower.wait_for(lambda f: f["driver"] == "input")
-        time.sleep(0.2)
+        first = follower.wait_for(lambda f: f["driver"] == "input")
+        follower.after(first, 40)
         producer.sending.clear()
         stopped = time.perf_counter()
         first = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
@@ -129,7 +127,7 @@ def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, fo
 def test_disconnect_eases_at_once(server: LiveServer, follower: Follower) -> None:
     producer = Producer(server.ws, lambda t: {"t": t, "values": {"rearPivot.rz": t}})
     first = follower.wait_for(lambda f: f["driver"] == "input")
-    time.sleep(0.1)
+    follower.after(first, 20)
     producer.close()
     neutral = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
     frames = [f for f in follower.since(first) if f["seq"] < neutral["seq"]]

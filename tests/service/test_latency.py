@@ -25,6 +25,7 @@ from websockets.sync.client import connect
 from riderlive.realtime.latency import BOUNDS, N_BOUNDS, LatencySnapshot
 from tests.service.live_server import LiveServer
 from tests.service.test_rig_hookup import AUTH, post, rig_server, wait_state
+from tests.waiting import wait_until
 
 __all__ = ["rig_server"]
 RATE = 100.0
@@ -95,13 +96,13 @@ def test_ingest_to_send_and_to_wire_are_observed_once_per_input(rig_server: Live
 
 
 def test_clients_of_one_decimation_are_spread_over_the_ticks() -> None:
-    from types import SimpleNamespace
     from typing import Any, cast
 
     from riderlive.service.codecs import Subscription
     from riderlive.service.publish import Hub, Subscriber
+    from tests.service.fakes import FakeService
 
-    hub = Hub(cast(Any, SimpleNamespace(extra_channels=())))
+    hub = Hub(FakeService())
     phases = []
     for i in range(10):
         client = Subscriber(cast(Any, None), f"c{i}", Subscription(rider=(0,), decimation=4))
@@ -131,10 +132,7 @@ def _fraction_above(window: LatencySnapshot, seconds: float) -> float:
 
 
 def _await(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
-    deadline = time.perf_counter() + timeout
-    while not predicate():
-        assert time.perf_counter() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.05)
+    wait_until(predicate, timeout, f"timed out waiting for {what}", poll=0.05)
 
 
 def _steady_producer(live: LiveServer, rate: float, stop: threading.Event) -> threading.Thread:

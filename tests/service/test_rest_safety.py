@@ -9,7 +9,6 @@ every endpoint without a body gets junk bodies and must not fail either.
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import httpx
@@ -20,6 +19,7 @@ from hypothesis import strategies as st
 from riderlive.framefile import read_frames
 from riderlive.horse import GAIT_TABLE, MOVES
 from tests.service.live_server import LiveServer
+from tests.waiting import wait_until
 
 SECRET = "hunter2-do-not-echo"
 
@@ -98,7 +98,8 @@ def test_a_body_over_the_limit_is_413(server_rest: LiveServer) -> None:
 def test_takes_are_never_overwritten_and_a_refused_start_changes_nothing(server_rest: LiveServer) -> None:
     takes = server_rest.workdir / "takes"
     assert server_rest.request("POST", "/api/record/start", json={"name": "keep"}).status_code == 200
-    time.sleep(0.3)
+    rows = lambda: server_rest.get("/api/state").json()["recording"]["rows"]  # noqa: E731
+    wait_until(lambda: rows() > 40, 10.0, rows)
     first = server_rest.request("POST", "/api/record/stop").json()["take"]
     assert first["rows"] > 30
     assert server_rest.request("POST", "/api/record/start", json={"name": "other"}).status_code == 200
@@ -109,7 +110,7 @@ def test_takes_are_never_overwritten_and_a_refused_start_changes_nothing(server_
     assert len(read_frames(str(takes / "keep.csv"))) == first["rows"], "the existing take is untouched"
     # overwrite: the old take stays whole until the new one is complete
     assert server_rest.request("POST", "/api/record/start", json={"name": "keep", "overwrite": True}).status_code == 200
-    time.sleep(0.4)
+    wait_until(lambda: rows() > first["rows"] + 20, 10.0, rows)  # the new take is longer, flushed more than once
     assert len(read_frames(str(takes / "keep.csv"))) == first["rows"]
     second = server_rest.request("POST", "/api/record/stop").json()["take"]
     assert len(read_frames(str(takes / "keep.csv"))) == second["rows"] != first["rows"]

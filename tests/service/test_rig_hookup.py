@@ -26,6 +26,7 @@ import pytest
 from websockets.sync.client import connect
 
 from tests.service.live_server import ROOT, LiveServer
+from tests.waiting import wait_until
 
 TOKEN = "rig-token-123"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -37,16 +38,18 @@ def rig(live: LiveServer) -> dict:
 
 
 def wait_for(what: Callable[[], bool], timeout: float = 15.0, say: Callable[[], object] = lambda: None) -> float:
-    deadline = time.perf_counter() + timeout
-    while time.perf_counter() < deadline:
-        if what():
-            return time.perf_counter()
-        time.sleep(0.02)
-    raise AssertionError(f"timed out: {say()}")
+    wait_until(what, timeout, say, poll=0.02)
+    return time.perf_counter()
 
 
 def wait_state(live: LiveServer, wanted: str, timeout: float = 15.0) -> float:
     return wait_for(lambda: rig(live).get("state") == wanted, timeout, lambda: (wanted, rig(live)))
+
+
+def wait_ticks(live: LiveServer, ticks: int, timeout: float = 15.0) -> None:
+    """Until the rig has been ticked ``ticks`` more times (a span of the tick's own time)."""
+    start = rig(live)["counters"]["ticks"]
+    wait_for(lambda: rig(live)["counters"]["ticks"] >= start + ticks, timeout, lambda: rig(live)["counters"])
 
 
 def relaxed_rig(tmp_path: Path) -> Path:
@@ -105,7 +108,7 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     wait_state(live, "disarmed")
     before = rig(live)
     wait_for(lambda: rig(live).get("outputs_off_confirmed") is True)
-    time.sleep(0.5)  # the rig map is fine and the horse trots: still nothing may move
+    wait_ticks(live, 50)  # the rig map is fine and the horse trots: still nothing may move
     after = rig(live)
     assert after["state"] == "disarmed" and after["counters"].get("goal_writes", 0) == 0
     assert [s["goal_deg"] for s in after["servos"]] == [s["goal_deg"] for s in before["servos"]]
@@ -137,7 +140,7 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     assert post(live, "/api/reset", token=False).status_code == 401
     assert post(live, "/api/reset").status_code == 200
     wait_state(live, "disarmed", timeout=3.0)
-    time.sleep(0.3)
+    wait_ticks(live, 30)
     assert rig(live)["state"] == "disarmed"  # reset never arms
 
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
@@ -204,7 +207,7 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     # frozen: SIGSTOP; the supervisor kills it (hang) and the guardian parks the rig
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
     wait_state(live, "running")
-    time.sleep(0.2)  # most likely still in the new tick's warm-up: a moving rig gets no 1 s grace
+    wait_ticks(live, 20)  # most likely still in the new tick's warm-up: a moving rig gets no 1 s grace
     pid = supervision()["tick_pid"]
     frozen = time.perf_counter()
     os.kill(pid, signal.SIGSTOP)

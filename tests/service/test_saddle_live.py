@@ -25,6 +25,7 @@ from riderlive.saddle.trial import COMPARED, GaitCase
 from riderlive.service.codecs import decode_binary_frame
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower, Producer, Stream, constant
+from tests.waiting import wait_until
 
 MODEL = RiderModel(params=load_preset("kuhnel2003"), scale=25.0)
 NEUTRAL = np.array(MODEL.evaluate([0.0] * len(HORSE_NAMES)))
@@ -48,10 +49,7 @@ def _driven(follower: Follower, since: float) -> list[dict[str, Any]]:
 
 def _until(condition: Any, timeout: float = 3.0) -> None:
     """Wait for ``condition()`` (a control message travels after the frames that decided it)."""
-    deadline = time.perf_counter() + timeout
-    while not condition():
-        assert time.perf_counter() < deadline, "not within the timeout"
-        time.sleep(0.01)
+    wait_until(condition, timeout, "not within the timeout")
 
 
 def _saddle_drives(frame: dict[str, Any]) -> bool:
@@ -118,11 +116,10 @@ def test_saddle_and_horse_producers_share_one_arbiter(server: LiveServer, follow
     try:
         follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == 1.0)
         quiet = Producer(server.ws, _trot_saddle, hello={"name": "arb-saddle"}, path="/ws/saddle")
-        time.sleep(0.3)
         assert quiet.welcome["kind"] == "saddle" and [c["name"] for c in quiet.welcome["channels"]] == list(
             SADDLE_NAMES
         )
-        assert quiet.driving() is False, "an equal priority does not take over a live incumbent"
+        assert quiet.wait_control() is False, "an equal priority does not take over a live incumbent"
         assert not any(_saddle_drives(f) for f in follower.frames[-20:])
         loud = Producer(server.ws, _trot_saddle, hello={"name": "arb-loud", "priority": 5}, path="/ws/saddle")
         follower.wait_for(_saddle_drives, timeout=2)

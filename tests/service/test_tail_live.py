@@ -4,7 +4,6 @@ and equal to an offline run of the same physics on the take's frames."""
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from tests.realtime.test_tail import assert_matches_offline
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.test_publish import frames
+from tests.waiting import wait_until
 
 TAIL = physics_channels()
 
@@ -87,7 +87,8 @@ def test_the_page_receives_the_tail_and_braid(tail_server: tuple[LiveServer, dic
 
 def test_take_records_the_tail_and_equals_an_offline_run(tail_server: tuple[LiveServer, dict]) -> None:
     server, _ = tail_server
-    time.sleep(1.0)
+    rows = lambda: server.get("/api/state").json()["recording"]["rows"]  # noqa: E731
+    wait_until(lambda: rows() > 200, 20.0, rows)  # a second of ticks recorded
     state = server.get("/api/state").json()
     stopped = server.request("POST", "/api/record/stop").json()["take"]
     path = server.workdir / Path(stopped["path"])

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -16,6 +15,7 @@ from riderlive.rules import RiderModel, load_preset
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
+from tests.waiting import wait_until
 
 SLOPE = 8.0
 GROUND = HORSE_INDEX["ground.rz"]
@@ -39,10 +39,14 @@ def hill(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
 
 def await_state(live: LiveServer, predicate: Any, timeout: float = 10.0) -> dict[str, Any]:
     """The first /api/state whose tick status satisfies ``predicate`` (polled: the status has no stream)."""
-    deadline = time.perf_counter() + timeout
-    while not predicate(tick := live.get("/api/state").json()["tick"]):
-        assert time.perf_counter() < deadline, tick
-        time.sleep(0.02)
+    tick: dict[str, Any] = {}
+
+    def check() -> bool:
+        nonlocal tick
+        tick = live.get("/api/state").json()["tick"]
+        return bool(predicate(tick))
+
+    wait_until(check, timeout, lambda: tick, poll=0.02)
     return tick
 
 

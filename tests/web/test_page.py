@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import numpy as np
@@ -13,6 +12,7 @@ from riderlive.channels import BY_NAME, HORSE_NAMES, RIDER_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, GAIT_TABLE, Gait
 from riderlive.rules import RiderModel
 from riderlive.skeleton import HORSE_RIG, bone_quaternions, horse_pose, rider_pose, rider_rig
+from tests.waiting import wait_until
 from tests.web.conftest import PageUnderTest, Server, free_port, open_page
 
 pytestmark = pytest.mark.browser
@@ -57,7 +57,7 @@ def test_rider_pose_follows_the_frames_and_matches_the_python_skeleton(live_page
         assert len(horse_values) == len(HORSE_NAMES)  # the page subscribed to the horse too
         want = horse_pose(horse_values).local_rotations
         assert np.allclose([horse[b.name] for b in HORSE_RIG.bones], want, atol=1e-9)
-        time.sleep(0.4)
+        live_page.wait_for(f"riderlive.seq >= {seq} + 0.4 * riderlive.tickRate", timeout=30.0)  # a later frame
     (seq0, _, pose0), (seq1, _, pose1) = poses
     assert seq1 > seq0
     assert not np.allclose(pose0["lower_back"], pose1["lower_back"], atol=1e-6), "the rider did not move"
@@ -86,10 +86,7 @@ def test_latency_panel_shows_the_service_histograms(live_page: PageUnderTest) ->
 
 
 def _wait_estop(server: Server, engaged: bool, what: str) -> None:
-    deadline = time.monotonic() + 5
-    while bool(server.get("/api/state")["tick"].get("estop")) is not engaged:
-        assert time.monotonic() < deadline, what
-        time.sleep(0.05)
+    wait_until(lambda: bool(server.get("/api/state")["tick"].get("estop")) is engaged, 5.0, what, poll=0.05)
 
 
 def test_estop_button_reaches_the_service(live_page: PageUnderTest, server: Server) -> None:
@@ -111,7 +108,8 @@ def test_space_bar_is_an_estop_and_never_presses_the_focused_button(live_page: P
     live_page.page.locator("#rec-start").focus()
     live_page.page.keyboard.press("Space")
     _wait_estop(server, True, "the space bar did not e-stop")
-    time.sleep(0.3)
+    seq = live_page.state("riderlive.seq")
+    live_page.wait_for(f"riderlive.seq >= {seq} + 0.3 * riderlive.tickRate", timeout=30.0)  # time for a click to land
     assert server.get("/api/state")["recording"] is None, "the space bar also pressed the focused Record button"
     live_page.page.locator("#reset").click()
     _wait_estop(server, False, "reset did not clear the e-stop")
@@ -135,11 +133,11 @@ def test_weight_slider_changes_the_next_frames(live_page: PageUnderTest, server:
     live_page.wait_for("riderlive.history('lf_knee.ty', 2).length > 100", timeout=10)
     before = _recent(live_page, "lf_knee.ty", 1.0)
     _move_slider(live_page, key, before_param - 2.0)
-    deadline = time.monotonic() + 5
-    while server.get("/api/params")[key] != pytest.approx(before_param - 2.0, abs=0.02):
-        assert time.monotonic() < deadline, "the slider never reached the service"
-        time.sleep(0.05)
-    time.sleep(0.5 + 1.2)  # the change blends in over tick.param_blend_time (0.5 s), then a second of frames
+    reached = lambda: server.get("/api/params")[key] == pytest.approx(before_param - 2.0, abs=0.02)  # noqa: E731
+    wait_until(reached, 5.0, "the slider never reached the service", poll=0.05)
+    seq = live_page.state("riderlive.seq")
+    # the change blends in over tick.param_blend_time (0.5 s), then a second of frames
+    live_page.wait_for(f"riderlive.seq >= {seq} + 1.7 * riderlive.tickRate", timeout=15.0)
     after = _recent(live_page, "lf_knee.ty", 1.0)
     try:
         assert len(before) > 30 and len(after) > 30
@@ -156,7 +154,8 @@ def test_record_button_makes_a_take_that_replays_from_the_list(live_page: PageUn
     page: Any = live_page.page
     page.locator("#rec-start").click()
     live_page.wait_for("document.getElementById('rec-now').textContent.startsWith('recording')", timeout=5)
-    time.sleep(0.6)
+    seq = live_page.state("riderlive.seq")
+    live_page.wait_for(f"riderlive.seq >= {seq} + 0.6 * riderlive.tickRate", timeout=30.0)  # some frames recorded
     page.locator("#rec-stop").click()
     live_page.wait_for("document.getElementById('rec-now').textContent === ''", timeout=5)
     names = [t["name"] for t in server.get("/api/takes")["takes"]]
@@ -166,10 +165,8 @@ def test_record_button_makes_a_take_that_replays_from_the_list(live_page: PageUn
     seq = live_page.state("riderlive.seq")
     page.locator(f"{row} .take-replay").click()
     try:
-        deadline = time.monotonic() + 10
-        while server.get("/api/state")["source"].get("take") != names[0]:
-            assert time.monotonic() < deadline, "clicking the recorded take did not replay it"
-            time.sleep(0.05)
+        replaying = lambda: server.get("/api/state")["source"].get("take") == names[0]  # noqa: E731
+        wait_until(replaying, 10.0, "clicking the recorded take did not replay it", poll=0.05)
         live_page.wait_for(f"riderlive.seq > {seq} + 30", timeout=5)  # frames keep coming
     finally:
         server.request("PUT", "/api/source", {"kind": "live"})
@@ -327,10 +324,8 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
 
         # The token survived the reconnect: the e-stop reaches the new service.
         p.page.locator("#estop").click()
-        deadline = time.monotonic() + 5
-        while not s.get("/api/state")["tick"].get("estop"):
-            assert time.monotonic() < deadline, "the e-stop with a token never reached the service"
-            time.sleep(0.05)
+        estop = lambda: s.get("/api/state")["tick"].get("estop")  # noqa: E731
+        wait_until(estop, 5.0, "the e-stop with a token never reached the service", poll=0.05)
         p.page.close()
     finally:
         s.stop()

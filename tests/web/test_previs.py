@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import base64
 import io
-import time
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +53,10 @@ def test_each_camera_view_looks_different(live_page: PageUnderTest) -> None:
     for view in ("perspective", "side", "front", "rear", "rider", "top"):
         p.page.locator(f"[data-view={view}]").click()
         p.wait_for(f"riderlive.viewName === {view!r}")
-        time.sleep(0.3)  # a few frames drawn from the new camera
+        seq = p.state("riderlive.seq")
+        p.wait_for(
+            f"riderlive.seq >= {seq} + 0.3 * riderlive.tickRate", timeout=30.0
+        )  # a few frames drawn from the new camera
         shots[view] = scene_pixels(p)
     names = list(shots)
     for i, a in enumerate(names):
@@ -197,7 +199,8 @@ def test_take_browser_bakes_and_downloads(live_page: PageUnderTest, server: Serv
     page: Any = live_page.page
     server.request("POST", "/api/record/start", {"name": "browse-me"})
     live_page.wait_for("riderlive.frames > 0")
-    time.sleep(0.5)
+    seq = live_page.state("riderlive.seq")
+    live_page.wait_for(f"riderlive.seq >= {seq} + 0.5 * riderlive.tickRate", timeout=30.0)  # half a second recorded
     server.request("POST", "/api/record/stop")
     row = "#takes li[data-take='browse-me']"
     live_page.wait_for(f'document.querySelector("{row}") !== null')

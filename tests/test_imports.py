@@ -1,0 +1,156 @@
+"""The import graph of riderlive/: no cycles (function-local and TYPE_CHECKING imports count) and
+no import from a lower layer to a higher one (the layers of docs/architecture.md)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "riderlive"
+
+KNOWN_CYCLES = [
+    {"riderlive.service.runtime", "riderlive.service.devices_api", "riderlive.bus.rig", "riderlive.bus.inbound"},
+]
+"""Left for the branches that own these modules: runtime -> devices_api (plan_devices) and
+devices_api -> runtime (the Service type of its routes); runtime -> bus.rig (serve --nats) and
+bus.rig / bus.inbound -> runtime (the Service type). The cure: narrow ports (service/ports.py)."""
+
+LAYERS: dict[str, int] = {
+    # 0: leaves, the vocabulary every layer may use
+    **dict.fromkeys(
+        ("channels", "units", "tickframe", "configfile", "framefile", "names", "ranges", "frameunits", "__init__"), 0
+    ),
+    **dict.fromkeys(("fastpath", "fastpath_core", "fastpath_cache", "fastpath_batch", "fastpath_llvm"), 0),
+    **dict.fromkeys(("parquetstream", "timecode"), 0),
+    # 1: the pure core (no I/O, no clocks)
+    **dict.fromkeys(("skeleton", "rules", "horse", "saddle", "physics"), 1),
+    # 2: offline edges over the core (files in, files out)
+    **dict.fromkeys(("bake", "export", "takes", "plot", "vmc", "fit"), 2),
+    # 3: devices (the lifecycle) and the hardware beside it
+    **dict.fromkeys(("devices", "dynamixel", "platform"), 3),
+    # 4: the tick process
+    "realtime": 4,
+    # 5: the web process and what it hosts
+    **dict.fromkeys(("service", "bus", "client"), 5),
+    # 6: the command line
+    **dict.fromkeys(("cli", "__main__"), 6),
+}
+"""Top-level module or package of riderlive -> its layer (an import may only go to the same or a lower one)."""
+
+UPWARD_EXCEPTIONS = {
+    ("riderlive.vmc.sender", "riderlive.service.config"),  # VmcSection: the sender is run by the service
+    ("riderlive.vmc.sender", "riderlive.service.poses"),
+    ("riderlive.vmc.sender", "riderlive.realtime.layout"),
+    ("riderlive.dynamixel.rig_cli", "riderlive.realtime.pacing"),  # the CLI's own tick (issue 26: one harness)
+}
+"""Known upward imports, each a debt named here (a new one fails the test)."""
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = path
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    """Module -> the riderlive modules it imports (``from pkg import sub`` is an import of ``pkg.sub``)."""
+    mods = modules()
+
+    def resolve(name: str) -> str | None:
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    edges: dict[str, set[str]] = {m: set() for m in mods}
+    for module, path in mods.items():
+        is_package = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = module.split(".") if is_package else module.split(".")[:-1]
+                    base = base[: len(base) - (node.level - 1)]
+                    source = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    source = node.module or ""
+                subs = [f"{source}.{a.name}" for a in node.names if f"{source}.{a.name}" in mods]
+                targets = subs if len(subs) == len(node.names) else [*subs, source]
+            for target in targets:
+                found = resolve(target) if target.startswith("riderlive") else None
+                if found is not None and found != module:
+                    edges[module].add(found)
+    return edges
+
+
+def cycles(edges: dict[str, set[str]]) -> list[set[str]]:
+    """Strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(edges[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(component)
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def layer(module: str) -> int:
+    top = module.split(".")[1] if "." in module else "__init__"
+    assert top in LAYERS, f"{module}: give riderlive.{top} a layer in tests/test_imports.py and docs/architecture.md"
+    return LAYERS[top]
+
+
+def test_no_import_cycles_but_the_known_one() -> None:
+    found = cycles(graph())
+    assert [c for c in found if c not in KNOWN_CYCLES] == [], "a new import cycle"
+    assert all(c in found for c in KNOWN_CYCLES), "a known cycle is gone: remove it from KNOWN_CYCLES"
+
+
+def test_the_knots_issue_26_names_are_cut() -> None:
+    edges = graph()
+    assert "riderlive.bake" not in edges["riderlive.saddle.takes"]
+    assert "riderlive.vmc.sender" not in edges["riderlive.service.config"]
+    assert "riderlive.service.runtime" not in edges["riderlive.service.ingest"] | edges["riderlive.service.publish"]
+    assert "riderlive.service.ingest" not in edges["riderlive.service.ports"]
+
+
+def test_no_import_goes_up_a_layer() -> None:
+    edges = graph()
+    upward = {
+        (a, b)
+        for a, targets in edges.items()
+        for b in targets
+        if layer(b) > layer(a) and (a, b) not in UPWARD_EXCEPTIONS
+    }
+    assert upward == set(), "imports from a lower layer to a higher one (docs/architecture.md)"
+    stale = {(a, b) for a, b in UPWARD_EXCEPTIONS if b not in edges.get(a, set())}
+    assert stale == set(), "an upward import was removed: drop it from UPWARD_EXCEPTIONS"

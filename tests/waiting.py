@@ -1,0 +1,72 @@
+"""Waiting in tests on events, not on the clock.
+
+- :class:`Inbox`: a list that threads append to and tests wait on (a condition variable:
+  the waiter wakes on each append, no polling).
+- :func:`wait_until`: poll a condition, for what has no event to wait on (a server's
+  REST state, another process's files). The only sleep of the helpers.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Generic, TypeVar
+
+T = TypeVar("T")
+POLL_S = 0.01
+
+
+def wait_until(
+    condition: Callable[[], object], timeout: float, what: Callable[[], object] | str = "", poll: float = POLL_S
+) -> None:
+    """Return once ``condition()`` is true; AssertionError naming ``what`` after ``timeout`` s."""
+    deadline = time.perf_counter() + timeout
+    while not condition():
+        if time.perf_counter() > deadline:
+            said = what() if callable(what) else what
+            raise AssertionError(f"timed out after {timeout} s: {said}")
+        time.sleep(poll)
+
+
+class Inbox(Generic[T]):
+    """Items appended by one thread, awaited by another."""
+
+    def __init__(self) -> None:
+        self.items: list[T] = []
+        self._changed = threading.Condition()
+
+    def append(self, item: T) -> None:
+        with self._changed:
+            self.items.append(item)
+            self._changed.notify_all()
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def wait_for(self, predicate: Callable[[T], bool], timeout: float, start: int = 0) -> T:
+        """The first item from index ``start`` on that matches, waiting for it up to ``timeout`` s."""
+        deadline = time.perf_counter() + timeout
+        seen = start
+        with self._changed:
+            while True:
+                for item in self.items[seen:]:
+                    if predicate(item):
+                        return item
+                seen = len(self.items)
+                left = deadline - time.perf_counter()
+                if left <= 0 or not self._changed.wait(left):
+                    last = self.items[-1] if self.items else None
+                    raise AssertionError(f"nothing matched within {timeout} s; last: {last}")
+
+    def wait_count(self, predicate: Callable[[T], bool], count: int, timeout: float, start: int = 0) -> list[T]:
+        """``count`` items from index ``start`` on that match, waiting for them up to ``timeout`` s."""
+        deadline = time.perf_counter() + timeout
+        with self._changed:
+            while True:
+                found = [item for item in self.items[start:] if predicate(item)]
+                if len(found) >= count:
+                    return found
+                left = deadline - time.perf_counter()
+                if left <= 0 or not self._changed.wait(left):
+                    raise AssertionError(f"{len(found)} of {count} items within {timeout} s")
