@@ -200,6 +200,38 @@ def test_estop_that_gives_up_a_read_writes_torque_off_at_once_then_again_on_a_qu
     device.close()
 
 
+def test_estop_recorded_while_a_goal_write_drains_the_line_stops_that_write(
+    timed_buses: Callable[..., TimedBus],
+) -> None:
+    """The gate was entered (no request yet), then the write first drained the late reply
+    of a failed read: a request recorded meanwhile (another process, through the shared
+    latch) is refused at the write itself; nothing begins after it (issue 25)."""
+    device, emu = rig_on(timed_buses, tick_hz=100.0)
+    start_running(device)
+    bus = device.plug.bus  # type: ignore[attr-defined]
+    pressed: list[float] = []
+    requester = threading.Thread(target=lambda: pressed.append(device.latch.request(StopSource.REST)))
+
+    def drain(quiet_ms: float, max_ms: float) -> int:  # inside the gate, before the goal's bytes
+        requester.start()
+        deadline = time.perf_counter() + 2.0
+        while device.latch.requested == device.stops.seen and time.perf_counter() < deadline:
+            time.sleep(0.0001)
+        return 0
+
+    bus.port.drain = drain
+    bus._unsettled = True
+    emu.settle()  # the goals written so far have all arrived
+    writes = device.plug.counters["goal_writes"]
+    status = device.tick(NEUTRAL, time.perf_counter())
+    requester.join()
+    emu.settle()
+    assert status.state is S.ESTOP and device.plug.counters["goal_writes"] == writes
+    assert goal_writes_after(emu, pressed[0]) == 0
+    assert any(at > pressed[0] and is_torque_off_write(raw) for at, raw in list(emu.arrivals))
+    device.close()
+
+
 def test_estop_during_setup(timed_buses: Callable[..., TimedBus]) -> None:
     device, emu = rig_on(timed_buses, "full_rider", baud=4_000_000)
     device.connect("test")
