@@ -42,6 +42,7 @@ from riderlive.devices.lifecycle import (
     PortLost,
     Refusal,
     Refused,
+    SetupTimeout,
     StopRequested,
     Transition,
 )
@@ -56,6 +57,10 @@ CONFIRM_FAST_S = 1.0
 """After outputs go off, read them back every tick for this long, then every ``IDLE_CHECK_S``."""
 IDLE_CHECK_S = 0.5
 """While off (disarmed, parked, e-stop, fault): read back that outputs are still off."""
+SETUP_TIMEOUT_S = 15.0
+"""Longest a device may stay ``connecting`` (a transport held by another process, a setup
+that never ends): then a ``setup_timeout`` fault, counted; a reset tries again. The
+guardian's own wait for a port held by a process it has killed is shorter (5 s)."""
 
 
 @dataclass
@@ -137,6 +142,7 @@ class Device:
         self.armed_by: str | None = None
         self.last_stop: StopRecord | None = None
         self._setup: Any = None
+        self._setup_since: float | None = None
         self._move_t0: float | None = None
         self._last_now: float | None = None
         self._off_confirmed = True
@@ -331,13 +337,20 @@ class Device:
         self._configured = False
         self.detail = "opening the transport"
         self._setup = self.plug.setup(self._say)
+        self._setup_since = time.perf_counter()
         self._go(S.CONNECTING, reason, by)
 
     def _say(self, detail: str) -> None:
         self.detail = detail
 
     def _run_setup(self, now: float) -> None:
-        """Setup transactions until half a tick is used (the rest is the tick's)."""
+        """Setup transactions until half a tick is used (the rest is the tick's); a setup
+        longer than ``SETUP_TIMEOUT_S`` is a fault."""
+        since = self._setup_since
+        if since is not None and (took := time.perf_counter() - since) > SETUP_TIMEOUT_S:
+            detail = self.detail
+            self._quietly(self.plug.close)
+            raise SetupTimeout(f"still connecting after {took:.1f} s (bound {SETUP_TIMEOUT_S:g} s): {detail}")
         budget_end = time.perf_counter() + 0.5 * self.period_s
         while self._setup is not None:
             try:

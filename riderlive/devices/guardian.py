@@ -62,6 +62,11 @@ power cut, a port now owned by someone else); the servos' Bus Watchdog and the h
 e-stop are all that is left, and an orphan guardian writing to a reused port forever
 would be a hazard of its own."""
 KILL_WAIT_S = 2.0
+PORT_RELEASE_S = 5.0
+"""How long a transport held by another process (the tick just killed, whose file the
+kernel has not released yet) is waited for before this stop gives up on it (logged with
+the holder's pid); the next tick's connect then waits for it, and faults
+(``setup_timeout``) if it stays held."""
 
 
 class Guardian:
@@ -91,6 +96,7 @@ class Guardian:
     def run(self) -> int:
         board = self.board
         board["guardian_pid"] = float(os.getpid())
+        board["guardian_beat"] = time.perf_counter()
         board["guardian_ready"] = 1.0
         log.info("watching %s", ", ".join(s.name for s in self.specs))
         while not self.exit and not board["shutdown"]:
@@ -178,23 +184,15 @@ class Guardian:
             return  # never connected by that tick: nothing of ours on its bus
         state, pose = last
         device = Device(make_plug(spec), spec.period_s, self.latch)
-        deadline = time.perf_counter() + 1.0
-        while True:
-            try:
-                device.takeover(pose, state.moving)
-                break
-            except PortBusy:
-                if time.perf_counter() > deadline:
-                    log.error("%s: the transport stays held by another process: cannot stop it", spec.name)
-                    return
-                time.sleep(0.002)
-            except PortLost as exc:
-                log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
-                return
-        started = next_tick = time.perf_counter()
+        if not self._take(device, spec, pose, state.moving):
+            return
+        off_since: float | None = None
+        next_tick = time.perf_counter()
         try:
             while True:
-                status = device.tick((), time.perf_counter())
+                now = time.perf_counter()
+                status = device.tick((), now)
+                self.board.publish(index, device.state, device.plug.pose)  # a successor goes on from here
                 if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
                     log.error("%s: the port went away during the stop", spec.name)
                     return
@@ -202,12 +200,14 @@ class Guardian:
                     if status.outputs_off_confirmed:
                         log.warning("%s: stopped, outputs off (read back)", spec.name)
                         return
+                    off_since = now if off_since is None else off_since  # the read-back's time starts here
                     web = int(self.board["web_pid"])
                     handback = bool(web and pid_alive(web))
-                    if time.perf_counter() - started > (HANDBACK_AFTER_S if handback else self.give_up_s):
+                    if now - off_since > (HANDBACK_AFTER_S if handback else self.give_up_s):
                         log.error(
-                            "%s: outputs-off not confirmed; %s",
+                            "%s: outputs-off not confirmed in %.1f s of read-backs; %s",
                             spec.name,
+                            now - off_since,
                             "handing the bus back" if handback else "giving up (the servos' watchdog holds them)",
                         )
                         return
@@ -215,6 +215,51 @@ class Guardian:
                 time.sleep(max(0.0, next_tick - time.perf_counter()))
         finally:
             device.plug.close()
+
+    def _take(self, device: Device, spec: DeviceSpec, pose: list[float], moving: bool) -> bool:
+        """Open the transport (waiting up to ``PORT_RELEASE_S`` for a killed holder's file
+        to be released) and start the stop; False when it cannot be taken."""
+        deadline = time.perf_counter() + PORT_RELEASE_S
+        waited = False
+        while True:
+            try:
+                device.takeover(pose, moving)
+                if waited:
+                    log.warning("%s: the transport was released: taken over", spec.name)
+                return True
+            except PortBusy:
+                if time.perf_counter() > deadline:
+                    log.error(
+                        "%s: the transport stays held by %s for %.0f s: cannot stop it (the next tick's connect "
+                        "waits for it, then faults)",
+                        spec.name,
+                        holders(spec.port) or "another process",
+                        PORT_RELEASE_S,
+                    )
+                    return False
+                waited = True
+                time.sleep(0.005)
+            except PortLost as exc:
+                log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
+                return False
+
+
+def holders(port: str | None) -> str:
+    """Which processes hold ``port`` open ("pid 123 (python)", ...; "" if none found or no /proc)."""
+    if not port:
+        return ""
+    try:
+        target = os.path.realpath(port)
+        found = []
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            with contextlib.suppress(OSError):
+                fds = os.listdir(f"/proc/{pid}/fd")
+                if any(os.path.realpath(f"/proc/{pid}/fd/{fd}") == target for fd in fds):
+                    with open(f"/proc/{pid}/comm") as comm:
+                        found.append(f"pid {pid} ({comm.read().strip()})")
+        return ", ".join(found)
+    except OSError:
+        return ""
 
 
 def launch(
@@ -247,6 +292,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     board, latch = SafetyBoard(args.board), StopLatch(args.latch)
+    board["guardian_pid"] = float(os.getpid())  # alive from here (ready once the plugs are built)
+    board["guardian_beat"] = time.perf_counter()
     guardian = Guardian(
         board,
         latch,

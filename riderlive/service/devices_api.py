@@ -95,7 +95,11 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
     config = service.config
     counts = DeviceMetrics()
     service.device_metrics = counts
-    app.add_middleware(EStopFirst, estop=lambda source: service.supervisor.estop(source))  # outermost: added last
+
+    def latch_now(source: StopSource) -> float:  # the supervisor of the running service (bound late)
+        return service.supervisor.estop(source)
+
+    app.add_middleware(EStopFirst, estop=latch_now)  # outermost: added last, after RestGuard and CORS
 
     def refuse(action: str, reason: Refusal | str, message: str) -> HTTPException:
         reason = Refusal(reason)
@@ -167,6 +171,7 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
             "devices": status.get("devices", []),
             "platform": status.get("platform"),
             "estop": service.link.latch.latched,
+            "guardian": status.get("guardian"),
             "supervision": service.supervisor.snapshot(),
         }
 
@@ -230,8 +235,8 @@ def render_device_metrics(service: Service) -> str:
         [f"riderlive_estop_requests_total {latch.requested}"],
     )
     by_source = [
-        f'riderlive_estop_requests_by_source_total{{source="{source}",authorized="{"yes" if authorized else "no"}"}} {n}'
-        for (source, authorized), n in sorted(service.device_metrics.estops.items())
+        f'riderlive_estop_requests_by_source_total{{source="{source}",authorized="{"yes" if ok else "no"}"}} {n}'
+        for (source, ok), n in sorted(service.device_metrics.estops.items())
     ]
     metric(
         "riderlive_estop_requests_by_source_total",

@@ -18,7 +18,7 @@ e-stop near people, which must cut servo power in hardware.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, MutableMapping
 from typing import Any
 
 from riderlive.devices.latch import StopSource
@@ -43,7 +43,7 @@ class EStopFirst:
         await self.app(scope, receive, send)
 
 
-def stamps(scope: dict[str, Any]) -> tuple[float, float] | None:
+def stamps(scope: MutableMapping[str, Any]) -> tuple[float, float] | None:
     """``(received_at, latched_at)`` set by :class:`EStopFirst` for this request (None: not through it)."""
     value = scope.get("state", {}).get(STATE_KEY)
     return None if value is None else (float(value[0]), float(value[1]))

@@ -43,10 +43,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from riderlive.devices.board import guardian_watching
 from riderlive.devices.guardian import launch
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
-from riderlive.devices.shared import pid_alive
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink
 from riderlive.service.config import ServiceConfig
@@ -62,6 +62,9 @@ START_GRACE_S = 60.0
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
 of compiled kernels, page faults) without being taken for hung, unless a device moves."""
+GUARDIAN_START_S = 5.0
+"""Allowance for a guardian relaunched during a stop to start and finish it (its imports
+on a loaded host), on top of the park timeout."""
 _ids = itertools.count(1)
 
 
@@ -268,8 +271,8 @@ class TickSupervisor:
         if self.guardian is None:
             return
         board = self.link.board
-        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0
-        while time.perf_counter() < deadline and self.guardian.poll() is None:
+        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0 + GUARDIAN_START_S
+        while time.perf_counter() < deadline:  # a guardian that dies meanwhile is relaunched and goes on
             if board["guardian_done"] >= generation:
                 return
             await asyncio.sleep(0.01)
@@ -300,8 +303,8 @@ class TickSupervisor:
         self._launch_guardian()
 
     def guardian_alive(self) -> bool:
-        board = self.link.board
-        return board["guardian_ready"] == 1.0 and pid_alive(int(board["guardian_pid"]))
+        """Ready, its process alive, its heartbeat fresh (the tick's own test: board.guardian_watching)."""
+        return guardian_watching(self.link.board, time.perf_counter()) is None
 
     # -- e-stop and requests -------------------------------------------------------------
 

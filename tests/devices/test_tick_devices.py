@@ -3,11 +3,16 @@ and the registry's plan for a real rig map (divide down, or refuse naming both r
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 
 import pytest
 
+from riderlive.devices import board as board_module
 from riderlive.devices import registry
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
@@ -48,10 +53,22 @@ def tick_devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[TickDevices,
     board.close()
 
 
-def run(devices: TickDevices, ticks: int, start: int = 0) -> None:
+def run(devices: TickDevices, ticks: int, start: int = 0, beat: bool = True) -> None:
+    """Tick; ``beat``: the guardian on the board (if any) beats as its watch loop would."""
+    board = devices.board
     for i in range(start, start + ticks):
+        if beat and board is not None and board["guardian_pid"]:
+            board["guardian_beat"] = time.perf_counter()
         devices.tick((1.0,), time.perf_counter(), i)
         time.sleep(0.001)
+
+
+def until(devices: TickDevices, wanted: dict[str, str], beat: bool = True, timeout: float = 5.0) -> None:
+    tick, deadline = 0, time.perf_counter() + timeout
+    while devices.states() != wanted and time.perf_counter() < deadline:
+        run(devices, 2, tick, beat)
+        tick += 2
+    assert devices.states() == wanted
 
 
 def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None:  # type: ignore[no-untyped-def]
@@ -63,8 +80,9 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     assert board.device(0) is not None and board.device(0)[0] is S.DISARMED  # published for the guardian
 
     reply = devices.request(cmd.Arm("left", "test", 1))
-    assert not reply.ok and reply.refusal == "not_ready" and "guardian" in reply.message  # no guardian running
-    board["guardian_ready"], board["guardian_pid"] = 1.0, float(__import__("os").getpid())
+    assert not reply.ok and reply.refusal == "no_guardian" and "guardian" in reply.message  # no guardian running
+    board["guardian_ready"], board["guardian_pid"] = 1.0, float(os.getpid())
+    board["guardian_beat"] = time.perf_counter()
     reply = devices.request(cmd.Arm("middle", "test", 2))
     assert not reply.ok and reply.refusal == "unknown_device" and "'left', 'right'" in reply.message
     reply = devices.request(cmd.Arm("left", "test", 3))
@@ -91,3 +109,52 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     run(devices, 20, 80)
     assert devices.states()["right"] == "disarmed"
     assert devices.status()["devices"][0]["name"] == "left"
+
+
+def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is_refused(  # type: ignore[no-untyped-def]
+    tick_devices, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 25, the watched watchman: a guardian killed (SIGKILL) while a device runs, then
+    one that hangs (no heartbeat): each time the tick parks the armed devices itself
+    (ease to park, outputs off), counts it, and refuses to arm until a guardian watches."""
+    monkeypatch.setattr(board_module, "GUARDIAN_HANG_S", 0.15)
+    devices, _, board = tick_devices
+    guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+        until(devices, {"left": "disarmed", "right": "disarmed"})
+        assert devices.request(cmd.Arm("left", "test", 1)).ok
+        until(devices, {"left": "running", "right": "disarmed"})
+        os.kill(guardian.pid, signal.SIGKILL)
+        guardian.wait(10)
+        killed = time.perf_counter()
+        run(devices, 2, 100, beat=False)
+        assert devices.states()["left"] == "parking"  # on the next ticks, not after a timeout
+        left = devices.devices[0]
+        assert left.life.history[-1].by.startswith(f"tick: the guardian {guardian.pid} is dead")
+        assert time.perf_counter() - killed < 0.5
+        refused = devices.request(cmd.Arm("right", "test", 2))
+        assert not refused.ok and refused.refusal == "no_guardian" and "dead" in refused.message
+        until(devices, {"left": "parked", "right": "disarmed"}, beat=False)
+        plug = left.plug
+        assert not any(plug.outputs) and plug.goals == [0.0] * 3  # type: ignore[attr-defined]
+        status = devices.status()["guardian"]
+        assert status["alive"] is False and "dead" in status["lost"]
+        assert (status["losses"], status["stops"], status["arms_refused"]) == (1, 1, 1)
+        assert left.counters["guardian_stops"] == 1
+
+        board["guardian_pid"] = float(os.getpid())  # a new guardian: arming is allowed again
+        run(devices, 10, 200)  # more than GUARDIAN_CHECK_S
+        assert devices.status()["guardian"]["alive"] and devices.status()["guardian"]["lost"] is None
+        assert devices.states()["left"] == "parked"  # nothing re-arms by itself
+        assert devices.request(cmd.Arm("left", "test", 3)).ok
+        until(devices, {"left": "running", "right": "disarmed"})
+        hung_from = time.perf_counter()  # it stops beating (SIGSTOP, a stuck loop)
+        while devices.states()["left"] == "running" and time.perf_counter() - hung_from < 5.0:
+            run(devices, 1, 300, beat=False)
+        assert devices.states()["left"] == "parking" and 0.15 <= time.perf_counter() - hung_from < 1.0
+        assert "hung" in (devices.guardian_lost or "")
+        assert devices.status()["guardian"]["losses"] == 2 and left.counters["guardian_stops"] == 2
+    finally:
+        guardian.kill()
+        guardian.wait(10)

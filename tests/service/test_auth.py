@@ -112,7 +112,9 @@ def test_an_estop_needs_no_token_reset_and_arm_do(guarded: LiveServer) -> None:
         return bool(guarded.get("/api/devices", headers=bearer).json()["estop"])
 
     def by_source(source: str, authorized: str) -> float:
-        return guarded.metric("riderlive_estop_requests_by_source_total", f'source="{source}",authorized="{authorized}"')
+        return guarded.metric(
+            "riderlive_estop_requests_by_source_total", f'source="{source}",authorized="{authorized}"'
+        )
 
     assert not latched()
     answer = guarded.request("POST", "/api/estop", json={"not": "looked at"})
