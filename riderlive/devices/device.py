@@ -66,7 +66,8 @@ guardian's own wait for a port held by a process it has killed is shorter (5 s).
 @dataclass
 class StopRecord:
     """The last e-stop (``perf_counter`` s, one clock for every process on the host):
-    requested (latch time), acted on by the bus owner, outputs-off written, read back off."""
+    requested (latch time), acted on by the bus owner, outputs-off written, read back off;
+    and when the last goal write before it began (None: the plug does not say)."""
 
     source: str = ""
     requested_at: float | None = None
@@ -74,6 +75,7 @@ class StopRecord:
     off_written_at: float | None = None
     confirmed_at: float | None = None
     repeats: int = 0
+    last_goal_at: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -84,6 +86,7 @@ class StopRecord:
             "confirmed_at": self.confirmed_at,
             "confirmed": self.confirmed_at is not None,
             "repeats": self.repeats,
+            "last_goal_at": self.last_goal_at,
         }
 
 
@@ -429,6 +432,8 @@ class Device:
         self.counters["estops"] += 1
         source = self.latch.source
         record = StopRecord(source.label if source else "api", self.latch.requested_at, time.perf_counter())
+        begun = getattr(self.plug, "goal_begun_at", None)  # a plug that says when its goal writes begin
+        record.last_goal_at = begun if isinstance(begun, float) else None
         self.last_stop = record
         self._off_confirmed, self._off_since, self._next_check = False, now, now
         try:
