@@ -71,10 +71,11 @@ class Rig:
         return str(devices[0]["state"]) if devices else "none"
 
     def wait(self, wanted: str, timeout: float = 30.0) -> None:
+        """Until the rig's state is ``wanted`` (several: separated by "|")."""
         deadline = time.perf_counter() + timeout
         while True:
             try:
-                if self.state() == wanted:
+                if self.state() in wanted.split("|"):
                     return
             except (httpx.HTTPError, KeyError, IndexError):
                 pass
@@ -90,7 +91,7 @@ class Rig:
             try:
                 if self.state() in ("fault", "estop"):
                     httpx.post(self.service().base + "/api/reset", timeout=10)
-                self.wait("disarmed")
+                self.wait("disarmed|parked")  # parked: the tick parked it itself (case guardian)
                 for _ in range(50):
                     sup = self.supervision()
                     if sup["guardian"]["alive"] and sup["up"]:

@@ -200,3 +200,28 @@ def test_the_guardian_beats_before_its_imports() -> None:
         guardian.wait(10)
         board.close()
         latch.close()
+
+
+@pytest.mark.parametrize("dead_tick", [1.5], indirect=True)
+def test_an_estop_during_a_takeover_cuts_the_park_short(
+    dead_tick: tuple[DeadTick, EmulatedBus, RigConfig], capfd: pytest.CaptureFixture[str]
+) -> None:
+    """An e-stop while the guardian parks a dead tick's rig (a failover under way): torque
+    off at once, no goal after it, the device latched in ``estop`` on the board."""
+    scene, emu, _ = dead_tick
+    guardian = scene.guardian()
+    deadline = time.perf_counter() + 30.0
+    while not goals_after(emu, 0.0) and time.perf_counter() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    pressed = scene.latch.request()
+    scene.wait_done()
+    published = scene.board.device(0)
+    scene.close(guardian)
+    emu.settle()
+    offs = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > pressed]
+    assert offs and offs[0] - pressed < 0.1  # the park (1.5 s) was cut short
+    assert goals_after(emu, offs[0]) == []
+    assert published is not None and published[0] is DeviceState.ESTOP
+    assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+    assert "stopped, outputs off (read back)" in capfd.readouterr().err
