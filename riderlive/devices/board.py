@@ -11,7 +11,8 @@ by exactly one of them:
   too, eases on from where the park had got, not from the dead tick's pose);
 - the guardian: its pid and heartbeat (from its first instant: imports come after),
   ``ready`` once its plugs are built, the last generation it has stopped, ``busy``
-  while it holds a bus, takeovers done.
+  while it holds a bus, takeovers done; a standby guardian its pid (``guardian_standby``)
+  once its plugs are built, until it becomes the guardian (the beat, then the pid).
 
 The tick watches the guardian as the guardian watches the tick (:func:`guardian_watching`).
 
@@ -46,6 +47,7 @@ _HEADER = (
     "guardian_done",
     "guardian_busy",
     "guardian_takeovers",
+    "guardian_standby",
     "shutdown",
 )
 _DEVICE = ("state", "seq", "units")

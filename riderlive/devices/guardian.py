@@ -270,14 +270,47 @@ def launch(
     web_timeout_s: float,
     *,
     give_up_s: float = GIVE_UP_AFTER_S,
+    standby_after: int = 0,
 ) -> subprocess.Popen[bytes]:
-    """Start the guardian in its own session (signals to the terminal's group skip it)."""
+    """Start the guardian in its own session (signals to the terminal's group skip it);
+    ``standby_after``: a standby that waits, imports paid and plugs built, to become the
+    guardian when guardian ``standby_after`` (or the one that follows it) is gone."""
     args = [sys.executable, "-m", "riderlive.devices.guardian", "--board", board, "--latch", latch]
     args += ["--tick-timeout", repr(tick_timeout_s), "--web-timeout", repr(web_timeout_s)]
-    args += ["--give-up", repr(give_up_s)]
+    args += ["--give-up", repr(give_up_s)] + (["--standby-after", str(standby_after)] if standby_after else [])
     for spec in specs:
         args += ["--device", spec.to_json()]
     return subprocess.Popen(args, start_new_session=True, stdin=subprocess.DEVNULL)
+
+
+def stand_by(board: SafetyBoard, after: int, poll_s: float = POLL_S) -> bool:
+    """A standby guardian, its imports paid and its plugs built: wait until the active
+    guardian (the board's, or ``after`` until that one has written its pid) is gone (at
+    once through a pidfd), then become it (True), or until shutdown (False). Its heartbeat
+    comes before its pid, so nobody sees the new pid with the old guardian's stale beat."""
+    pidfd: int | None = None
+    watched = 0
+    try:
+        while not board["shutdown"]:
+            active = int(board["guardian_pid"]) or after
+            if not pid_alive(active):
+                board["guardian_beat"] = time.perf_counter()
+                board["guardian_pid"] = float(os.getpid())
+                board["guardian_standby"] = 0.0
+                log.warning("the guardian %d is gone: the standby %d takes over", active, os.getpid())
+                return True
+            if active != watched:
+                if pidfd is not None:
+                    os.close(pidfd)
+                pidfd, watched = None, active
+                with contextlib.suppress(OSError):
+                    pidfd = os.pidfd_open(active)
+            with contextlib.suppress(OSError, ValueError):
+                select.select([] if pidfd is None else [pidfd], [], [], poll_s)
+        return False
+    finally:
+        if pidfd is not None:
+            os.close(pidfd)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -288,12 +321,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--tick-timeout", type=float, default=0.1)
     parser.add_argument("--web-timeout", type=float, default=1.0)
     parser.add_argument("--give-up", type=float, default=GIVE_UP_AFTER_S, help="see GIVE_UP_AFTER_S")
+    parser.add_argument("--standby-after", type=int, default=0, metavar="PID", help="stand by for guardian PID")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     board, latch = SafetyBoard(args.board), StopLatch(args.latch)
-    board["guardian_pid"] = float(os.getpid())  # alive from here (ready once the plugs are built)
-    board["guardian_beat"] = time.perf_counter()
+    if not args.standby_after:
+        board["guardian_beat"] = time.perf_counter()  # alive from here (ready once the plugs are built)
+        board["guardian_pid"] = float(os.getpid())
     guardian = Guardian(
         board,
         latch,
@@ -307,7 +342,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         guardian.exit = True  # after any stop in progress
 
     signal.signal(signal.SIGTERM, on_term)
+    if args.standby_after:
+        board["guardian_standby"] = float(os.getpid())  # ready to take over from here
     try:
+        if args.standby_after and not stand_by(board, args.standby_after):
+            return 0
         return guardian.run()
     finally:
         board.close()

@@ -111,6 +111,8 @@ class TickSupervisor:
         self._bound: list[int] = []
         self._pending: dict[int, asyncio.Future[cmd.Reply]] = {}
         self.guardian: subprocess.Popen[bytes] | None = None
+        self.standby: subprocess.Popen[bytes] | None = None
+        """A standby guardian: becomes the guardian the moment it is gone (guardian.py)."""
         self.guardian_restarts = 0
         self._guardian_launched_at = 0.0
 
@@ -127,7 +129,7 @@ class TickSupervisor:
     async def start(self) -> None:
         self._bind()
         if self.guardian_wanted:
-            self._launch_guardian()
+            self._start_guardians()
         self._watch_task = asyncio.get_running_loop().create_task(self._watch())
 
     async def stop(self) -> None:
@@ -141,12 +143,13 @@ class TickSupervisor:
     def stop_guardian(self) -> None:
         """After the tick has stopped (its devices are closed): the guardian may go."""
         self.link.board["shutdown"] = 1.0
-        if self.guardian is not None:
-            try:
-                self.guardian.wait(2.0)
-            except subprocess.TimeoutExpired:
-                self.guardian.kill()
-                self.guardian.wait(2.0)
+        for guardian in (self.guardian, self.standby):
+            if guardian is not None:
+                try:
+                    guardian.wait(2.0)
+                except subprocess.TimeoutExpired:
+                    guardian.kill()
+                    guardian.wait(2.0)
 
     def _bind(self) -> None:
         loop = asyncio.get_running_loop()
@@ -280,27 +283,46 @@ class TickSupervisor:
 
     # -- the guardian --------------------------------------------------------------------
 
-    def _launch_guardian(self) -> None:
+    def _launch_guardian(self, standby_after: int = 0) -> subprocess.Popen[bytes]:
         link, guardian = self.link, self.config.guardian
-        self.guardian = launch(
+        return launch(
             link.board.name,
             link.latch.name,
             link.setup.devices,
             guardian.tick_timeout,
             guardian.web_timeout,
             give_up_s=guardian.give_up,
+            standby_after=standby_after,
         )
+
+    def _start_guardians(self) -> None:
+        """The guardian, and a standby (imports paid, plugs built) that becomes the guardian
+        within a few ms of its death: a relaunch would take a Python start and the imports."""
+        self.guardian = self._launch_guardian()
         self._guardian_launched_at = time.perf_counter()
+        self.standby = self._launch_guardian(standby_after=self.guardian.pid)
 
     def _check_guardian(self, now: float) -> None:
-        if self.guardian is None or self.guardian.poll() is None or self.stopping:
+        """The guardian gone: its standby has taken over (or it is relaunched); a new standby
+        follows (at most one launch a second)."""
+        if self.guardian is None or self.stopping:
             return
-        if now - self._guardian_launched_at < 1.0:
-            return  # at most one relaunch a second
-        log.critical("the guardian exited (%s): relaunching it; arming is refused meanwhile", self.guardian.returncode)
-        self.guardian_restarts += 1
-        self.link.board["guardian_ready"] = 0.0
-        self._launch_guardian()
+        if self.guardian.poll() is not None:
+            code = self.guardian.returncode
+            if self.standby is not None and self.standby.poll() is None:
+                log.critical("the guardian exited (%s): its standby %d takes over", code, self.standby.pid)
+                self.guardian, self.standby = self.standby, None
+            elif now - self._guardian_launched_at >= 1.0:
+                log.critical("the guardian exited (%s), no standby: relaunching it; arming is refused", code)
+                self.link.board["guardian_ready"] = 0.0
+                self.guardian, self.standby = self._launch_guardian(), None
+                self._guardian_launched_at = now
+            else:
+                return
+            self.guardian_restarts += 1
+        if (self.standby is None or self.standby.poll() is not None) and now - self._guardian_launched_at >= 1.0:
+            self.standby = self._launch_guardian(standby_after=self.guardian.pid)
+            self._guardian_launched_at = now
 
     def guardian_alive(self) -> bool:
         """Ready, its process alive, its heartbeat fresh (the tick's own test: board.guardian_watching)."""
@@ -366,6 +388,7 @@ class TickSupervisor:
                 "enabled": self.guardian_wanted,
                 "alive": self.guardian_alive() if self.guardian is not None else False,
                 "pid": None if self.guardian is None else self.guardian.pid,
+                "standby_pid": None if self.standby is None or self.standby.poll() is not None else self.standby.pid,
                 "restarts": self.guardian_restarts,
                 "takeovers": int(board["guardian_takeovers"]),
             },

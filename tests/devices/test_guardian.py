@@ -133,10 +133,11 @@ def test_a_takeover_that_parks_longer_than_the_handback_time_confirms_outputs_of
     assert "bench3: stopped, outputs off (read back)" in err, err
     assert "not confirmed" not in err, err
     emu.settle()
-    offs = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > started]
-    goals = goals_after(emu, started)
-    assert goals and offs and offs[0] > goals[-1][0]  # eased to park, then torque off
-    assert offs[0] - goals[0][0] >= rig.bus.park_s
+    packets = [(t, raw) for t, raw in list(emu.arrivals) if t > started]
+    offs = [i for i, (_, raw) in enumerate(packets) if is_torque_off_write(raw)]
+    goals = [i for i, (_, raw) in enumerate(packets) if raw[7] == Instruction.SYNC_WRITE and raw[8] == GOAL_POSITION]
+    assert goals and offs and offs[0] > goals[-1]  # eased to park, then torque off (in the wire's order)
+    assert packets[offs[0]][0] - packets[goals[0]][0] >= rig.bus.park_s
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
 
 
@@ -225,3 +226,39 @@ def test_an_estop_during_a_takeover_cuts_the_park_short(
     assert published is not None and published[0] is DeviceState.ESTOP
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
     assert "stopped, outputs off (read back)" in capfd.readouterr().err
+
+
+def test_a_standby_guardian_takes_over_within_milliseconds_of_the_guardians_death() -> None:
+    """The supervisor keeps a standby (imports paid, plugs built): kill -9 of the guardian,
+    and the standby is the guardian (its beat, then its pid, ready) a few ms later,
+    instead of a Python start and the imports (~0.5-3 s on a loaded host)."""
+    latch, board = StopLatch(), SafetyBoard()
+    file = ROOT / "config" / "rigs" / "bench3.toml"
+    rig = load_rig(file)
+    spec = DeviceSpec("dynamixel", str(file), "/dev/null-port", rig.name, 1, rig.bus.tick_s)
+    active = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0)
+    standby = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0, standby_after=active.pid)
+    try:
+        deadline = time.perf_counter() + 30.0
+        while (board["guardian_standby"] != standby.pid or board["guardian_ready"] != 1.0) and (
+            time.perf_counter() < deadline
+        ):
+            time.sleep(0.005)
+        assert board["guardian_pid"] == active.pid and board["guardian_standby"] == standby.pid
+        time.sleep(0.2)
+        assert board["guardian_pid"] == active.pid and standby.poll() is None  # it stands by
+        active.send_signal(signal.SIGKILL)
+        killed = time.perf_counter()
+        while board["guardian_pid"] != standby.pid and time.perf_counter() < killed + 5.0:
+            time.sleep(0.0005)
+        took = time.perf_counter() - killed
+        assert board["guardian_pid"] == standby.pid and board["guardian_beat"] >= killed
+        assert took < 0.2, f"the standby took {took * 1000:.0f} ms"
+        print(f"guardian: kill -9 -> the standby is the guardian in {took * 1000:.1f} ms")
+    finally:
+        board["shutdown"] = 1.0
+        for guardian in (active, standby):
+            if guardian.poll() is None:
+                guardian.wait(10)
+        board.close()
+        latch.close()
