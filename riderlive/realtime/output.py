@@ -149,6 +149,7 @@ class TickDevices:
             if why is not None:
                 self.arms_refused_no_guardian += 1
                 raise Refused(Refusal.NO_GUARDIAN, f"{why}: nothing may move until a guardian watches")
+            self.guardian_lost, self._guardian_seen = None, True  # seen watching: a loss from here counts
         device.arm(device.name, by)
 
     def guardian_alive(self) -> bool:

@@ -158,3 +158,30 @@ def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is
     finally:
         guardian.kill()
         guardian.wait(10)
+
+
+def test_a_guardian_killed_during_arming_parks_the_soft_start_and_nothing_moves_after(  # type: ignore[no-untyped-def]
+    tick_devices,
+) -> None:
+    """The guardian dies between the arm's acceptance and the end of the soft start, twice
+    in a row: each time the device parks from where it was, and stays parked."""
+    devices, _, board = tick_devices
+    for attempt in (1, 2):
+        guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+        try:
+            board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+            until(devices, {"left": "parked" if attempt == 2 else "disarmed", "right": "disarmed"})
+            assert devices.request(cmd.Arm("left", "test", attempt)).ok
+            assert devices.states()["left"] == "soft_start"
+            os.kill(guardian.pid, signal.SIGKILL)
+            guardian.wait(10)
+            run(devices, 12, 1000 * attempt, beat=False)  # > GUARDIAN_CHECK_S
+            assert devices.states()["left"] in ("parking", "parked")
+            until(devices, {"left": "parked", "right": "disarmed"}, beat=False)
+            run(devices, 20, 2000 * attempt, beat=False)
+            assert devices.states()["left"] == "parked"  # nothing re-arms
+            assert not any(devices.devices[0].plug.outputs)  # type: ignore[attr-defined]
+        finally:
+            guardian.kill()
+            guardian.wait(10)
+    assert devices.guardian_losses == 2 and devices.devices[0].counters["guardian_stops"] == 2
