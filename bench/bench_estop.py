@@ -94,7 +94,15 @@ def run(rate: float, trials: int, workdir: Path, web_priority: int) -> dict[str,
         f'[tick]\nrate = {rate}\n[security]\ntoken = "{TOKEN}"\n'
         f'[rig]\nfile = "{workdir / f"bench{rate:g}.toml"}"\nport = "{emu.port}"\n'
     )
-    live = LiveServer(config, workdir, token=TOKEN)
+    for attempt in range(3):  # a saturated machine can take > 30 s to import the service
+        try:
+            live = LiveServer(config, workdir, token=TOKEN)
+            break
+        except RuntimeError as exc:
+            if attempt == 2:
+                emu.stop()
+                raise
+            print(f"  (the service did not start, retrying: {str(exc)[-300:]})", flush=True)
     out: dict[str, list[float]] = {
         "handler": [],
         "latch": [],
