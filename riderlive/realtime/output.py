@@ -64,6 +64,8 @@ class TickDevices:
         self.arms_refused_no_guardian = 0
         self._guardian_next = 0.0
         self._guardian_seen = False
+        self._guardian_pid = 0
+        """The guardian last seen watching (a new pid means the one that watched is gone)."""
 
     def open(self) -> None:
         for device in self.devices:
@@ -150,6 +152,7 @@ class TickDevices:
                 self.arms_refused_no_guardian += 1
                 raise Refused(Refusal.NO_GUARDIAN, f"{why}: nothing may move until a guardian watches")
             self.guardian_lost, self._guardian_seen = None, True  # seen watching: a loss from here counts
+            self._guardian_pid = 0 if self.board is None else int(self.board["guardian_pid"])
         device.arm(device.name, by)
 
     def guardian_alive(self) -> bool:
@@ -166,12 +169,22 @@ class TickDevices:
             return False
         self._guardian_next = now + GUARDIAN_CHECK_S
         why = self._guardian_why(time.perf_counter())
+        pid = 0 if self.board is None else int(self.board["guardian_pid"])
+        replaced_now = False
+        if why is None:
+            replaced_now, self._guardian_pid = self._guardian_pid not in (0, pid), pid
+            if replaced_now:
+                # A standby became the guardian between two looks: the one that watched is gone all
+                # the same (a fault of the safety chain): the same stop; arming may follow at once.
+                why, self.guardian_lost = f"the guardian that watched is gone (its standby {pid} watches now)", None
         if why is None:
             self._guardian_seen = True
             if self.guardian_lost is not None:
                 log.warning("a guardian watches again (nothing re-arms)")
             self.guardian_lost = None
             return False
+        if not replaced_now:
+            self._guardian_pid = 0  # a loss seen as such: the next guardian is no replacement
         if self.guardian_lost is None and self._guardian_seen:
             self.guardian_losses += 1
             log.critical("%s: armed devices park (category 1 stop by the tick), arming is refused", why)

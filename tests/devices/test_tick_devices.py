@@ -185,3 +185,31 @@ def test_a_guardian_killed_during_arming_parks_the_soft_start_and_nothing_moves_
             guardian.kill()
             guardian.wait(10)
     assert devices.guardian_losses == 2 and devices.devices[0].counters["guardian_stops"] == 2
+
+
+def test_a_standby_that_takes_over_between_two_looks_still_parks_the_armed_devices(  # type: ignore[no-untyped-def]
+    tick_devices,
+) -> None:
+    """The guardian that watched is replaced by its standby faster than the tick's 5 ms
+    look: no gap is ever seen, but the pid changed: the same category 1 stop (counted);
+    arming is allowed again at once (a guardian watches)."""
+    devices, _, board = tick_devices
+    first, standby = (subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) for _ in range(2))
+    try:
+        board["guardian_pid"], board["guardian_ready"] = float(first.pid), 1.0
+        until(devices, {"left": "disarmed", "right": "disarmed"})
+        assert devices.request(cmd.Arm("left", "test", 1)).ok
+        until(devices, {"left": "running", "right": "disarmed"})
+        os.kill(first.pid, signal.SIGKILL)
+        first.wait(10)
+        board["guardian_beat"], board["guardian_pid"] = time.perf_counter(), float(standby.pid)  # as stand_by does
+        run(devices, 12, 500)
+        assert devices.states()["left"] in ("parking", "parked")
+        assert "standby" in devices.devices[0].life.history[-1].by or devices.states()["left"] == "parked"
+        assert devices.guardian_losses == 1 and devices.devices[0].counters["guardian_stops"] == 1
+        until(devices, {"left": "parked", "right": "disarmed"})
+        assert devices.request(cmd.Arm("left", "test", 2)).ok  # a guardian watches: arming is allowed
+    finally:
+        for process in (first, standby):
+            process.kill()
+            process.wait(10)
