@@ -111,6 +111,19 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     assert devices.status()["devices"][0]["name"] == "left"
 
 
+def running_then_killed(devices: TickDevices, guardian: subprocess.Popen[bytes]) -> None:
+    """``guardian`` (a sleeping process) on the board, "left" armed and running, then the
+    guardian killed (SIGKILL) and reaped."""
+    board = devices.board
+    assert board is not None
+    board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+    until(devices, {"left": "disarmed", "right": "disarmed"})
+    assert devices.request(cmd.Arm("left", "test", 1)).ok
+    until(devices, {"left": "running", "right": "disarmed"})
+    os.kill(guardian.pid, signal.SIGKILL)
+    guardian.wait(10)
+
+
 def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is_refused(  # type: ignore[no-untyped-def]
     tick_devices, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -121,12 +134,7 @@ def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is
     devices, _, board = tick_devices
     guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
-        board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
-        until(devices, {"left": "disarmed", "right": "disarmed"})
-        assert devices.request(cmd.Arm("left", "test", 1)).ok
-        until(devices, {"left": "running", "right": "disarmed"})
-        os.kill(guardian.pid, signal.SIGKILL)
-        guardian.wait(10)
+        running_then_killed(devices, guardian)
         killed = time.perf_counter()
         run(devices, 2, 100, beat=False)
         assert devices.states()["left"] == "parking"  # on the next ticks, not after a timeout
@@ -196,12 +204,7 @@ def test_a_standby_that_takes_over_between_two_looks_still_parks_the_armed_devic
     devices, _, board = tick_devices
     first, standby = (subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) for _ in range(2))
     try:
-        board["guardian_pid"], board["guardian_ready"] = float(first.pid), 1.0
-        until(devices, {"left": "disarmed", "right": "disarmed"})
-        assert devices.request(cmd.Arm("left", "test", 1)).ok
-        until(devices, {"left": "running", "right": "disarmed"})
-        os.kill(first.pid, signal.SIGKILL)
-        first.wait(10)
+        running_then_killed(devices, first)
         board["guardian_beat"], board["guardian_pid"] = time.perf_counter(), float(standby.pid)  # as stand_by does
         run(devices, 12, 500)
         assert devices.states()["left"] in ("parking", "parked")
