@@ -105,7 +105,7 @@ class Rig:
                 self.wait("disarmed|parked")  # parked: the tick parked it itself (case guardian)
                 for _ in range(50):
                     sup = self.supervision()
-                    if sup["guardian"]["alive"] and sup["up"]:
+                    if sup["guardian"]["alive"] and sup["up"] and sup["guardian"].get("standby_ready", True):
                         break
                     time.sleep(0.1)
                 answer = httpx.post(self.service().base + "/api/arm", json={"device": self.config.name}, timeout=10)

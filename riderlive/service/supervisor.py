@@ -389,6 +389,7 @@ class TickSupervisor:
                 "alive": self.guardian_alive() if self.guardian is not None else False,
                 "pid": None if self.guardian is None else self.guardian.pid,
                 "standby_pid": None if self.standby is None or self.standby.poll() is not None else self.standby.pid,
+                "standby_ready": self.standby is not None and board["guardian_standby"] == self.standby.pid,
                 "restarts": self.guardian_restarts,
                 "takeovers": int(board["guardian_takeovers"]),
             },
