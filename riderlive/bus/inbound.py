@@ -15,8 +15,9 @@ when it has one. A producer silent for ``nats.producer_forget`` s is forgotten; 
 **Control** (``riderlive.v1.<stage>.<rig>.control``, request/reply): ``{"action": A,
 "device": ..., "by": ..., "token": ...}`` with A one of ``state``, ``arm``, ``disarm``,
 ``reset``, ``reload``, ``estop``. The token rules are REST's (``service/devices_api.py``):
-arm, reset and reload need ``security.token`` whenever one is configured; disarm and
-e-stop when the service requires a token; ``state`` when publishing does. With
+arm, reset and reload need ``security.token`` whenever one is configured; disarm
+when the service requires a token; ``state`` when publishing does; an ``estop`` is
+never locked: latched first, token or not (counted apart when not authorized). With
 ``nats.control_auth = "credentials"`` the broker's permissions decide instead. The
 answer is ``{"ok": true, ...}`` or ``{"ok": false, "refusal": R, "message": ...}``,
 refusals counted with REST's (``riderlive_device_refusals_total``).
@@ -225,14 +226,18 @@ class Control:
             return {"ok": False, "refusal": "unknown_action", "message": f"action must be one of {', '.join(ACTIONS)}"}
         token = obj.pop("token", None)
         obj.pop("id", None)
+        if action == "estop":  # never locked (service/estop_first.py): latched first, token or not
+            latched = service.supervisor.estop(StopSource.NATS)
+            authorized = not self._needs_token(action) or auth.token_matches(service.config.security.token, token)
+            counts = getattr(service, "device_metrics", None)
+            if counts is not None:
+                counts.estops[(StopSource.NATS.label, authorized)] += 1
+            return {"ok": True, "action": "estop", "latched_at": latched, "authorized": authorized}
         if self._needs_token(action) and not auth.token_matches(service.config.security.token, token):
             service.metrics.bad_frames["unauthorized"] += 1
             return self.refuse(action, Refusal.UNAUTHORIZED, 'token required: add "token" to the request')
         if action == "state":
             return {"ok": True, **self.describe()}
-        if action == "estop":
-            latched = service.supervisor.estop(StopSource.NATS)
-            return {"ok": True, "action": "estop", "latched_at": latched}
         try:
             body: DeviceRequest | AnyDeviceRequest
             body = (DeviceRequest if action in ("arm", "reload") else AnyDeviceRequest).model_validate(obj)

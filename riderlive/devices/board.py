@@ -6,9 +6,15 @@ by exactly one of them:
 - the web process: its pid and heartbeat, the tick's pid and generation (a new
   generation per spawn), ``shutdown``;
 - the tick: its heartbeat (every tick), a clean-exit mark, and per device its state
-  and its last goal pose (seqlock'd: the guardian never reads a torn pose);
-- the guardian: its pid, heartbeat, ``ready`` once its plugs are built, the last
-  generation it has stopped, ``busy`` while it holds a bus, takeovers done.
+  and its last goal pose (seqlock'd: the guardian never reads a torn pose); while a
+  guardian stops a dead tick's devices, the guardian (so a successor, should it die
+  too, eases on from where the park had got, not from the dead tick's pose);
+- the guardian: its pid and heartbeat (from its first instant: imports come after),
+  ``ready`` once its plugs are built, the last generation it has stopped, ``busy``
+  while it holds a bus, takeovers done; a standby guardian its pid (``guardian_standby``)
+  once its plugs are built, until it becomes the guardian (the beat, then the pid).
+
+The tick watches the guardian as the guardian watches the tick (:func:`guardian_watching`).
 
 Times are ``perf_counter`` seconds (CLOCK_MONOTONIC, shared by every process here).
 """
@@ -18,8 +24,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from riderlive.devices.lifecycle import DeviceState
-from riderlive.devices.shared import Slots
+from riderlive.devices.shared import Slots, pid_alive
 
+GUARDIAN_HANG_S = 0.5
+"""A guardian whose heartbeat (written every 5 ms by its watch loop) is older than this is
+hung: armed devices get a category 1 stop from the tick, arming is refused. Generous
+because the guardian runs at normal priority on a host that may be loaded (a stall of
+tens of ms is normal there, 0.5 s is not); a dead guardian is seen at once (its pid)."""
 MAX_DEVICES = 4
 MAX_UNITS = 64
 STATES: tuple[DeviceState, ...] = tuple(DeviceState)
@@ -36,6 +47,7 @@ _HEADER = (
     "guardian_done",
     "guardian_busy",
     "guardian_takeovers",
+    "guardian_standby",
     "shutdown",
 )
 _DEVICE = ("state", "seq", "units")
@@ -90,3 +102,17 @@ class SafetyBoard(Slots):
         device from a dead tick's old pose on the new tick's behalf)."""
         for device in range(MAX_DEVICES):
             self.values[self._base + device * _PER_DEVICE + 1] = 0.0
+
+
+def guardian_watching(board: SafetyBoard, now: float) -> str | None:
+    """None while a guardian is ready, its process alive and its heartbeat younger than
+    ``GUARDIAN_HANG_S`` (``now``: perf_counter s); else why not, for the log and refusals."""
+    pid = int(board["guardian_pid"])
+    if not pid or not pid_alive(pid):
+        return "no guardian (dead-man process) is running" if not pid else f"the guardian {pid} is dead"
+    if board["guardian_ready"] != 1.0:
+        return f"the guardian {pid} is starting"
+    age = now - board["guardian_beat"]
+    if age > GUARDIAN_HANG_S:
+        return f"the guardian {pid} has not beaten for {age * 1000:.0f} ms (hung)"
+    return None

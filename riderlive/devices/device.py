@@ -42,6 +42,7 @@ from riderlive.devices.lifecycle import (
     PortLost,
     Refusal,
     Refused,
+    SetupTimeout,
     StopRequested,
     Transition,
 )
@@ -57,12 +58,17 @@ CONFIRM_FAST_S = 1.0
 """After outputs go off, read them back every tick for this long, then every ``IDLE_CHECK_S``."""
 IDLE_CHECK_S = 0.5
 """While off (disarmed, parked, e-stop, fault): read back that outputs are still off."""
+SETUP_TIMEOUT_S = 15.0
+"""Longest a device may stay ``connecting`` (a transport held by another process, a setup
+that never ends): then a ``setup_timeout`` fault, counted; a reset tries again. The
+guardian's own wait for a port held by a process it has killed is shorter (5 s)."""
 
 
 @dataclass
 class StopRecord:
     """The last e-stop (``perf_counter`` s, one clock for every process on the host):
-    requested (latch time), acted on by the bus owner, outputs-off written, read back off."""
+    requested (latch time), acted on by the bus owner, outputs-off written, read back off;
+    and when the last goal write before it began (None: the plug does not say)."""
 
     source: str = ""
     requested_at: float | None = None
@@ -70,6 +76,7 @@ class StopRecord:
     off_written_at: float | None = None
     confirmed_at: float | None = None
     repeats: int = 0
+    last_goal_at: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -80,6 +87,7 @@ class StopRecord:
             "confirmed_at": self.confirmed_at,
             "confirmed": self.confirmed_at is not None,
             "repeats": self.repeats,
+            "last_goal_at": self.last_goal_at,
         }
 
 
@@ -138,6 +146,7 @@ class Device:
         self.armed_by: str | None = None
         self.last_stop: StopRecord | None = None
         self._setup: Any = None
+        self._setup_since: float | None = None
         self._move_t0: float | None = None
         self._last_now: float | None = None
         self._off_confirmed = True
@@ -331,13 +340,20 @@ class Device:
         self._configured = False
         self.detail = "opening the transport"
         self._setup = self.plug.setup(self._say)
+        self._setup_since = time.perf_counter()
         self._go(S.CONNECTING, reason, by)
 
     def _say(self, detail: str) -> None:
         self.detail = detail
 
     def _run_setup(self, now: float) -> None:
-        """Setup transactions until half a tick is used (the rest is the tick's)."""
+        """Setup transactions until half a tick is used (the rest is the tick's); a setup
+        longer than ``SETUP_TIMEOUT_S`` is a fault."""
+        since = self._setup_since
+        if since is not None and (took := time.perf_counter() - since) > SETUP_TIMEOUT_S:
+            detail = self.detail
+            self._quietly(self.plug.close)
+            raise SetupTimeout(f"still connecting after {took:.1f} s (bound {SETUP_TIMEOUT_S:g} s): {detail}")
         budget_end = time.perf_counter() + 0.5 * self.period_s
         while self._setup is not None:
             try:
@@ -416,6 +432,8 @@ class Device:
         self.counters["estops"] += 1
         source = self.latch.source
         record = StopRecord(source.label if source else "api", self.latch.requested_at, time.perf_counter())
+        begun = getattr(self.plug, "goal_begun_at", None)  # a plug that says when its goal writes begin
+        record.last_goal_at = begun if isinstance(begun, float) else None
         self.last_stop = record
         self._off_confirmed, self._off_since, self._next_check = False, now, now
         try:

@@ -62,6 +62,11 @@ power cut, a port now owned by someone else); the servos' Bus Watchdog and the h
 e-stop are all that is left, and an orphan guardian writing to a reused port forever
 would be a hazard of its own."""
 KILL_WAIT_S = 2.0
+PORT_RELEASE_S = 5.0
+"""How long a transport held by another process (the tick just killed, whose file the
+kernel has not released yet) is waited for before this stop gives up on it (logged with
+the holder's pid); the next tick's connect then waits for it, and faults
+(``setup_timeout``) if it stays held."""
 
 
 class Guardian:
@@ -91,6 +96,7 @@ class Guardian:
     def run(self) -> int:
         board = self.board
         board["guardian_pid"] = float(os.getpid())
+        board["guardian_beat"] = time.perf_counter()
         board["guardian_ready"] = 1.0
         log.info("watching %s", ", ".join(s.name for s in self.specs))
         while not self.exit and not board["shutdown"]:
@@ -178,23 +184,15 @@ class Guardian:
             return  # never connected by that tick: nothing of ours on its bus
         state, pose = last
         device = Device(make_plug(spec), spec.period_s, self.latch)
-        deadline = time.perf_counter() + 1.0
-        while True:
-            try:
-                device.takeover(pose, state.moving)
-                break
-            except PortBusy:
-                if time.perf_counter() > deadline:
-                    log.error("%s: the transport stays held by another process: cannot stop it", spec.name)
-                    return
-                time.sleep(0.002)
-            except PortLost as exc:
-                log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
-                return
-        started = next_tick = time.perf_counter()
+        if not self._take(device, spec, pose, state.moving):
+            return
+        off_since: float | None = None
+        next_tick = time.perf_counter()
         try:
             while True:
-                status = device.tick(None, time.perf_counter())
+                now = time.perf_counter()
+                status = device.tick(None, now)
+                self.board.publish(index, device.state, device.plug.pose)  # a successor goes on from here
                 if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
                     log.error("%s: the port went away during the stop", spec.name)
                     return
@@ -202,12 +200,14 @@ class Guardian:
                     if status.outputs_off_confirmed:
                         log.warning("%s: stopped, outputs off (read back)", spec.name)
                         return
+                    off_since = now if off_since is None else off_since  # the read-back's time starts here
                     web = int(self.board["web_pid"])
                     handback = bool(web and pid_alive(web))
-                    if time.perf_counter() - started > (HANDBACK_AFTER_S if handback else self.give_up_s):
+                    if now - off_since > (HANDBACK_AFTER_S if handback else self.give_up_s):
                         log.error(
-                            "%s: outputs-off not confirmed; %s",
+                            "%s: outputs-off not confirmed in %.1f s of read-backs; %s",
                             spec.name,
+                            now - off_since,
                             "handing the bus back" if handback else "giving up (the servos' watchdog holds them)",
                         )
                         return
@@ -215,6 +215,51 @@ class Guardian:
                 time.sleep(max(0.0, next_tick - time.perf_counter()))
         finally:
             device.plug.close()
+
+    def _take(self, device: Device, spec: DeviceSpec, pose: list[float], moving: bool) -> bool:
+        """Open the transport (waiting up to ``PORT_RELEASE_S`` for a killed holder's file
+        to be released) and start the stop; False when it cannot be taken."""
+        deadline = time.perf_counter() + PORT_RELEASE_S
+        waited = False
+        while True:
+            try:
+                device.takeover(pose, moving)
+                if waited:
+                    log.warning("%s: the transport was released: taken over", spec.name)
+                return True
+            except PortBusy:
+                if time.perf_counter() > deadline:
+                    log.error(
+                        "%s: the transport stays held by %s for %.0f s: cannot stop it (the next tick's connect "
+                        "waits for it, then faults)",
+                        spec.name,
+                        holders(spec.port) or "another process",
+                        PORT_RELEASE_S,
+                    )
+                    return False
+                waited = True
+                time.sleep(0.005)
+            except PortLost as exc:
+                log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
+                return False
+
+
+def holders(port: str | None) -> str:
+    """Which processes hold ``port`` open ("pid 123 (python)", ...; "" if none found or no /proc)."""
+    if not port:
+        return ""
+    try:
+        target = os.path.realpath(port)
+        found = []
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            with contextlib.suppress(OSError):
+                fds = os.listdir(f"/proc/{pid}/fd")
+                if any(os.path.realpath(f"/proc/{pid}/fd/{fd}") == target for fd in fds):
+                    with open(f"/proc/{pid}/comm") as comm:
+                        found.append(f"pid {pid} ({comm.read().strip()})")
+        return ", ".join(found)
+    except OSError:
+        return ""
 
 
 def launch(
@@ -225,14 +270,47 @@ def launch(
     web_timeout_s: float,
     *,
     give_up_s: float = GIVE_UP_AFTER_S,
+    standby_after: int = 0,
 ) -> subprocess.Popen[bytes]:
-    """Start the guardian in its own session (signals to the terminal's group skip it)."""
+    """Start the guardian in its own session (signals to the terminal's group skip it);
+    ``standby_after``: a standby that waits, imports paid and plugs built, to become the
+    guardian when guardian ``standby_after`` (or the one that follows it) is gone."""
     args = [sys.executable, "-m", "riderlive.devices.guardian", "--board", board, "--latch", latch]
     args += ["--tick-timeout", repr(tick_timeout_s), "--web-timeout", repr(web_timeout_s)]
-    args += ["--give-up", repr(give_up_s)]
+    args += ["--give-up", repr(give_up_s)] + (["--standby-after", str(standby_after)] if standby_after else [])
     for spec in specs:
         args += ["--device", spec.to_json()]
     return subprocess.Popen(args, start_new_session=True, stdin=subprocess.DEVNULL)
+
+
+def stand_by(board: SafetyBoard, after: int, poll_s: float = POLL_S) -> bool:
+    """A standby guardian, its imports paid and its plugs built: wait until the active
+    guardian (the board's, or ``after`` until that one has written its pid) is gone (at
+    once through a pidfd), then become it (True), or until shutdown (False). Its heartbeat
+    comes before its pid, so nobody sees the new pid with the old guardian's stale beat."""
+    pidfd: int | None = None
+    watched = 0
+    try:
+        while not board["shutdown"]:
+            active = int(board["guardian_pid"]) or after
+            if not pid_alive(active):
+                board["guardian_beat"] = time.perf_counter()
+                board["guardian_pid"] = float(os.getpid())
+                board["guardian_standby"] = 0.0
+                log.warning("the guardian %d is gone: the standby %d takes over", active, os.getpid())
+                return True
+            if active != watched:
+                if pidfd is not None:
+                    os.close(pidfd)
+                pidfd, watched = None, active
+                with contextlib.suppress(OSError):
+                    pidfd = os.pidfd_open(active)
+            with contextlib.suppress(OSError, ValueError):
+                select.select([] if pidfd is None else [pidfd], [], [], poll_s)
+        return False
+    finally:
+        if pidfd is not None:
+            os.close(pidfd)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -243,10 +321,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--tick-timeout", type=float, default=0.1)
     parser.add_argument("--web-timeout", type=float, default=1.0)
     parser.add_argument("--give-up", type=float, default=GIVE_UP_AFTER_S, help="see GIVE_UP_AFTER_S")
+    parser.add_argument("--standby-after", type=int, default=0, metavar="PID", help="stand by for guardian PID")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     board, latch = SafetyBoard(args.board), StopLatch(args.latch)
+    if not args.standby_after:
+        board["guardian_beat"] = time.perf_counter()  # alive from here (ready once the plugs are built)
+        board["guardian_pid"] = float(os.getpid())
     guardian = Guardian(
         board,
         latch,
@@ -260,7 +342,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         guardian.exit = True  # after any stop in progress
 
     signal.signal(signal.SIGTERM, on_term)
+    if args.standby_after:
+        board["guardian_standby"] = float(os.getpid())  # ready to take over from here
     try:
+        if args.standby_after and not stand_by(board, args.standby_after):
+            return 0
         return guardian.run()
     finally:
         board.close()

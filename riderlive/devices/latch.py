@@ -5,14 +5,18 @@ for REST and websocket e-stops, the CLI on SIGINT/SIGTERM) and a *reaction* (the
 process that owns the bus writes torque off). Between the two lives this latch: a few
 slots in shared memory and a file lock on that segment.
 
-"No goal write after the request" is structural: every goal write happens inside
-:meth:`StopView.gate`, which holds the lock and refuses (:class:`StopRequested`) when a
-request is pending. :meth:`StopLatch.request` takes the same lock to record the
-request, so a request is ordered either after a whole goal write or before its check;
-a signal handler that interrupts this process's own write (SIGINT of the CLI) has its
-request recorded the moment the write is done. The lock is held for one write system call (~20 us); a requester
-that cannot get it within ``LOCK_WAIT_S`` (the writer is frozen, say) records the
-request anyway and counts it. A killed holder releases the lock with its file.
+"No goal write begins after the request" is structural. A request is recorded at once
+(a few stores to shared memory, no lock, nothing to wait for: from a signal handler
+too), and every goal write happens inside :meth:`StopView.gate`, which refuses
+(:class:`StopRequested`) when a request is pending at its entry **and again at the
+write itself** (:meth:`StopView.check_write`, called by the transport immediately
+before the bytes go out, under the gate's lock): a request recorded while the writer
+computed, drained the line or was descheduled stops the write it was about to send.
+After recording, :meth:`StopLatch.request` takes the gate's lock (a file lock on the
+segment) so that it returns only once a write already under way has left: from then
+on no goal can be in progress. The lock is held for one write system call (~20 us); a
+requester that cannot get it within ``LOCK_WAIT_S`` (the writer is frozen, say)
+returns anyway and counts it. A killed holder releases the lock with its file.
 
 The latch stays set until :meth:`clear` (an operator's reset), across tick restarts:
 new devices that find it set go to ``estop``, not ``disarmed``.
@@ -32,7 +36,7 @@ from riderlive.devices.lifecycle import StopRequested
 from riderlive.devices.shared import Slots, lock_path
 
 LOCK_WAIT_S = 0.002
-"""How long a request waits for a goal write in progress before recording anyway."""
+"""How long a request (already recorded) waits for a goal write under way to leave."""
 _SLOTS = ("requested", "handled", "latched", "requested_at", "source", "lock_timeouts")
 
 
@@ -63,7 +67,6 @@ class StopLatch:
         self._thread_lock = threading.Lock()  # requests from threads of one process: one at a time
         self._gate_owner: int | None = None
         """The thread inside a gate of this process (a signal handler may interrupt it)."""
-        self._deferred: list[StopSource] = []
 
     @property
     def name(self) -> str:
@@ -72,32 +75,30 @@ class StopLatch:
     # -- the requester's side ----------------------------------------------------------
 
     def request(self, source: StopSource = StopSource.API) -> float:
-        """Record an e-stop request; return its time (perf_counter s, after the lock).
+        """Record an e-stop request at once; return its time (perf_counter s, when recorded).
 
-        Called by a signal handler that interrupted this process's own goal write (the
-        thread inside the gate), the request is recorded the moment the write is done."""
+        Then wait (up to ``LOCK_WAIT_S``) for a goal write under way to leave, unless the
+        caller is a signal handler that interrupted this thread's own write (the write's
+        check refuses it if it has not begun). Two requests at the same instant from two
+        processes may count as one in ``requested`` (both latch, and both are pending)."""
+        now = time.perf_counter()
+        slots = self._slots
+        slots["requested_at"] = now
+        slots["source"] = float(source)
+        slots["latched"] = 1.0
+        slots["requested"] = slots["requested"] + 1.0  # pending from here: every gate refuses
         if self._gate_owner == threading.get_ident():
-            self._deferred.append(source)
-            return time.perf_counter()
+            return now
         acquired = self._thread_lock.acquire(timeout=LOCK_WAIT_S)
         try:
-            locked = self._flock(self._request_fd, LOCK_WAIT_S)
-            try:
-                now = time.perf_counter()
-                slots = self._slots
-                slots["requested_at"] = now
-                slots["source"] = float(source)
-                slots["latched"] = 1.0
-                slots["requested"] = slots["requested"] + 1.0
-                if not locked:
-                    slots["lock_timeouts"] = slots["lock_timeouts"] + 1.0
-                return now
-            finally:
-                if locked:
-                    fcntl.flock(self._request_fd, fcntl.LOCK_UN)
+            if self._flock(self._request_fd, LOCK_WAIT_S):
+                fcntl.flock(self._request_fd, fcntl.LOCK_UN)
+            else:
+                slots["lock_timeouts"] = slots["lock_timeouts"] + 1.0
         finally:
             if acquired:
                 self._thread_lock.release()
+        return now
 
     @staticmethod
     def _flock(fd: int, wait_s: float) -> bool:
@@ -172,10 +173,17 @@ class StopView:
         self.seen = requested
         return True
 
+    def check_write(self) -> None:
+        """Immediately before a write's bytes go out: inside this thread's gate, raise
+        StopRequested if a request was recorded since the gate's entry (outside a gate:
+        nothing to check, an outputs-off or a read)."""
+        if self.latch._gate_owner == threading.get_ident() and self.pending:
+            raise StopRequested("e-stop requested before the write began")
+
     @contextlib.contextmanager
     def gate(self) -> Iterator[None]:
         """Around a goal write: raises StopRequested instead of entering if a request is
-        pending (or is being recorded right now); no request can be recorded inside."""
+        pending; the transport calls :meth:`check_write` at the write itself."""
         latch = self.latch
         if not latch._flock(latch._gate_fd, LOCK_WAIT_S):
             raise StopRequested("e-stop being requested")
@@ -187,5 +195,3 @@ class StopView:
         finally:
             latch._gate_owner = None
             fcntl.flock(latch._gate_fd, fcntl.LOCK_UN)
-            while latch._deferred:  # a signal handler asked while this thread wrote
-                latch.request(latch._deferred.pop(0))

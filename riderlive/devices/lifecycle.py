@@ -107,12 +107,15 @@ class Refusal(enum.StrEnum):
     MOVING = "moving"
     TICK_DOWN = "tick_down"
     BAD_CONFIG = "bad_config"
+    NO_GUARDIAN = "no_guardian"
+    """No guardian (dead-man process) is alive and watching: nothing may move."""
 
 
 REFUSAL_STATUS: dict[Refusal, int] = {
     Refusal.UNKNOWN_DEVICE: 404,
     Refusal.UNAUTHORIZED: 401,
     Refusal.TICK_DOWN: 503,
+    Refusal.NO_GUARDIAN: 503,
     Refusal.BAD_CONFIG: 422,
 }
 """HTTP status of a refusal (409 Conflict when not listed: the request is fine, the state is not)."""
@@ -185,6 +188,11 @@ class TickGap(DeviceError):
         )
 
 
+class SetupTimeout(DeviceError):
+    """Connecting (open, check, configure) did not end within its bound: the transport stayed
+    held by another process, or the units kept it busy."""
+
+
 class BusErrors(DeviceError):
     """The transport's error budget is spent: failures come faster than they drain."""
 
@@ -202,6 +210,7 @@ class FaultKind(enum.StrEnum):
     REJECTED = "rejected"
     TICK_GAP = "tick_gap"
     BUS_ERRORS = "bus_errors"
+    SETUP_TIMEOUT = "setup_timeout"
     INTERNAL = "internal"
 
 
@@ -213,6 +222,7 @@ _KINDS: tuple[tuple[type[BaseException], FaultKind], ...] = (
     (Rejected, FaultKind.REJECTED),
     (TickGap, FaultKind.TICK_GAP),
     (BusErrors, FaultKind.BUS_ERRORS),
+    (SetupTimeout, FaultKind.SETUP_TIMEOUT),
 )
 
 

@@ -70,6 +70,8 @@ class RigPlug(PlugBase):
         self.clamped: list[bool] = [False] * n
         self.goal_written_at: float | None = None
         """perf_counter time the last goal SYNC_WRITE returned (handed to the port)."""
+        self.goal_begun_at: float | None = None
+        """perf_counter time the last goal SYNC_WRITE began (its write system call; in the e-stop record)."""
         self.off_written_at: float | None = None
         """perf_counter time the last outputs-off write returned (the first, if written twice)."""
         self.tracking: list[float | None] = [None] * n
@@ -156,6 +158,7 @@ class RigPlug(PlugBase):
         with self._gate():
             self.bus.sync_write(self._spec.spec(Item.GOAL_POSITION), pulses)
         self.goal_written_at = time.perf_counter()
+        self.goal_begun_at = self.bus.port.last_write  # set as the packet's write began (after the latch's check)
         self.goals, self.clamped = goals, clamped
         self.counters["goal_writes"] += 1
         self.counters["clamps"] += sum(clamped)

@@ -17,13 +17,12 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from riderlive.devices.board import SafetyBoard
+from riderlive.devices.board import SafetyBoard, guardian_watching
 from riderlive.devices.device import Device, DeviceStatus
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
 from riderlive.devices.plug import NotTunable
 from riderlive.devices.registry import DeviceSpec, make_plug
-from riderlive.devices.shared import pid_alive
 from riderlive.realtime import commands as cmd
 from riderlive.tickframe import TickFrame
 
@@ -31,6 +30,8 @@ log = logging.getLogger(__name__)
 REST_STATES = frozenset({DeviceState.DISCONNECTED, DeviceState.DISARMED, DeviceState.PARKED})
 REST_STATES |= {DeviceState.ESTOP, DeviceState.FAULT}
 """States in which a device holds no pose: shutdown may stop ticking."""
+GUARDIAN_CHECK_S = 0.005
+"""How often the tick looks at the guardian (its pid and heartbeat on the safety board)."""
 
 
 class TickDevices:
@@ -56,6 +57,17 @@ class TickDevices:
         self._auto_armed: set[str] = set()
         self.goal_written_at: float | None = None
         """perf_counter time this tick's last goal write returned (None: no device wrote a goal)."""
+        self.guardian_lost: str | None = None
+        """Why no guardian watches now (None: one does); see :meth:`watch_guardian`."""
+        self.guardian_losses = 0
+        """Times a watching guardian was lost (dead or hung) while this tick ran."""
+        self.guardian_stops = 0
+        """Armed devices this tick stopped itself because the guardian was lost."""
+        self.arms_refused_no_guardian = 0
+        self._guardian_next = 0.0
+        self._guardian_seen = False
+        self._guardian_pid = 0
+        """The guardian last seen watching (a new pid means the one that watched is gone)."""
 
     def open(self) -> None:
         for device in self.devices:
@@ -80,7 +92,7 @@ class TickDevices:
     def tick(self, frame: TickFrame) -> bool:
         """Tick each device that is due at ``frame.tick`` with the tick's frame (each reads the
         parts it consumes) at ``frame.at``; True when a state changed (publish now)."""
-        changed = False
+        changed = self.watch_guardian(frame.at)
         self.goal_written_at = None
         now = frame.at
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
@@ -137,13 +149,57 @@ class TickDevices:
         raise Refused(Refusal.UNKNOWN_DEVICE, f"no device {name!r} (devices: {known})")
 
     def _arm(self, device: Device, by: str) -> None:
-        if self.guardian_required and not self.guardian_alive():
-            raise Refused(Refusal.NOT_READY, "the guardian (dead-man process) is not running: nothing may move")
+        if self.guardian_required:
+            why = self._guardian_why(time.perf_counter())
+            if why is not None:
+                self.arms_refused_no_guardian += 1
+                raise Refused(Refusal.NO_GUARDIAN, f"{why}: nothing may move until a guardian watches")
+            self.guardian_lost, self._guardian_seen = None, True  # seen watching: a loss from here counts
+            self._guardian_pid = 0 if self.board is None else int(self.board["guardian_pid"])
         device.arm(device.name, by)
 
     def guardian_alive(self) -> bool:
-        board = self.board
-        return board is not None and board["guardian_ready"] == 1.0 and pid_alive(int(board["guardian_pid"]))
+        return self.board is not None and self._guardian_why(time.perf_counter()) is None
+
+    def _guardian_why(self, now: float) -> str | None:
+        return "no safety board" if self.board is None else guardian_watching(self.board, now)
+
+    def watch_guardian(self, now: float) -> bool:
+        """The watched watchman: every ``GUARDIAN_CHECK_S``, with a guardian required, look at
+        it; dead, hung or not there, each armed device gets a category 1 stop from the tick
+        itself (its disarm: ease to park, outputs off, read back). True when that happened."""
+        if not self.guardian_required or now < self._guardian_next:
+            return False
+        self._guardian_next = now + GUARDIAN_CHECK_S
+        why = self._guardian_why(time.perf_counter())
+        pid = 0 if self.board is None else int(self.board["guardian_pid"])
+        replaced_now = False
+        if why is None:
+            replaced_now, self._guardian_pid = self._guardian_pid not in (0, pid), pid
+            if replaced_now:
+                # A standby became the guardian between two looks: the one that watched is gone all
+                # the same (a fault of the safety chain): the same stop; arming may follow at once.
+                why, self.guardian_lost = f"the guardian that watched is gone (its standby {pid} watches now)", None
+        if why is None:
+            self._guardian_seen = True
+            if self.guardian_lost is not None:
+                log.warning("a guardian watches again (nothing re-arms)")
+            self.guardian_lost = None
+            return False
+        if not replaced_now:
+            self._guardian_pid = 0  # a loss seen as such: the next guardian is no replacement
+        if self.guardian_lost is None and self._guardian_seen:
+            self.guardian_losses += 1
+            log.critical("%s: armed devices park (category 1 stop by the tick), arming is refused", why)
+        self.guardian_lost = why
+        stopped = False
+        for device in self.devices:
+            if device.state.armed:
+                device.counters["guardian_stops"] += 1
+                self.guardian_stops += 1
+                device.disarm(f"tick: {why}")
+                stopped = True
+        return stopped
 
     def _reset(self, targets: list[Device], command: cmd.Reset) -> str:
         done = []
@@ -224,5 +280,13 @@ class TickDevices:
             "devices": [{k: s[k] for k in summary_keys} for s in full],
             "rig": rig,
             "platform": platform,
-            "guardian": None if self.board is None else {"alive": self.guardian_alive()},
+            "guardian": None
+            if self.board is None
+            else {
+                "alive": self.guardian_alive(),
+                "lost": self.guardian_lost,
+                "losses": self.guardian_losses,
+                "stops": self.guardian_stops,
+                "arms_refused": self.arms_refused_no_guardian,
+            },
         }

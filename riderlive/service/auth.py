@@ -67,6 +67,9 @@ class Rule(enum.Enum):
     """When the service requires one: bound beyond loopback, or ``security.require_token``."""
     ARMING = "arming"
     """Whenever one is configured, loopback too: the request makes hardware move (or may)."""
+    NEVER_LOCKED = "never-locked"
+    """Never: an e-stop stops with or without the token (``service/estop_first.py`` latches it
+    before this guard; one without the token is counted apart and logged there)."""
 
 
 @dataclass(frozen=True)
@@ -84,8 +87,8 @@ WRITE_RULES: Mapping[tuple[str, str], WriteRule] = {
     ("POST", "/api/reload"): WriteRule(Rule.ARMING, "reload"),
     ("PATCH", "/api/platform"): WriteRule(Rule.ARMING, "tune"),
     ("POST", "/api/disarm"): WriteRule(Rule.CONTROL, "disarm"),
-    # A stop follows the other control calls: off loopback it needs the token (docs/api.md).
-    ("POST", "/api/estop"): WriteRule(Rule.CONTROL, "estop"),
+    # An e-stop is never locked (docs/hardware.md, "E-stop without the token").
+    ("POST", "/api/estop"): WriteRule(Rule.NEVER_LOCKED, "estop"),
 }
 
 
@@ -110,6 +113,8 @@ class WriteGuard:
         self.refused = refused
 
     def needs_token(self, rule: WriteRule) -> bool:
+        if rule.rule is Rule.NEVER_LOCKED:
+            return False
         return self.token is not None if rule.rule is Rule.ARMING else self.required
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:

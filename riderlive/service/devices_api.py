@@ -7,8 +7,11 @@
     POST /api/reload  {"device": "bench3"}        re-read its file (refused while it moves)
 
 Arm, reset and reload need the token whenever one is configured, even on loopback;
-disarm and e-stop (stopping) follow the other control calls (a token when bound beyond
-loopback). ``auth.WriteGuard`` checks it (``auth.WRITE_RULES``) before a body is read.
+disarm follows the other control calls (a token when bound beyond loopback);
+``auth.WriteGuard`` checks it (``auth.WRITE_RULES``) before a body is read. An
+e-stop is never locked: latched by the outermost ASGI layer before anything else
+(:mod:`riderlive.service.estop_first`), token or not; one without the token is
+counted apart and logged.
     GET  /api/devices                             lifecycle of each device, supervision
     GET  /healthz, /readyz                        liveness and readiness (no token)
 
@@ -19,6 +22,7 @@ A refused request changes nothing and answers 401/404/409/422/503 with
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from collections import Counter
@@ -35,11 +39,13 @@ from riderlive.names import NAME_PATTERN
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
+from riderlive.service.estop_first import EStopFirst, stamps
 from riderlive.tickframe import computed_parts
 
 if TYPE_CHECKING:
     from riderlive.service.runtime import Service
 
+log = logging.getLogger(__name__)
 NAME = pydantic.Field(pattern=NAME_PATTERN)
 """A device name: a name like every user-given name (riderlive/names.py)."""
 BY = pydantic.Field(default=None, pattern=r"^[A-Za-z0-9][A-Za-z0-9 _-]{0,31}$")
@@ -91,13 +97,19 @@ class DeviceMetrics:
 
     def __init__(self) -> None:
         self.refusals: Counter[tuple[str, str]] = Counter()
-        self.estops: Counter[str] = Counter()
+        self.estops: Counter[tuple[str, bool]] = Counter()
+        """E-stop requests by (source label, authorized: with the token or where none is needed)."""
 
 
 def add_device_routes(app: FastAPI, service: Service) -> None:
     config = service.config
     counts = DeviceMetrics()
     service.device_metrics = counts
+
+    def latch_now(source: StopSource) -> float:  # the supervisor of the running service (bound late)
+        return service.supervisor.estop(source)
+
+    app.add_middleware(EStopFirst, estop=latch_now)  # outermost: added last, after RestGuard and CORS
 
     def refuse(action: str, reason: Refusal | str, message: str) -> HTTPException:
         reason = Refusal(reason)
@@ -130,12 +142,19 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
         by = who(operator(request), body)
         return await answer("disarm", lambda r: cmd.Disarm(body.device if body else None, by, r))
 
-    @app.post("/api/estop", summary="Emergency stop, latched: every device's outputs off at once")
+    @app.post("/api/estop", summary="Emergency stop, latched: every device's outputs off at once (never locked)")
     async def estop(request: Request) -> dict[str, Any]:
-        received = time.perf_counter()  # the token was checked before (auth.WriteGuard)
-        latched = service.supervisor.estop(StopSource.REST)
-        counts.estops[StopSource.REST.label] += 1
-        return {"estop": True, "received_at": received, "latched_at": latched}
+        first = stamps(request.scope)
+        if first is None:  # not through the outer layer (never in the service): latch here
+            first = (time.perf_counter(), service.supervisor.estop(StopSource.REST))
+        received, latched = first
+        given = auth.bearer(request.headers.get("authorization"))
+        authorized = auth.token_matches(config.security.token, given) or not config.token_required
+        counts.estops[(StopSource.REST.label, authorized)] += 1
+        if not authorized:
+            host = request.client.host if request.client else "?"
+            log.warning("e-stop without the token from %s: latched (an e-stop is never locked)", host)
+        return {"estop": True, "received_at": received, "latched_at": latched, "authorized": authorized}
 
     @app.post("/api/reset", summary="Clear the e-stop and device faults: disarmed (never arms)")
     async def reset(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
@@ -162,6 +181,7 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
             "devices": status.get("devices", []),
             "platform": status.get("platform"),
             "estop": service.link.latch.latched,
+            "guardian": status.get("guardian"),
             "supervision": service.supervisor.snapshot(),
         }
 
@@ -223,6 +243,16 @@ def render_device_metrics(service: Service) -> str:
         "counter",
         "E-stop requests (all sources).",
         [f"riderlive_estop_requests_total {latch.requested}"],
+    )
+    by_source = [
+        f'riderlive_estop_requests_by_source_total{{source="{source}",authorized="{"yes" if ok else "no"}"}} {n}'
+        for (source, ok), n in sorted(service.device_metrics.estops.items())
+    ]
+    metric(
+        "riderlive_estop_requests_by_source_total",
+        "counter",
+        "E-stop requests the web process received, by source and whether it was authorized (never refused).",
+        by_source,
     )
     states, events = [], []
     for device in service.link.status().get("devices", []):

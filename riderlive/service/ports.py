@@ -14,6 +14,7 @@ what it is told and a clock they set (``tests/service/fakes.py``).
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
@@ -86,8 +87,18 @@ class ServicePort(Protocol):
         ...
 
 
+class StopCounts(Protocol):
+    @property
+    def estops(self) -> Counter[tuple[str, bool]]:
+        """E-stop requests by (source label, authorized) (``devices_api.DeviceMetrics``)."""
+        ...
+
+
 class PublishPort(ServicePort, Protocol):
     """What ``/ws/rider`` reads of the service."""
+
+    @property
+    def device_metrics(self) -> StopCounts: ...
 
     @property
     def poses(self) -> PosesPort: ...

@@ -98,7 +98,7 @@ class Subscriber:
     """The raw transport (fast path), or None: frames then go through the slot."""
     behind_since: float | None = None
     controls: bool = False
-    """May send control messages (``estop``): no control token is required, or it gave it."""
+    """Gave the control token, or none is required (an ``estop`` is latched either way, counted apart)."""
 
     def offer_frame(self, data: str | bytes, input_rx: float) -> None:
         if self.frame is not None:
@@ -414,7 +414,14 @@ class Hub:
         try:
             obj = parse_message(data, service.config.input.max_message_bytes)
             kind = obj.get("type")
-            if kind == "subscribe":
+            if kind == "estop":  # first: latched at once, token or not (never locked: estop_first.py)
+                latched = service.supervisor.estop(StopSource.WEBSOCKET)
+                service.device_metrics.estops[(StopSource.WEBSOCKET.label, client.controls)] += 1
+                if not client.controls:
+                    log.warning("e-stop without the control token from websocket client %s: latched", client.id)
+                reply = {"type": "estop", "id": obj.get("id"), "latched_at": latched, "authorized": client.controls}
+                client.offer_control(reply)
+            elif kind == "subscribe":
                 client.subscription = decode_subscription(
                     obj, client.subscription, service.config.tick.rate, self.index
                 )
@@ -426,11 +433,6 @@ class Hub:
                 client.offer_control(pong)
             elif kind == "auth":
                 client.controls = client.controls or auth.token_matches(service.config.security.token, obj.get("token"))
-            elif kind == "estop":  # the websocket control channel: latched e-stop of every device
-                if not client.controls:
-                    raise BadFrame("unauthorized", "estop needs the control token (subprotocol or auth message)")
-                latched = service.supervisor.estop(StopSource.WEBSOCKET)
-                client.offer_control({"type": "estop", "id": obj.get("id"), "latched_at": latched})
             else:
                 raise BadFrame("unknown_type", f"unknown message type {str(kind)[:64]!r}")
         except Exception as exc:

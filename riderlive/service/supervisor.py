@@ -43,10 +43,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from riderlive.devices.board import guardian_watching
 from riderlive.devices.guardian import launch
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
-from riderlive.devices.shared import pid_alive
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink
 from riderlive.service.config import ServiceConfig
@@ -62,6 +62,9 @@ START_GRACE_S = 60.0
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
 of compiled kernels, page faults) without being taken for hung, unless a device moves."""
+GUARDIAN_START_S = 5.0
+"""Allowance for a guardian relaunched during a stop to start and finish it (its imports
+on a loaded host), on top of the park timeout."""
 _ids = itertools.count(1)
 
 
@@ -108,6 +111,8 @@ class TickSupervisor:
         self._bound: list[int] = []
         self._pending: dict[int, asyncio.Future[cmd.Reply]] = {}
         self.guardian: subprocess.Popen[bytes] | None = None
+        self.standby: subprocess.Popen[bytes] | None = None
+        """A standby guardian: becomes the guardian the moment it is gone (guardian.py)."""
         self.guardian_restarts = 0
         self._guardian_launched_at = 0.0
 
@@ -124,7 +129,7 @@ class TickSupervisor:
     async def start(self) -> None:
         self._bind()
         if self.guardian_wanted:
-            self._launch_guardian()
+            self._start_guardians()
         self._watch_task = asyncio.get_running_loop().create_task(self._watch())
 
     async def stop(self) -> None:
@@ -138,12 +143,13 @@ class TickSupervisor:
     def stop_guardian(self) -> None:
         """After the tick has stopped (its devices are closed): the guardian may go."""
         self.link.board["shutdown"] = 1.0
-        if self.guardian is not None:
-            try:
-                self.guardian.wait(2.0)
-            except subprocess.TimeoutExpired:
-                self.guardian.kill()
-                self.guardian.wait(2.0)
+        for guardian in (self.guardian, self.standby):
+            if guardian is not None:
+                try:
+                    guardian.wait(2.0)
+                except subprocess.TimeoutExpired:
+                    guardian.kill()
+                    guardian.wait(2.0)
 
     def _bind(self) -> None:
         loop = asyncio.get_running_loop()
@@ -268,8 +274,8 @@ class TickSupervisor:
         if self.guardian is None:
             return
         board = self.link.board
-        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0
-        while time.perf_counter() < deadline and self.guardian.poll() is None:
+        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0 + GUARDIAN_START_S
+        while time.perf_counter() < deadline:  # a guardian that dies meanwhile is relaunched and goes on
             if board["guardian_done"] >= generation:
                 return
             await asyncio.sleep(0.01)
@@ -277,31 +283,50 @@ class TickSupervisor:
 
     # -- the guardian --------------------------------------------------------------------
 
-    def _launch_guardian(self) -> None:
+    def _launch_guardian(self, standby_after: int = 0) -> subprocess.Popen[bytes]:
         link, guardian = self.link, self.config.guardian
-        self.guardian = launch(
+        return launch(
             link.board.name,
             link.latch.name,
             link.setup.devices,
             guardian.tick_timeout,
             guardian.web_timeout,
             give_up_s=guardian.give_up,
+            standby_after=standby_after,
         )
+
+    def _start_guardians(self) -> None:
+        """The guardian, and a standby (imports paid, plugs built) that becomes the guardian
+        within a few ms of its death: a relaunch would take a Python start and the imports."""
+        self.guardian = self._launch_guardian()
         self._guardian_launched_at = time.perf_counter()
+        self.standby = self._launch_guardian(standby_after=self.guardian.pid)
 
     def _check_guardian(self, now: float) -> None:
-        if self.guardian is None or self.guardian.poll() is None or self.stopping:
+        """The guardian gone: its standby has taken over (or it is relaunched); a new standby
+        follows (at most one launch a second)."""
+        if self.guardian is None or self.stopping:
             return
-        if now - self._guardian_launched_at < 1.0:
-            return  # at most one relaunch a second
-        log.critical("the guardian exited (%s): relaunching it; arming is refused meanwhile", self.guardian.returncode)
-        self.guardian_restarts += 1
-        self.link.board["guardian_ready"] = 0.0
-        self._launch_guardian()
+        if self.guardian.poll() is not None:
+            code = self.guardian.returncode
+            if self.standby is not None and self.standby.poll() is None:
+                log.critical("the guardian exited (%s): its standby %d takes over", code, self.standby.pid)
+                self.guardian, self.standby = self.standby, None
+            elif now - self._guardian_launched_at >= 1.0:
+                log.critical("the guardian exited (%s), no standby: relaunching it; arming is refused", code)
+                self.link.board["guardian_ready"] = 0.0
+                self.guardian, self.standby = self._launch_guardian(), None
+                self._guardian_launched_at = now
+            else:
+                return
+            self.guardian_restarts += 1
+        if (self.standby is None or self.standby.poll() is not None) and now - self._guardian_launched_at >= 1.0:
+            self.standby = self._launch_guardian(standby_after=self.guardian.pid)
+            self._guardian_launched_at = now
 
     def guardian_alive(self) -> bool:
-        board = self.link.board
-        return board["guardian_ready"] == 1.0 and pid_alive(int(board["guardian_pid"]))
+        """Ready, its process alive, its heartbeat fresh (the tick's own test: board.guardian_watching)."""
+        return guardian_watching(self.link.board, time.perf_counter()) is None
 
     # -- e-stop and requests -------------------------------------------------------------
 
@@ -363,6 +388,8 @@ class TickSupervisor:
                 "enabled": self.guardian_wanted,
                 "alive": self.guardian_alive() if self.guardian is not None else False,
                 "pid": None if self.guardian is None else self.guardian.pid,
+                "standby_pid": None if self.standby is None or self.standby.poll() is not None else self.standby.pid,
+                "standby_ready": self.standby is not None and board["guardian_standby"] == self.standby.pid,
                 "restarts": self.guardian_restarts,
                 "takeovers": int(board["guardian_takeovers"]),
             },

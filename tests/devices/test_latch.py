@@ -49,29 +49,62 @@ def test_a_request_from_another_process_is_seen_and_latched(latch: StopLatch) ->
     assert not latch.latched and latch.requested == 1
 
 
-def test_a_request_waits_for_a_goal_write_in_progress(latch: StopLatch, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Either the whole write goes before the request, or the write is refused. (The
-    requester's patience is raised here: a loaded machine may deschedule the writer for
-    longer than the real 2 ms, which the next test covers.)"""
+def test_a_request_is_recorded_at_once_and_returns_after_the_write_under_way(
+    latch: StopLatch, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The latch is set before anything waits; request() returns only once the write that
+    had begun has left. (The requester's patience is raised here: a loaded machine may
+    deschedule the writer for longer than the real 2 ms, which a test below covers.)"""
     monkeypatch.setattr(latch_module, "LOCK_WAIT_S", 5.0)
     view = latch.view()
-    inside, done = threading.Event(), threading.Event()
+    began, done = threading.Event(), threading.Event()
     left_at: list[float] = []
 
     def writer() -> None:
         with view.gate():
-            inside.set()
-            time.sleep(0.001)  # a write system call, shorter than the requester's patience
+            view.check_write()  # the write's bytes go out from here
+            began.set()
+            time.sleep(0.002)  # a write system call
             left_at.append(time.perf_counter())
         done.set()
 
     thread = threading.Thread(target=writer)
     thread.start()
-    inside.wait(5)
+    began.wait(5)
     requested_at = latch.request(StopSource.API)
+    returned_at = time.perf_counter()
     thread.join()
-    assert requested_at >= left_at[0]
-    assert latch.lock_timeouts == 0
+    assert requested_at < left_at[0] <= returned_at  # latched at once, returned after the write
+    assert latch.latched and view.pending and latch.lock_timeouts == 0
+
+
+def test_a_write_that_has_not_begun_when_the_request_is_recorded_is_refused(latch: StopLatch) -> None:
+    """The gate was entered before the request (the check passed), the write had not
+    begun (the writer computed, drained the line, was descheduled): refused at the write."""
+    view = latch.view()
+    entered, outcome = threading.Event(), []
+
+    def writer() -> None:
+        try:
+            with view.gate():
+                entered.set()
+                deadline = time.perf_counter() + 5
+                while latch.requested == 0 and time.perf_counter() < deadline:
+                    time.sleep(0.0001)
+                view.check_write()
+                outcome.append("written")
+        except StopRequested:
+            outcome.append("refused")
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    entered.wait(5)
+    latch.request(StopSource.REST)
+    thread.join()
+    assert outcome == ["refused"]
+    with pytest.raises(StopRequested), view.gate():
+        pass  # and no later gate opens until the request is acted on
+    view.check_write()  # outside a gate (an outputs-off, a read): nothing to refuse
 
 
 def test_a_writer_that_holds_the_gate_too_long_cannot_block_the_request(latch: StopLatch) -> None:
@@ -94,27 +127,27 @@ def test_a_writer_that_holds_the_gate_too_long_cannot_block_the_request(latch: S
     thread.join()
 
 
-def test_a_signal_cannot_land_between_the_check_and_the_write(latch: StopLatch) -> None:
-    """SIGTERM of the process that writes (its own handler asks for the e-stop): the
-    request is recorded once the write in progress is done, never inside it."""
+def test_a_signal_inside_the_gate_is_recorded_at_once_and_stops_the_write(latch: StopLatch) -> None:
+    """SIGTERM of the process that writes (its own handler asks for the e-stop) between
+    the gate's check and the write: recorded at once (no wait on its own lock), and the
+    write that had not begun is refused."""
     view = latch.view()
     handled: list[float] = []
 
     def on_stop(signum: int, frame: object) -> None:
-        handled.append(time.perf_counter())
-        latch.request(StopSource.SIGNAL)
+        handled.append(latch.request(StopSource.SIGNAL))
 
     previous = signal.signal(signal.SIGTERM, on_stop)
     try:
-        with view.gate():
+        with pytest.raises(StopRequested), view.gate():
             os.kill(os.getpid(), signal.SIGTERM)
             deadline = time.perf_counter() + 5
             while not handled and time.perf_counter() < deadline:
-                time.sleep(0.001)  # the handler runs here, inside the write
-            assert handled and not view.pending  # asked, but not recorded yet
-            written = time.perf_counter()
-        assert view.pending and latch.source is StopSource.SIGNAL
-        assert latch.requested_at >= written
+                time.sleep(0.001)  # the handler runs here, inside the gate
+            assert handled and view.pending and latch.source is StopSource.SIGNAL
+            view.check_write()
+            pytest.fail("the write went out after the request")
+        assert latch.requested_at == handled[0] and latch.lock_timeouts == 0
     finally:
         signal.signal(signal.SIGTERM, previous)
 

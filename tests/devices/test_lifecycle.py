@@ -276,6 +276,35 @@ def test_a_port_held_by_another_process_is_waited_for(latch: StopLatch) -> None:
     assert device.counters["port_busy"] == 1 and device.fault is None
 
 
+def test_a_port_held_for_good_ends_in_a_setup_timeout_fault_not_connecting_forever(
+    latch: StopLatch, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 25: a generation stayed ``connecting`` for 100 s behind a held port."""
+    from riderlive.devices import device as device_module
+
+    monkeypatch.setattr(device_module, "SETUP_TIMEOUT_S", 0.1)
+    device, mem = make(latch)
+
+    class Held(dict[str, BaseException]):
+        def pop(self, key: str, default: object = None) -> BaseException | None:  # type: ignore[override]
+            return PortBusy("held by pid 4242") if key == "open" else None
+
+    mem.fail_next = Held()
+    device.connect("test")
+    started = time.perf_counter()
+    until(device, S.FAULT, limit=400)
+    assert 0.1 <= time.perf_counter() - started < 1.0
+    assert device.fault is not None and device.fault.kind is FaultKind.SETUP_TIMEOUT
+    assert "held by pid 4242" in device.fault.message and not mem.open
+    assert device.counters["fault_setup_timeout"] == 1 and device.counters["port_busy"] >= 2
+    with pytest.raises(Refused):
+        device.arm("mem", "test")  # a fault: reset first
+    mem.fail_next = {}
+    assert device.reset("test") is S.CONNECTING
+    until(device, S.DISARMED)  # the port is free again: a reset connects (never arms)
+    assert not any(mem.outputs)
+
+
 def test_a_latched_estop_survives_a_new_device(latch: StopLatch) -> None:
     """A restarted tick builds new devices: they come up in estop while the latch is set."""
     latch.request(StopSource.SIGNAL)

@@ -3,11 +3,16 @@ and the registry's plan for a real rig map (divide down, or refuse naming both r
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 
 import pytest
 
+from riderlive.devices import board as board_module
 from riderlive.devices import registry
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
@@ -49,10 +54,22 @@ def tick_devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[TickDevices,
     board.close()
 
 
-def run(devices: TickDevices, ticks: int, start: int = 0) -> None:
+def run(devices: TickDevices, ticks: int, start: int = 0, beat: bool = True) -> None:
+    """Tick; ``beat``: the guardian on the board (if any) beats as its watch loop would."""
+    board = devices.board
     for i in range(start, start + ticks):
+        if beat and board is not None and board["guardian_pid"]:
+            board["guardian_beat"] = time.perf_counter()
         devices.tick(rider_frame(1.0, tick=i, at=time.perf_counter()))
         time.sleep(0.001)
+
+
+def until(devices: TickDevices, wanted: dict[str, str], beat: bool = True, timeout: float = 5.0) -> None:
+    tick, deadline = 0, time.perf_counter() + timeout
+    while devices.states() != wanted and time.perf_counter() < deadline:
+        run(devices, 2, tick, beat)
+        tick += 2
+    assert devices.states() == wanted
 
 
 def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None:  # type: ignore[no-untyped-def]
@@ -64,8 +81,9 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
     assert board.device(0) is not None and board.device(0)[0] is S.DISARMED  # published for the guardian
 
     reply = devices.request(cmd.Arm("left", "test", 1))
-    assert not reply.ok and reply.refusal == "not_ready" and "guardian" in reply.message  # no guardian running
-    board["guardian_ready"], board["guardian_pid"] = 1.0, float(__import__("os").getpid())
+    assert not reply.ok and reply.refusal == "no_guardian" and "guardian" in reply.message  # no guardian running
+    board["guardian_ready"], board["guardian_pid"] = 1.0, float(os.getpid())
+    board["guardian_beat"] = time.perf_counter()
     reply = devices.request(cmd.Arm("middle", "test", 2))
     assert not reply.ok and reply.refusal == "unknown_device" and "'left', 'right'" in reply.message
     reply = devices.request(cmd.Arm("left", "test", 3))
@@ -107,3 +125,110 @@ def test_a_device_consuming_a_part_the_tick_lacks_is_refused_at_plan_time(monkey
     spec, _ = plan("memory", "seat", None, 100.0, computed=computed_parts(saddle_input=True))
     assert spec.consumes == ("estimate", "rider") and spec.parts == wants
     assert DeviceSpec.from_json(spec.to_json()) == spec
+
+
+def running_then_killed(devices: TickDevices, guardian: subprocess.Popen[bytes]) -> None:
+    """``guardian`` (a sleeping process) on the board, "left" armed and running, then the
+    guardian killed (SIGKILL) and reaped."""
+    board = devices.board
+    assert board is not None
+    board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+    until(devices, {"left": "disarmed", "right": "disarmed"})
+    assert devices.request(cmd.Arm("left", "test", 1)).ok
+    until(devices, {"left": "running", "right": "disarmed"})
+    os.kill(guardian.pid, signal.SIGKILL)
+    guardian.wait(10)
+
+
+def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is_refused(  # type: ignore[no-untyped-def]
+    tick_devices, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 25, the watched watchman: a guardian killed (SIGKILL) while a device runs, then
+    one that hangs (no heartbeat): each time the tick parks the armed devices itself
+    (ease to park, outputs off), counts it, and refuses to arm until a guardian watches."""
+    monkeypatch.setattr(board_module, "GUARDIAN_HANG_S", 0.15)
+    devices, _, board = tick_devices
+    guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        running_then_killed(devices, guardian)
+        killed = time.perf_counter()
+        run(devices, 2, 100, beat=False)
+        assert devices.states()["left"] == "parking"  # on the next ticks, not after a timeout
+        left = devices.devices[0]
+        assert left.life.history[-1].by.startswith(f"tick: the guardian {guardian.pid} is dead")
+        assert time.perf_counter() - killed < 0.5
+        refused = devices.request(cmd.Arm("right", "test", 2))
+        assert not refused.ok and refused.refusal == "no_guardian" and "dead" in refused.message
+        until(devices, {"left": "parked", "right": "disarmed"}, beat=False)
+        plug = left.plug
+        assert not any(plug.outputs) and plug.goals == [0.0] * 3  # type: ignore[attr-defined]
+        status = devices.status()["guardian"]
+        assert status["alive"] is False and "dead" in status["lost"]
+        assert (status["losses"], status["stops"], status["arms_refused"]) == (1, 1, 1)
+        assert left.counters["guardian_stops"] == 1
+
+        board["guardian_pid"] = float(os.getpid())  # a new guardian: arming is allowed again
+        run(devices, 10, 200)  # more than GUARDIAN_CHECK_S
+        assert devices.status()["guardian"]["alive"] and devices.status()["guardian"]["lost"] is None
+        assert devices.states()["left"] == "parked"  # nothing re-arms by itself
+        assert devices.request(cmd.Arm("left", "test", 3)).ok
+        until(devices, {"left": "running", "right": "disarmed"})
+        hung_from = time.perf_counter()  # it stops beating (SIGSTOP, a stuck loop)
+        while devices.states()["left"] == "running" and time.perf_counter() - hung_from < 5.0:
+            run(devices, 1, 300, beat=False)
+        assert devices.states()["left"] == "parking" and 0.15 <= time.perf_counter() - hung_from < 1.0
+        assert "hung" in (devices.guardian_lost or "")
+        assert devices.status()["guardian"]["losses"] == 2 and left.counters["guardian_stops"] == 2
+    finally:
+        guardian.kill()
+        guardian.wait(10)
+
+
+def test_a_guardian_killed_during_arming_parks_the_soft_start_and_nothing_moves_after(  # type: ignore[no-untyped-def]
+    tick_devices,
+) -> None:
+    """The guardian dies between the arm's acceptance and the end of the soft start, twice
+    in a row: each time the device parks from where it was, and stays parked."""
+    devices, _, board = tick_devices
+    for attempt in (1, 2):
+        guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+        try:
+            board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+            until(devices, {"left": "parked" if attempt == 2 else "disarmed", "right": "disarmed"})
+            assert devices.request(cmd.Arm("left", "test", attempt)).ok
+            assert devices.states()["left"] == "soft_start"
+            os.kill(guardian.pid, signal.SIGKILL)
+            guardian.wait(10)
+            run(devices, 12, 1000 * attempt, beat=False)  # > GUARDIAN_CHECK_S
+            assert devices.states()["left"] in ("parking", "parked")
+            until(devices, {"left": "parked", "right": "disarmed"}, beat=False)
+            run(devices, 20, 2000 * attempt, beat=False)
+            assert devices.states()["left"] == "parked"  # nothing re-arms
+            assert not any(devices.devices[0].plug.outputs)  # type: ignore[attr-defined]
+        finally:
+            guardian.kill()
+            guardian.wait(10)
+    assert devices.guardian_losses == 2 and devices.devices[0].counters["guardian_stops"] == 2
+
+
+def test_a_standby_that_takes_over_between_two_looks_still_parks_the_armed_devices(  # type: ignore[no-untyped-def]
+    tick_devices,
+) -> None:
+    """The guardian that watched is replaced by its standby faster than the tick's 5 ms
+    look: no gap is ever seen, but the pid changed: the same category 1 stop (counted);
+    arming is allowed again at once (a guardian watches)."""
+    devices, _, board = tick_devices
+    first, standby = (subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) for _ in range(2))
+    try:
+        running_then_killed(devices, first)
+        board["guardian_beat"], board["guardian_pid"] = time.perf_counter(), float(standby.pid)  # as stand_by does
+        run(devices, 12, 500)
+        assert devices.states()["left"] in ("parking", "parked")
+        assert "standby" in devices.devices[0].life.history[-1].by or devices.states()["left"] == "parked"
+        assert devices.guardian_losses == 1 and devices.devices[0].counters["guardian_stops"] == 1
+        until(devices, {"left": "parked", "right": "disarmed"})
+        assert devices.request(cmd.Arm("left", "test", 2)).ok  # a guardian watches: arming is allowed
+    finally:
+        for process in (first, standby):
+            process.kill()
+            process.wait(10)

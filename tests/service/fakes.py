@@ -17,6 +17,7 @@ from riderlive.devices.latch import StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
 from riderlive.service.config import ServiceConfig
+from riderlive.service.devices_api import DeviceMetrics
 from riderlive.service.ingest import Arbiter
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
@@ -104,3 +105,4 @@ class FakeService:
         self.extra_channels: tuple[str, ...] = RIDER_PART_NAMES
         self.supervisor = FakeStops(self.clock)
         self.timecode = host_timecode(self.config.timecode, self.clock.now, self.metrics.timecode)
+        self.device_metrics = DeviceMetrics()

@@ -165,14 +165,16 @@ def test_control_messages_subscribe_ping_and_estop() -> None:
     service.clock.advance(4.5)
     hub.handle(viewer, json.dumps({"type": "ping", "id": 7}))
     assert messages(viewer)[-1] == {"type": "pong", "id": 7, "engine_time": 4.5}
-    hub.handle(viewer, json.dumps({"type": "estop", "id": 1}))
-    refused = messages(viewer)[-1]
-    assert refused["reason"] == "unauthorized" and service.supervisor.requests == []
-    hub.handle(operator, json.dumps({"type": "estop", "id": 2}))
+    hub.handle(viewer, json.dumps({"type": "estop", "id": 1}))  # never locked: latched without the token
+    unlocked = messages(viewer)[-1]
+    assert unlocked["type"] == "estop" and unlocked["id"] == 1 and unlocked["authorized"] is False
     assert service.supervisor.requests == [StopSource.WEBSOCKET]
-    assert messages(operator)[-1]["type"] == "estop"
+    hub.handle(operator, json.dumps({"type": "estop", "id": 2}))
+    assert service.supervisor.requests == [StopSource.WEBSOCKET] * 2
+    assert messages(operator)[-1]["type"] == "estop" and messages(operator)[-1]["authorized"] is True
+    assert service.device_metrics.estops == {("websocket", False): 1, ("websocket", True): 1}
     hub.handle(viewer, b"\xff")
-    assert service.metrics.bad_frames["unauthorized"] == 1 and sum(service.metrics.bad_frames.values()) == 2
+    assert service.metrics.bad_frames["unauthorized"] == 0 and sum(service.metrics.bad_frames.values()) == 1
 
 
 def test_the_hello_describes_the_service_through_its_ports() -> None:
