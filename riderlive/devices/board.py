@@ -8,13 +8,16 @@ by exactly one of them:
 - the tick: its heartbeat (every tick), a clean-exit mark, and per device its state
   and its last goal pose (seqlock'd: the guardian never reads a torn pose);
 - the guardian: its pid, heartbeat, ``ready`` once its plugs are built, the last
-  generation it has stopped, ``busy`` while it holds a bus, takeovers done.
+  generation it has stopped, ``busy`` while it holds a bus, takeovers done, and per
+  device what it did in its last stop (:class:`GuardianReport`: what the web process
+  shows for a device while no tick generation is serving).
 
 Times are ``perf_counter`` seconds (CLOCK_MONOTONIC, shared by every process here).
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Sequence
 
 from riderlive.devices.lifecycle import DeviceState
@@ -37,7 +40,29 @@ _HEADER = (
     "guardian_busy",
     "guardian_takeovers",
     "shutdown",
+    *(f"guardian_d{d}" for d in range(MAX_DEVICES)),
 )
+
+
+class GuardianReport(enum.IntEnum):
+    """What the guardian did with a device in its last stop (``guardian_dN`` on the board)."""
+
+    NONE = 0
+    """Nothing yet (or the slot was cleared for a new generation)."""
+    PARKING = 1
+    """Taking over a device that was moving: easing it to park, then outputs off."""
+    STOPPING = 2
+    """Taking over a device that was not moving: outputs off, read back."""
+    OUTPUTS_OFF = 3
+    """Stopped: every unit read back with its outputs off."""
+    UNCONFIRMED = 4
+    """Outputs off sent but not confirmed by a read back (handed back or given up)."""
+    UNREACHABLE = 5
+    """The port was gone or held by another process: the servos' own watchdog is all that is left."""
+    NOT_CONNECTED = 6
+    """The dead tick had not connected it: nothing of ours on its bus."""
+
+
 _DEVICE = ("state", "seq", "units")
 _PER_DEVICE = len(_DEVICE) + MAX_UNITS
 
@@ -90,3 +115,16 @@ class SafetyBoard(Slots):
         device from a dead tick's old pose on the new tick's behalf)."""
         for device in range(MAX_DEVICES):
             self.values[self._base + device * _PER_DEVICE + 1] = 0.0
+
+    def report(self, device: int, report: GuardianReport) -> None:
+        """The guardian: what it is doing or did with ``device`` in its stop."""
+        self[f"guardian_d{device}"] = float(report)
+
+    def reported(self, device: int) -> GuardianReport:
+        """What the guardian last reported for ``device``."""
+        return GuardianReport(int(self[f"guardian_d{device}"]))
+
+    def clear_reports(self) -> None:
+        """The web process, when a generation fails: the guardian's reports are about it from now."""
+        for device in range(MAX_DEVICES):
+            self[f"guardian_d{device}"] = 0.0

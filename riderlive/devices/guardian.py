@@ -42,7 +42,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from riderlive.devices.board import SafetyBoard
+from riderlive.devices.board import GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
@@ -175,8 +175,10 @@ class Guardian:
     def _stop_device(self, index: int, spec: DeviceSpec) -> None:
         last = self.board.device(index)
         if last is None:
+            self.board.report(index, GuardianReport.NOT_CONNECTED)
             return  # never connected by that tick: nothing of ours on its bus
         state, pose = last
+        self.board.report(index, GuardianReport.PARKING if state.moving else GuardianReport.STOPPING)
         device = Device(make_plug(spec), spec.period_s, self.latch)
         deadline = time.perf_counter() + 1.0
         while True:
@@ -186,10 +188,12 @@ class Guardian:
             except PortBusy:
                 if time.perf_counter() > deadline:
                     log.error("%s: the transport stays held by another process: cannot stop it", spec.name)
+                    self.board.report(index, GuardianReport.UNREACHABLE)
                     return
                 time.sleep(0.002)
             except PortLost as exc:
                 log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
+                self.board.report(index, GuardianReport.UNREACHABLE)
                 return
         started = next_tick = time.perf_counter()
         try:
@@ -197,10 +201,12 @@ class Guardian:
                 status = device.tick((), time.perf_counter())
                 if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
                     log.error("%s: the port went away during the stop", spec.name)
+                    self.board.report(index, GuardianReport.UNREACHABLE)
                     return
                 if not device.state.moving:
                     if status.outputs_off_confirmed:
                         log.warning("%s: stopped, outputs off (read back)", spec.name)
+                        self.board.report(index, GuardianReport.OUTPUTS_OFF)
                         return
                     web = int(self.board["web_pid"])
                     handback = bool(web and pid_alive(web))
@@ -210,6 +216,7 @@ class Guardian:
                             spec.name,
                             "handing the bus back" if handback else "giving up (the servos' watchdog holds them)",
                         )
+                        self.board.report(index, GuardianReport.UNCONFIRMED)
                         return
                 next_tick += spec.period_s
                 time.sleep(max(0.0, next_tick - time.perf_counter()))
