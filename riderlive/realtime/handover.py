@@ -23,7 +23,7 @@ the newest complete one at takeover (``realtime/spare.py``) and goes on from the
   a hand-over of compiled-kernel state is not worth its cost).
 
 At the first tick after the takeover the rider blends from the last frame the dead tick
-published to the new output over ``Timing.blend_time`` (a smoothstep): the rider goes on
+published to the new output over :data:`BLEND_S` (a smoothstep): the rider goes on
 without a jump larger than one tick's motion, however long the gap was.
 
 A snapshot is versioned (:data:`VERSION`): a spare from another build ignores it and
@@ -32,6 +32,7 @@ starts fresh (counted, logged). Pickled: both ends are this package, in this ins
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -42,7 +43,7 @@ from riderlive.realtime.core import Driver, Mode
 from riderlive.rules.animator import DamperState, SpringState
 
 if TYPE_CHECKING:
-    from riderlive.horse import ProceduralHorse
+    from riderlive.horse import ProceduralHorse, TerrainConfig
     from riderlive.realtime.core import TickCore
     from riderlive.realtime.shm import SharedRing
 
@@ -52,6 +53,10 @@ REPLAY = 512
 """Input records replayed at takeover: the resampler's capacity (``Resampler.capacity``)."""
 SNAPSHOT_BYTES = 1 << 18
 """Size of the shared blob (a snapshot pickles to a few KiB)."""
+BLEND_S = 0.2
+"""Seconds over which the first frames after a takeover blend from the last published one
+(``Timing.blend_time`` when shorter): a smoothstep, so the first step is a small part of
+the difference, whatever the gap."""
 SNAPSHOT_RATE = 60.0
 """Snapshots written per second, about (every tick up to this rate): the input is replayed
 and the blend starts from the last published frame, so an older snapshot costs little."""
@@ -114,6 +119,16 @@ checks that every attribute is in one of the two sets: a new one must be placed)
 
 
 @dataclass(frozen=True)
+class Settings:
+    """The horse and source settings a tick has applied (its setup's, then its commands')."""
+
+    gait: str
+    speed: float | None
+    terrain: TerrainConfig | None
+    mode: Mode
+
+
+@dataclass(frozen=True)
 class TickSnapshot:
     """What one tick generation hands the next (see the module docstring). Times: engine
     seconds, except ``clock_start`` (``perf_counter`` seconds, shared by the processes)."""
@@ -134,6 +149,8 @@ class TickSnapshot:
     horse: ProceduralHorse
     phase: phase.State
     events: tuple[str, ...]
+    settings: Settings
+    """As applied by the dead tick: a setting changed while no tick ran wins over its state."""
 
 
 def capture_core(core: TickCore) -> CoreState:
@@ -162,6 +179,9 @@ def decode(data: bytes | None) -> TickSnapshot | None:
         return None
     if not isinstance(snapshot, TickSnapshot) or snapshot.version != VERSION:
         return None
+    for part, kind in ((snapshot, TickSnapshot), (snapshot.core, CoreState)):  # an install upgraded in place
+        if not all(hasattr(part, f.name) for f in dataclasses.fields(kind)):
+            return None
     return snapshot
 
 
@@ -181,15 +201,31 @@ def replay_inputs(core: TickCore, ring: SharedRing, until: int) -> int:
     return replayed
 
 
-def restore(core: TickCore, ring: SharedRing, snapshot: TickSnapshot, now: float, blend_time: float) -> int:
+def restore(
+    core: TickCore,
+    ring: SharedRing,
+    snapshot: TickSnapshot,
+    now: float,
+    blend_time: float,
+    *,
+    settings: Settings | None = None,
+) -> int:
     """Hand ``snapshot`` to a fresh ``core``: the gone producers, the input replayed, the rest
     copied, and a blend from the last published rider starting at engine time ``now``.
-    Returns the records replayed; the ring's read position is set to go on after them."""
+    ``settings``: as the new generation was started with; where they differ from the
+    snapshot's (changed while no tick ran) they win: the core's mode, and the procedural
+    horse as built fresh from them instead of the dead tick's. Returns the records
+    replayed; the ring's read position is set to go on after them."""
     core._gone = set(snapshot.core.gone)
     replayed = replay_inputs(core, ring, snapshot.input_next)
     ring.read_next = snapshot.input_next
     restore_core(core, snapshot.core)
-    core.horse = snapshot.horse
+    settings = settings or snapshot.settings
+    if settings.mode is not snapshot.settings.mode:
+        core.mode = settings.mode
+    ours, theirs = snapshot.settings, settings
+    if (ours.gait, ours.speed, ours.terrain) == (theirs.gait, theirs.speed, theirs.terrain):
+        core.horse = snapshot.horse
     if snapshot.core.last_rider is not None and blend_time > 0.0:
         core._blend_from = list(snapshot.core.last_rider)
         core._blend_start = now

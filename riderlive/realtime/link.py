@@ -44,6 +44,17 @@ from riderlive.realtime.spare import WARM_NICE, Failed, TakeOver, Warm, spare_ma
 from riderlive.realtime.tick import tick_main
 
 
+def exit_reason(code: int | None) -> str:
+    """A process's ``exitcode`` said: ``exit 1``, ``SIGKILL``..., or ``running`` (None)."""
+    if code is None:
+        return "running"
+    if code < 0:
+        with contextlib.suppress(ValueError):
+            return signal.Signals(-code).name
+        return f"signal {-code}"
+    return f"exit {code}"
+
+
 @dataclasses.dataclass
 class Spare:
     """The web side of a spare tick process (``realtime/spare.py``)."""
@@ -362,14 +373,7 @@ class TickLink:
         """How the tick process ended: ``exit 1``, ``SIGKILL``..., or ``running``."""
         if isinstance(self.process, threading.Thread):
             return "running" if self.process.is_alive() else "thread ended"
-        code = self.process.exitcode
-        if code is None:
-            return "running"
-        if code < 0:
-            with contextlib.suppress(ValueError):
-                return signal.Signals(-code).name
-            return f"signal {-code}"
-        return f"exit {code}"
+        return exit_reason(self.process.exitcode)
 
     def kill(self) -> None:
         """SIGKILL the tick process (a hung one). Not waited for: a killed process runs none of

@@ -18,6 +18,7 @@ guardian look for a dead or hung tick.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import logging
 import math
@@ -91,6 +92,8 @@ class TickLoop:
         self.status_blob = SharedBlob(name=names["status"])
         self.handover_blob = SharedBlob(name=names["handover"]) if "handover" in names else None
         """Where this tick writes its :class:`~riderlive.realtime.handover.TickSnapshot` (None: nobody takes over)."""
+        self.settings = handover.Settings(setup.gait, setup.speed, setup.terrain, setup.mode)
+        """As applied: the setup's, then the commands' (handed over)."""
         self.resume: handover.TickSnapshot | None = None
         """Set by a spare that takes over (``realtime/spare.py``): :meth:`run` goes on from it."""
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
@@ -127,11 +130,14 @@ class TickLoop:
     def _handle(self, command: cmd.Command, now: float) -> None:
         if isinstance(command, cmd.SetMode):
             self.core.set_mode(command.mode, now)
+            self.settings = dataclasses.replace(self.settings, mode=command.mode)
         elif isinstance(command, cmd.SetGait):
             self.horse.set_gait(command.gait, command.speed)
+            self.settings = dataclasses.replace(self.settings, gait=command.gait, speed=command.speed)
         elif isinstance(command, cmd.SetTerrain):
             ground = command.terrain or TerrainConfig(slope=0.0)
             self.terrain = ground.describe(self.horse.set_terrain(ground.terrain()))
+            self.settings = dataclasses.replace(self.settings, terrain=command.terrain)
         elif isinstance(command, cmd.Perform):
             perform = getattr(self.horse, "perform", None)
             if perform is None:
@@ -382,6 +388,7 @@ class TickLoop:
             self.horse,
             self.phase.state,
             tuple(self.events),
+            self.settings,
         )
         self.handover_blob.write(handover.encode(snapshot))
 
@@ -394,7 +401,8 @@ class TickLoop:
             return 0
         self.resume = snapshot
         now = time.perf_counter() - self.setup.start
-        replayed = handover.restore(self.core, self.inputs, snapshot, now, self.setup.timing.blend_time)
+        blend = min(self.setup.timing.blend_time, handover.BLEND_S)
+        replayed = handover.restore(self.core, self.inputs, snapshot, now, blend, settings=self.settings)
         self.horse = self.core.horse
         last = self.outputs.latest()
         if last is not None and self.core.last_rider is not None:

@@ -48,6 +48,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import multiprocessing
 import subprocess
 import time
 from collections.abc import Callable
@@ -58,7 +59,7 @@ from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
 from riderlive.devices.shared import pid_alive
 from riderlive.realtime import commands as cmd
-from riderlive.realtime.link import TickLink
+from riderlive.realtime.link import TickLink, exit_reason
 from riderlive.service import stall
 from riderlive.service.config import ServiceConfig
 
@@ -362,6 +363,7 @@ class TickSupervisor:
         self._streak += 1
         if self.stopping:
             return
+        dead = link.process
         warm = link.promote()
         self._bind()
         self.restarts += 1
@@ -377,6 +379,14 @@ class TickSupervisor:
             "the warm spare" if warm else "cold",
         )
         self.publish_status({**link.status(), "restarting": True})
+        if (
+            died
+            and isinstance(dead, multiprocessing.process.BaseProcess)
+            and "killed or exiting" in str(self.last_exit)
+        ):
+            await asyncio.to_thread(dead.join, 2.0)  # torn down by now, or soon: its exit status for the record
+            if dead.exitcode is not None:
+                self.last_exit = f"died ({exit_reason(dead.exitcode)})"
 
     async def _wait_for_guardian(self, generation: int) -> None:
         """Until the guardian has stopped that generation's devices (bounded)."""
