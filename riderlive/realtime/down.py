@@ -4,8 +4,8 @@ After a tick dies or is declared hung, and until the next generation's first hea
 the status the dead tick last wrote is not the truth: its devices are in the guardian's
 hands (or nobody's). :func:`down_status` keeps the dead status's settings (preset, gait,
 mode: they are handed to the next generation) but says ``driver`` ``down``, ``tick_up``
-false, no rig or platform detail, and for each device what the guardian reports
-(``devices.board.GuardianReport``) or ``unknown``:
+false, ``restarting`` (the supervisor is failing over), no rig or platform detail, and
+for each device what the guardian reports (``devices.board.GuardianReport``) or ``unknown``:
 
 | guardian report | ``state`` | ``outputs_off_confirmed`` |
 | --- | --- | --- |
@@ -68,6 +68,7 @@ def down_status(
         **last,
         "driver": "down",
         "tick_up": False,
+        "restarting": True,
         "reason": reason,
         "generation": generation,
         "estop": estop,

@@ -160,20 +160,6 @@ class TickLink:
         self.spare = Spare(process, commands, notify_read, time.perf_counter(), urgent)
         return self.spare
 
-    def check_spare(self) -> bool:
-        """The spare is there (warming or warm); a dead or failed one is replaced (counted).
-        False when there is none and none is wanted."""
-        if not self.spares_wanted:
-            return False
-        spare = self.spare
-        if spare is not None:
-            spare.poll()
-            if spare.failed is None and spare.process.is_alive():
-                return True
-            self.spares_failed += 1
-        self.start_spare()
-        return True
-
     def promote(self) -> bool:
         """Make the spare the next generation (after the running one is dead and its devices
         stopped); a spare started now at normal priority if none is there. True if the spare

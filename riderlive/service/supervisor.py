@@ -496,6 +496,7 @@ class TickSupervisor:
             "stall_excused_max": self.stall_excused_max,
             "takeovers": self.link.takeovers,
             "last_outage": self.last_outage,
+            "hang_threshold": self.hang_threshold(),
             "spare": self._spare_snapshot(),
             "setups_dropped": self.setups_dropped,
             "beats_unread": self.beats_unread,
