@@ -182,6 +182,7 @@ def main() -> None:
     parser.add_argument("--kills", type=int, default=20)
     parser.add_argument("--stops", type=int, default=20)
     parser.add_argument("--stalls", type=int, default=10, help="per stall length")
+    parser.add_argument("--spare-nice", type=int, default=10, help="tick.spare_nice (lower: the spare warms sooner)")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")
     burners = [context.Process(target=burn, args=(time.perf_counter() + 7200,)) for _ in range(args.burners)]
@@ -189,7 +190,7 @@ def main() -> None:
         burner.start()
     workdir = Path(tempfile.mkdtemp(prefix="bench-failover-"))
     config = workdir / "service.toml"
-    config.write_text(f"[tick]\nrate = {RATE}\n")
+    config.write_text(f"[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
     proc, port = start_server(config)
     producer = context.Process(target=produce, args=(f"ws://127.0.0.1:{port}", time.perf_counter() + 7200))
     producer.start()
@@ -214,7 +215,10 @@ def main() -> None:
         for burner in burners:
             burner.kill()
     load = "loaded: both cores busy with burners" if args.burners >= 2 else f"{args.burners} burner(s)"
-    print(f"bench_failover: 120 Hz, a producer at 120 Hz, {load}; load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"bench_failover: 120 Hz, a producer at 120 Hz, {load}; load average {os.getloadavg()[0]:.1f};"
+        f" spare warm-up at nice {args.spare_nice}"
+    )
     print(f"hang threshold {threshold * 1000:.1f} ms")
     if kills:
         print(f"kill -9 -> first new frame at the client: {quantiles(kills)} (goal p99 <= 50 ms)")

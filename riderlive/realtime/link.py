@@ -40,7 +40,7 @@ from riderlive.realtime import layout as L
 from riderlive.realtime.down import down_status
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.realtime.spare import WARM_NICE, Failed, TakeOver, Warm, spare_main
+from riderlive.realtime.spare import Failed, TakeOver, Warm, spare_main
 from riderlive.realtime.tick import tick_main
 
 
@@ -151,7 +151,7 @@ class TickLink:
         commands, child_commands = context.Pipe(duplex=True)
         notify_read, notify_write = context.Pipe(duplex=False)
         setups = tuple(pickle.dumps(s, protocol=pickle.HIGHEST_PROTOCOL) for s in (self.base_setup, self.start_setup))
-        args = (setups, child_commands, notify_write, 0 if urgent else WARM_NICE)
+        args = (setups, child_commands, notify_write, 0 if urgent else self.base_setup.spare_nice)
         process = context.Process(target=spare_main, args=args, name="riderlive-tick-spare", daemon=True)
         process.start()
         child_commands.close()

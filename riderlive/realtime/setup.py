@@ -68,5 +68,7 @@ class TickSetup:
     tunes: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Live parameters applied to devices since start (``Tune``, by device name): a new
     generation applies them to its devices before connecting them."""
+    spare_nice: int = 10
+    """Nice value of the warm spare's warm-up thread (``realtime/spare.py``)."""
     phase_margin: float = 0.0003
     """Seconds: the least time from a frame's expected arrival to the deadline that takes it."""

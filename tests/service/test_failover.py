@@ -28,7 +28,7 @@ from riderlive.service.runtime import make_setup
 from riderlive.service.supervisor import TickSupervisor
 
 RATE = 100.0
-CONFIG = ServiceConfig.model_validate({"tick": {"rate": RATE, "realtime_priority": False}})
+CONFIG = ServiceConfig.model_validate({"tick": {"rate": RATE, "realtime_priority": False, "spare_nice": 0}})
 
 
 class Watch:
