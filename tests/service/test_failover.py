@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import pytest
 
 from riderlive.channels import HORSE_NAMES
 from riderlive.devices.board import GuardianReport
@@ -149,6 +150,7 @@ async def _kill_and_take_over() -> None:
         await w.close()
 
 
+@pytest.mark.timeout(900)  # three generations and two spares warmed: minutes on a busy CI host
 def test_kill_9_the_spare_takes_over_with_the_state_and_the_settings() -> None:
     asyncio.run(_kill_and_take_over())
 
@@ -158,7 +160,15 @@ async def _stop_and_take_over() -> None:
     await w.supervisor.start()
     try:
         await w.until(w.supervisor.ready, 60.0, "the first tick never ticked")
+        # A spare killed during its warm-up is replaced (counted), the running tick untouched.
+        await w.until(lambda: w.link.spare is not None, 10.0, "a spare is started once the tick beats")
+        assert w.link.spare is not None
+        first_spare = w.link.spare.process.pid
+        assert first_spare is not None
+        os.kill(first_spare, signal.SIGKILL)
         await w.spare_warm()
+        assert w.link.spare.process.pid != first_spare
+        assert (w.link.spares_failed, w.link.generation, w.supervisor.restarts) == (1, 1, 0)
         await w.until(lambda: time.perf_counter() - (w.supervisor._first_beat or 0.0) > 3.5, 10.0, "past warm-up")
         pid = int(w.link.board["tick_pid"])
         stopped_at = time.perf_counter()
@@ -181,6 +191,7 @@ def _alive(pid: int) -> bool:
         return False
 
 
+@pytest.mark.timeout(600)
 def test_sigstop_is_a_hang_and_the_spare_takes_over() -> None:
     asyncio.run(_stop_and_take_over())
 
