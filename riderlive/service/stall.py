@@ -147,7 +147,8 @@ def classify(model: Model, seen: Observation) -> Finding:
     left = age - excused
     if left > model.threshold:
         what = "stopped (SIGSTOP)" if stopped else "no heartbeat"
-        return Finding(Verdict.HUNG, left, excused, f"hung ({what} for {age * 1000:.0f} ms)")
+        why = f"hung ({what} for {age * 1000:.0f} ms, {excused * 1000:.0f} of them excused)"
+        return Finding(Verdict.HUNG, left, excused, why)
     if excused > model.longest_excuse:
         return Finding(Verdict.HUNG, left, excused, f"hung (starved by the host for {excused:.1f} s)")
     return Finding(Verdict.STALLED, left, excused, f"host stall of {age * 1000:.0f} ms ({excused * 1000:.0f} excused)")

@@ -323,6 +323,11 @@ class TickSupervisor:
         realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
         floor = tick.hang_floor_realtime if realtime else tick.hang_floor
         threshold = max(self.hang_s + self.device_wait_s, floor)
+        spare = self.link.spare
+        if self.link.spares_wanted and (spare is None or spare.warm is None):
+            # No warm spare: a failover would be a cold start (seconds on a busy host), dearer
+            # than most stalls; a moving device is the guardian's (``guardian.tick_timeout``).
+            threshold = max(threshold, tick.hang_floor)
         first = self._first_beat
         if (first is None or time.perf_counter() - first < WARMUP_S) and not self._a_device_moves():
             threshold = max(threshold, WARMUP_HANG_S)
