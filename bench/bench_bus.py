@@ -1,7 +1,8 @@
 """The rig device on a 24-servo emulated bus with wire timing: loop rate, e-stop, soak.
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py [--seconds 1.5] [--bauds 1000000 4000000]
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak [--runs 20] [--run-seconds 60]
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak [--runs 20] [--run-seconds 60] [--burners 2]
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak --in-process [--runs 20] [--run-seconds 60]
 
 The emulator runs in a child process (bench/rig_fixtures.py) and holds every packet on
 the wire for bytes x 10 / baud.
@@ -11,7 +12,10 @@ Read of 15 bytes every ``read_divider`` ticks, against two baselines from the sa
 the rate the wire allows (target ratio >= 0.8) and the bare SDK doing the same
 transactions (the device's overhead).
 
-Soak (issue 10): ``--runs`` runs of ``--run-seconds`` of the shipped 24-servo map
+Soak (issue 24, ``--soak``): the rig through the real service on a loaded host
+(bench/bus_soak.py): faults, false hangs, vanish detection.
+
+In-process soak (issue 10, ``--soak --in-process``): ``--runs`` runs of ``--run-seconds`` of the shipped 24-servo map
 (config/rigs/full_rider.toml, its own budgets and timeouts, nothing relaxed) at its
 tick rate, trotting, with the other core busy: faults (target 0), read failures and
 retries, Fast Sync Read fallbacks (none may be permanent), overruns, the device's CPU
@@ -28,6 +32,7 @@ from typing import Any
 
 import dynamixel_sdk as sdk
 
+from bench.bus_soak import service_soak
 from bench.rig_fixtures import Emulator, other_core_busy
 from riderlive.devices.budget import ReplyTimer
 from riderlive.devices.device import Device
@@ -238,8 +243,13 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--run-seconds", type=float, default=60.0)
     parser.add_argument("--idle", action="store_true", help="do not keep the other core busy")
+    parser.add_argument("--in-process", action="store_true", help="the soak of the device alone (issue 10)")
+    parser.add_argument("--burners", type=int, default=2, help="normal-priority busy loops in the service soak")
+    parser.add_argument("--web-priority", type=int, default=10, help="server.realtime_priority in the service soak")
     args = parser.parse_args()
     sys.setswitchinterval(0.0005)
+    if args.soak and not args.in_process:
+        return service_soak(args.runs, args.run_seconds, 0 if args.idle else args.burners, args.web_priority)
     if args.soak:
         return soak(args.runs, args.run_seconds, not args.idle)
     ok = True

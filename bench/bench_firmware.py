@@ -10,6 +10,9 @@ splits the bytes at 0x00; then the undetected rate of 10^6 corrupted frames.
 Size and speed on the MCU: ``make cross`` (flash, static RAM) and ``make avr-step-bench``
 (the cost of one control period on the ATmega2560 in simavr, when simavr is installed).
 
+Slowest park: the host build at each profile's CONFIG floors, parked by the dead-man from
+the far soft limit: first park step to outputs off, against the 5 s bound.
+
 Dead-man: the host build on a pty, servo8 profile; each trial arms, streams targets until
 RUNNING, then stops sending. The firmware prints the CLOCK_MONOTONIC time of its last valid
 frame and of its first park step; Python's last write is on the same clock. Bound: heartbeat
@@ -28,7 +31,19 @@ import sys
 import time
 
 from riderlive.platform.firmware_host import FIRMWARE_DIR, FirmwareHost
-from riderlive.platform.link import Arm, LinkState, Reset, Target
+from riderlive.platform.link import (
+    CONFIG_RANGES,
+    PARK_BOUND_S,
+    Arm,
+    Config,
+    ConfigKey,
+    Heartbeat,
+    LinkState,
+    Profile,
+    Reset,
+    Target,
+    firmware_park_s,
+)
 from riderlive.platform.serial_link import SerialPlatformLink
 
 
@@ -71,6 +86,43 @@ def deadman(trials: int) -> None:
     print(f"baseline: RESET -> STATUS round trip on the pty: median {statistics.median(round_trips):.2f} ms")
 
 
+def slowest_park(profile: str, far: int) -> None:
+    """The host build (real time, simulated actuators) at its CONFIG floors: the dead-man park
+    from the far limit, first park step -> outputs off (fault), against link.PARK_BOUND_S."""
+    ranges = CONFIG_RANGES[Profile[profile.upper()]]
+    v, a = ranges[ConfigKey.VELOCITY_LIMIT][0], ranges[ConfigKey.ACCELERATION_LIMIT][0]
+    with FirmwareHost(profile) as firmware, SerialPlatformLink(firmware.port, heartbeat_s=10.0) as port:
+        hello = port.open()
+        for i in range(hello.actuators):
+            port.command(Config(ConfigKey.VELOCITY_LIMIT, i, v))
+            port.command(Config(ConfigKey.ACCELERATION_LIMIT, i, a))
+        port.command(Arm(profile))
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:  # homing (platforms), soft start, then at the far limit
+            t = port.telemetry
+            if t is not None and LinkState(t.state) is LinkState.HOMING:
+                port.send(Heartbeat())
+            else:
+                port.send(Target((far,) * hello.actuators))
+            port.service()
+            if (
+                t is not None
+                and LinkState(t.state) is LinkState.RUNNING
+                and all(abs(c - far) <= 5 for c in t.commanded)
+            ):
+                break
+            time.sleep(0.004)
+        mark = len(firmware.events)
+        park = firmware.wait_event(lambda e: e["event"] == "park_step", 2.0, mark)
+        off = firmware.wait_event(lambda e: e["event"] == "state" and e["to"] == "fault", 30.0, mark)
+    seconds = (off["t_ns"] - park["t_ns"]) / 1e9
+    print(
+        f"slowest park, {profile} at its CONFIG floors ({v} counts/s, {a} counts/s^2), host build on the pty, "
+        f"from {far} counts: first park step -> outputs off {seconds:.2f} s (bound {PARK_BOUND_S:g} s; "
+        f"formula {firmware_park_s(abs(far - (500 if profile != 'servo8' else 0)), v, a):.2f} s from full speed)"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--trials", type=int, default=20)
@@ -80,6 +132,8 @@ def main() -> int:
     out = make("bench", f"BENCH_ARGS={args.megabytes} 1000000")
     print(out.strip())
     deadman(args.trials)
+    slowest_park("servo8", 8500)
+    slowest_park("platform6", 14500)
     sizes = re.findall(r"^.*flash.*$", make("cross"), re.M)
     print("\n".join(sizes))
     if shutil.which("simavr"):

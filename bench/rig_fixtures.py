@@ -7,6 +7,7 @@ test do not share a GIL with it. Ask it over a pipe:
     emu = Emulator(rig, baud=1_000_000, wire_timing=True)
     emu.ask("arrivals")        # [(perf_counter when fully arrived, raw packet), ...] since the last ask
     emu.ask(("torque", ids))   # Torque Enable of each id
+    emu.ask(("fault", spec))   # apply an emulator FaultSpec; perf_counter when applied
 """
 
 from __future__ import annotations
@@ -56,6 +57,9 @@ def _serve(conn: Connection, rig: RigConfig, baud: int, wire_timing: bool, prior
             conn.send([bus.read_item(i, Item.TORQUE_ENABLE) for i in command[1]])
         elif isinstance(command, tuple) and command[0] == "goal":
             conn.send([bus.read_item(i, Item.GOAL_POSITION) for i in command[1]])
+        elif isinstance(command, tuple) and command[0] == "fault":  # ("fault", FaultSpec): apply now
+            bus.apply(command[1])
+            conn.send(time.perf_counter())
 
 
 class Emulator:
@@ -91,18 +95,22 @@ def torque_offs(packets: list[tuple[float, bytes]]) -> list[float]:
 
 
 @contextlib.contextmanager
-def other_core_busy(seconds: float, enabled: bool = True) -> Iterator[None]:
-    """A busy-loop process for ``seconds`` (the other of two cores busy)."""
+def other_core_busy(seconds: float, enabled: bool = True, burners: int = 1) -> Iterator[None]:
+    """``burners`` busy-loop processes at normal priority for ``seconds`` (1: the other of
+    two cores busy; 2: both)."""
     if not enabled:
         yield
         return
-    burner = mp.get_context("spawn").Process(target=burn, args=(time.perf_counter() + seconds,), daemon=True)
-    burner.start()
+    context = mp.get_context("spawn")
+    procs = [context.Process(target=burn, args=(time.perf_counter() + seconds,), daemon=True) for _ in range(burners)]
+    for proc in procs:
+        proc.start()
     try:
         yield
     finally:
-        burner.terminate()
-        burner.join()
+        for proc in procs:
+            proc.terminate()
+            proc.join()
 
 
 def bench_rig(path: Path, tick_hz: float, baud: int = 1_000_000, **bus: Any) -> RigConfig:

@@ -33,7 +33,6 @@
 static volatile uint32_t millis_count;
 static volatile uint8_t rx_buf[RX_SIZE], rx_head, rx_tail;
 static volatile uint8_t tx_buf[TX_SIZE], tx_head, tx_tail;
-static volatile uint8_t estop_seen;
 static uint16_t timer_top;
 static profile_t board_profile_copy; /* the chosen profile at this board's control period */
 static const profile_t *board_profile;
@@ -67,13 +66,33 @@ static void outputs_off(void)
     TCCR4A = _BV(WGM41);
 }
 
-ISR(INT0_vect)
+static void outputs_on(void)
 {
-    if (PIND & _BV(PD0)) { /* the e-stop opened: cut the outputs now, the core latches next */
-        outputs_off();
-        estop_seen = 1;
-    }
+    TCCR1A = _BV(COM1A1) | _BV(COM1B1) | _BV(COM1C1) | _BV(WGM11);
+    TCCR3A = _BV(COM3A1) | _BV(COM3B1) | _BV(COM3C1) | _BV(WGM31);
+    TCCR4A = _BV(COM4A1) | _BV(COM4B1) | _BV(WGM41);
+    PORTA |= _BV(PA0);
 }
+
+/* The e-stop gate (estop_gate.h): interrupts masked by saving SREG and cli(), restored
+ * with a compiler barrier, as avr-libc's ATOMIC_BLOCK(ATOMIC_RESTORESTATE) does. */
+#define GATE_PIN() ((PIND & _BV(PD0)) != 0)
+#define GATE_OUTPUTS_OFF() outputs_off()
+#define GATE_OUTPUTS_ON() outputs_on()
+#define GATE_MASK(s) \
+    do { \
+        (s) = SREG; \
+        cli(); \
+    } while (0)
+#define GATE_UNMASK(s) \
+    do { \
+        __asm__ __volatile__("" ::: "memory"); \
+        SREG = (s); \
+    } while (0)
+#define GATE_POINT() ((void)0)
+#include "estop_gate.h"
+
+ISR(INT0_vect) { gate_on_edge(); }
 
 uint32_t hal_millis(void)
 {
@@ -109,12 +128,7 @@ int hal_serial_write(const uint8_t *bytes, size_t n)
     return 1;
 }
 
-int hal_estop_input(void) /* the pin, or an opening the interrupt saw since the last call */
-{
-    int active = (PIND & _BV(PD0)) != 0 || estop_seen;
-    estop_seen = 0;
-    return active;
-}
+int hal_estop_input(void) { return gate_estop_input(); }
 
 int hal_read_feedback(int16_t *measured, uint8_t n)
 {
@@ -142,20 +156,15 @@ void hal_write_outputs(const device_t *d)
 {
     uint8_t i;
     uint16_t top = (uint16_t)(2000000UL / d->pwm_hz - 1u); /* 2 MHz timer clock */
-    if (!d->outputs_on || (PIND & _BV(PD0))) {
-        outputs_off();
-        return;
+    if (d->outputs_on) { /* the widths first (buffered to the next period), then the gate */
+        if (top != timer_top) {
+            ICR1 = ICR3 = ICR4 = top;
+            timer_top = top;
+        }
+        for (i = 0; i < d->profile->actuators && i < 8; i++)
+            *OCR[i] = (uint16_t)(profile_pulse_us(d->profile, d->axis[i].pos) * 2u);
     }
-    if (top != timer_top) {
-        ICR1 = ICR3 = ICR4 = top;
-        timer_top = top;
-    }
-    for (i = 0; i < d->profile->actuators && i < 8; i++)
-        *OCR[i] = (uint16_t)(profile_pulse_us(d->profile, d->axis[i].pos) * 2u);
-    TCCR1A = _BV(COM1A1) | _BV(COM1B1) | _BV(COM1C1) | _BV(WGM11);
-    TCCR3A = _BV(COM3A1) | _BV(COM3B1) | _BV(COM3C1) | _BV(WGM31);
-    TCCR4A = _BV(COM4A1) | _BV(COM4B1) | _BV(WGM41);
-    PORTA |= _BV(PA0);
+    gate_outputs(d->outputs_on);
 }
 
 static void board_init(void)

@@ -64,7 +64,18 @@ int hal_serial_write(const uint8_t *bytes, size_t n)
     return w == (ssize_t)n;
 }
 
-int hal_estop_input(void) { return host.estop; }
+/* The board's e-stop gate (board/estop_gate.h): "estop on" is the edge interrupt, which
+ * cuts the outputs at once and records the opening; no interrupt can come in between the
+ * loop's own calls here (stdin is read between polls), so masking is a no-op. */
+#define GATE_PIN() (host.estop)
+#define GATE_OUTPUTS_OFF() (host.enabled = 0)
+#define GATE_OUTPUTS_ON() (host.enabled = 1)
+#define GATE_MASK(s) ((s) = 0)
+#define GATE_UNMASK(s) ((void)(s))
+#define GATE_POINT() ((void)0)
+#include "estop_gate.h"
+
+int hal_estop_input(void) { return gate_estop_input(); }
 
 static void simulate(void)
 {
@@ -95,10 +106,10 @@ int hal_read_feedback(int16_t *measured, uint8_t n)
 void hal_write_outputs(const device_t *d)
 {
     uint8_t i;
-    simulate();
-    host.enabled = d->outputs_on;
+    simulate(); /* up to now under the old command and enable */
     for (i = 0; i < d->profile->actuators; i++)
         host.cmd[i] = d->axis[i].pos;
+    gate_outputs(d->outputs_on);
 }
 
 /* --- JSON lines --- */
@@ -190,8 +201,11 @@ static int command(fw_t *fw, char *line)
     int i;
     if (strncmp(line, "status", 6) == 0)
         print_status(&fw->device);
-    else if (strncmp(line, "estop on", 8) == 0)
+    else if (strncmp(line, "estop on", 8) == 0) {
+        simulate();
         host.estop = 1;
+        gate_on_edge(); /* the board's interrupt */
+    }
     else if (strncmp(line, "estop off", 9) == 0)
         host.estop = 0;
     else if (sscanf(line, "stick %d", &i) == 1 && i >= 0 && i < (int)LINK_MAX_ACTUATORS)

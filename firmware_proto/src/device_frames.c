@@ -111,12 +111,12 @@ static uint8_t configure(device_t *d, const link_frame_t *f)
         if (v > a->soft_max || (float)v <= lim->min || v < a->park || v < a->home) return REASON_OUT_OF_RANGE;
         lim->max = (float)v;
         return REASON_OK;
-    case K_VELOCITY_LIMIT:
-        if (v <= 0 || (float)v > a->vmax) return REASON_OUT_OF_RANGE;
+    case K_VELOCITY_LIMIT: /* never so slow that a park outlasts PARK_BOUND_MS */
+        if ((float)v < a->vmin || (float)v > a->vmax) return REASON_OUT_OF_RANGE;
         lim->vmax = (float)v;
         return REASON_OK;
     case K_ACCELERATION_LIMIT:
-        if (v <= 0 || (float)v > a->amax) return REASON_OUT_OF_RANGE;
+        if ((float)v < a->amin || (float)v > a->amax) return REASON_OUT_OF_RANGE;
         lim->amax = (float)v;
         return REASON_OK;
     case K_PWM_HZ:

@@ -11,9 +11,12 @@
     .settle_counts = 5, .follow_counts = 1000, .follow_ms = 200, .error_budget = 25.0f, .error_leak_per_s = 10.0f
 
 /* 150 mm linear actuators with an RC/pulse position input (1000-2000 us = retracted-extended),
- * 250 mm/s, 5 m/s^2; parked fully down on the soft minimum, homed at mid stroke. */
+ * 250 mm/s, 5 m/s^2; parked fully down on the soft minimum, homed at mid stroke. CONFIG may
+ * slow them to 130 mm/s and 1.25 m/s^2, no further: a park over the whole 145 mm at 25 %
+ * of 130 mm/s takes 4.6 s (PARK_BOUND_MS). */
 #define LINEAR_150MM \
     {.soft_min = 500, .soft_max = 14500, .home = 7500, .park = 500, .vmax = 25000.0f, .amax = 500000.0f, \
+     .vmin = 13000.0f, .amin = 125000.0f, \
      .out_lo = 0, .out_hi = 15000, .pulse_lo_us = 1000, .pulse_hi_us = 2000}
 
 const profile_t PROFILES[] = {
@@ -24,10 +27,12 @@ const profile_t PROFILES[] = {
     {.name = "platform3", .id = 2, .actuators = 3, .needs_homing = 1, .feedback = 1, .pwm_hz = 200, COMMON_TIMING,
      .actuator = LINEAR_150MM},
     /* Hobby PWM servos for a low-cost rider puppet: +-90 deg = 500-2500 us at 50 Hz (analog
-     * servos; digital ones take up to 330 Hz by CONFIG), 300 deg/s. No feedback, no homing. */
+     * servos; digital ones take up to 330 Hz by CONFIG), 300 deg/s. No feedback, no homing.
+     * CONFIG may slow them to 80 deg/s and 750 deg/s^2: a park over 90 deg takes 4.6 s. */
     {.name = "servo8", .id = 3, .actuators = 8, .needs_homing = 0, .feedback = 0, .pwm_hz = 50, COMMON_TIMING,
      .actuator = {.soft_min = -8500, .soft_max = 8500, .home = 0, .park = 0, .vmax = 30000.0f,
-                  .amax = 300000.0f, .out_lo = -9000, .out_hi = 9000, .pulse_lo_us = 500, .pulse_hi_us = 2500}},
+                  .amax = 300000.0f, .vmin = 8000.0f, .amin = 75000.0f, .out_lo = -9000, .out_hi = 9000,
+                  .pulse_lo_us = 500, .pulse_hi_us = 2500}},
 };
 const uint8_t PROFILE_COUNT = (uint8_t)(sizeof PROFILES / sizeof PROFILES[0]);
 

@@ -13,9 +13,19 @@ typedef struct {
     int16_t soft_min, soft_max; /* widest soft limits, counts (CONFIG may narrow them) */
     int16_t home, park;         /* poses, counts */
     float vmax, amax;           /* widest velocity (counts/s) and acceleration (counts/s^2) limits */
+    float vmin, amin;           /* slowest CONFIG may set: a park ends within PARK_BOUND_MS (below) */
     int16_t out_lo, out_hi;     /* counts at the two ends of the output range ... */
     uint16_t pulse_lo_us, pulse_hi_us; /* ... and the pulse widths there (hobby servo / RC input) */
 } actuator_spec_t;
+
+/* The longest a park may take, ms, from its first step to outputs off, for any accepted
+ * CONFIG: from anywhere in the output range, moving at full speed the wrong way, at
+ * park_scale of the slowest speed limit and the lowest acceleration limit CONFIG accepts
+ * (vmin, amin). With D the farthest park distance, v the speed and a the acceleration
+ * limit: D / (park_scale v) + park_scale v / a + v / a <= 4.8 s at every corner of
+ * [vmin, vmax] x [amin, amax]; test_device checks it on the core itself
+ * (docs/platform-link.md). Feedback that never arrives is bounded by the following error. */
+#define PARK_BOUND_MS 5000u
 
 typedef struct {
     const char *name;          /* also the default device name ARM must give */

@@ -4,7 +4,8 @@
  *
  * Every frame vector: its wire bytes parse to its fields, and its fields encode to its wire
  * bytes. Every bad vector: rejected with the same error kind. The seq and stream vectors:
- * the same verdicts and counts as Python's. */
+ * the same verdicts and counts as Python's. The CONFIG ranges (riderlive.platform.link.
+ * CONFIG_RANGES): the device core accepts each edge and refuses one beyond it. */
 #include <cjson/cJSON.h>
 #include <stdlib.h>
 #include <string.h>
@@ -250,6 +251,62 @@ static void stream(const cJSON *root)
         CHECK_EQ(counts[k], num(item(s, "errors"), ERROR_NAMES[k]));
 }
 
+/* --- the CONFIG ranges: each profile's device core accepts both edges of every key's range and
+ * refuses one beyond each (OUT_OF_RANGE, counted) --- */
+
+static uint8_t status_result;
+
+static int take_status(void *ctx, const uint8_t *wire, size_t n)
+{
+    uint8_t frame[LINK_MAX_ENCODED];
+    size_t m = link_cobs_decode(wire, n - 1, frame);
+    (void)ctx;
+    if (m != SIZE_MAX && m > 7 && frame[1] == LINK_STATUS)
+        status_result = frame[7];
+    return 1;
+}
+
+static int configure(device_t *d, uint16_t *seq, int key, long value)
+{
+    uint8_t body[6] = {(uint8_t)key, 0}, wire[LINK_MAX_ENCODED + 1];
+    link_put_u32(body + 2, (uint32_t)value);
+    status_result = 0xFF;
+    device_receive(d, wire, link_encode(LINK_CONFIG, (*seq)++, body, sizeof body, wire), 0);
+    return status_result;
+}
+
+static void config_ranges(const cJSON *root)
+{
+    const cJSON *prof, *range, *enums = item(root, "enums");
+    static device_t d;
+    int seen = 0;
+    cJSON_ArrayForEach(prof, item(root, "config_ranges")) {
+        const profile_t *p = 0;
+        uint16_t seq = 1, refused;
+        uint8_t i;
+        for (i = 0; i < PROFILE_COUNT; i++)
+            if (PROFILES[i].id == num(item(enums, "profile"), prof->string))
+                p = &PROFILES[i];
+        CHECK(p != 0);
+        if (!p)
+            continue;
+        seen++;
+        device_init(&d, p, 0, take_status, 0, 0, 0, 0);
+        CHECK_EQ(cJSON_GetArraySize(prof), K_PWM_HZ); /* every key */
+        cJSON_ArrayForEach(range, prof) {
+            int key = num(item(enums, "config_key"), range->string);
+            long lo = (long)cJSON_GetArrayItem(range, 0)->valuedouble, hi = (long)cJSON_GetArrayItem(range, 1)->valuedouble;
+            refused = d.counters[C_REFUSED];
+            CHECK_EQ(configure(&d, &seq, key, lo - 1), REASON_OUT_OF_RANGE);
+            CHECK_EQ(configure(&d, &seq, key, hi + 1), REASON_OUT_OF_RANGE);
+            CHECK_EQ(d.counters[C_REFUSED], refused + 2);
+            CHECK_EQ(configure(&d, &seq, key, hi), REASON_OK);
+            CHECK_EQ(configure(&d, &seq, key, lo), REASON_OK); /* ends at lo: SOFT_MIN back at its widest */
+        }
+    }
+    CHECK_EQ(seen, PROFILE_COUNT);
+}
+
 int main(int argc, char **argv)
 {
     cJSON *root = load(argc > 1 ? argv[1] : "test/link_vectors.json");
@@ -280,6 +337,7 @@ int main(int argc, char **argv)
     bad(root);
     seqs(root);
     stream(root);
+    config_ranges(root);
     cJSON_Delete(root);
     return CHECK_DONE("test_vectors");
 }

@@ -1,9 +1,12 @@
 """The NATS implementation of :class:`~riderlive.bus.transport.Transport` (``nats-py``).
 
-Connection policy: :func:`connect` first tries once without retrying, so a wrong address
-or refused credentials is a clear error at start (:class:`Unreachable`,
-:class:`Refused`); the connection it then keeps reconnects forever (every
-``reconnect_wait`` s) across broker restarts and cut cables. Messages published while
+Connection policy: :func:`connect` first tries once without retrying, bounded by
+``connect_timeout`` s (+ 1 s of slack as a whole: a closed port, a host that drops
+packets, a port that accepts and never speaks NATS), so a wrong address or refused credentials is a clear error
+at start (:class:`Unreachable`, :class:`Refused`). nats-py alone does not bound it: its
+first connect walks the server pool ``max_reconnect_attempts`` times even with
+``allow_reconnect=False`` (and forever with 0). The connection it then keeps reconnects
+forever (every ``reconnect_wait`` s) across broker restarts and cut cables. Messages published while
 disconnected are *not* buffered for later (:meth:`NatsTransport.publish` drops them,
 counted ``dropped_disconnected``): a live frame from two seconds ago is worse than none,
 and an e-stop is re-sent by whoever means it.
@@ -11,6 +14,8 @@ and an e-stop is re-sent by whoever means it.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import ssl
 from dataclasses import dataclass
 from typing import Any
@@ -118,6 +123,62 @@ class NatsTransport:
         self.stats.connected = False
 
 
+def _what(exc: BaseException) -> str:
+    if isinstance(exc, TimeoutError):
+        return "no answer in time"
+    return str(exc) or type(exc).__name__
+
+
+SLACK_S = 1.0
+"""Beyond ``connect_timeout`` for a whole first connect: nats-py bounds each of its steps
+(TCP connect, the greeting, the PONG) by ``connect_timeout`` itself, so a closed port or a
+mute broker ends at that; the slack keeps a busy host's slow handshake from failing."""
+
+
+async def _bounded(client: Client, timeout: float, **options: Any) -> None:
+    """``client.connect(**options)`` within ``timeout`` + :data:`SLACK_S` s, or closed and
+    :class:`TimeoutError`."""
+    try:
+        await asyncio.wait_for(client.connect(**options), timeout + SLACK_S)
+    except BaseException:
+        with contextlib.suppress(Exception):
+            await client.close()
+        raise
+
+
+async def _first_connect(url: str, servers: list[str], name: str, timeout: float, options: dict[str, Any]) -> Client:
+    """One pass over the servers, no retry, within ``timeout`` s: the check that the broker is there.
+
+    ``max_reconnect_attempts=1`` is the smallest that ends nats-py's server walk (0 means
+    forever); the :func:`asyncio.wait_for` bounds the whole, including a port that accepts
+    and never sends the NATS greeting."""
+    client, seen = Client(), []
+
+    async def keep(exc: Exception) -> None:
+        """The first connect's errors are raised to us (nats-py would also print them)."""
+        seen.append(exc)
+
+    try:
+        await _bounded(
+            client,
+            timeout,
+            servers=servers,
+            name=name,
+            allow_reconnect=False,
+            max_reconnect_attempts=1,
+            reconnect_time_wait=0.0,
+            connect_timeout=timeout,
+            error_cb=keep,
+            **options,
+        )
+    except Exception as exc:
+        cause = seen[0] if seen and not isinstance(exc, TimeoutError) else exc  # the first, not "no servers"
+        if _refusal(exc) or any(map(_refusal, seen)):
+            raise Refused(f"the NATS server at {url} refused our credentials: {_what(cause)}") from None
+        raise Unreachable(f"no NATS server answers at {url} within {timeout:g} s: {_what(cause)}") from None
+    return client
+
+
 async def connect(
     url: str,
     credentials: Credentials = Credentials(),
@@ -134,24 +195,7 @@ async def connect(
     link is noticed (two unanswered pings)."""
     servers = [s.strip() for s in url.split(",") if s.strip()]
     options = credentials.options()
-    # one attempt, no retries: a clear error at start
-
-    async def quiet(exc: Exception) -> None:
-        """The probe's errors are raised to us; nats-py would also print them."""
-
-    try:
-        probe = await nats.connect(
-            servers=servers,
-            name=name,
-            allow_reconnect=False,
-            connect_timeout=connect_timeout,
-            error_cb=quiet,
-            **options,
-        )
-    except Exception as exc:
-        if _refusal(exc):
-            raise Refused(f"the NATS server at {url} refused our credentials: {exc}") from None
-        raise Unreachable(f"no NATS server answers at {url}: {exc!r}") from None
+    probe = await _first_connect(url, servers, name, connect_timeout, options)
     await probe.close()
     stats = TransportStats()
 
@@ -171,8 +215,11 @@ async def connect(
         stats.connected = True
         stats.events["reconnects"] += 1
 
+    client = Client()
     try:
-        client = await nats.connect(
+        await _bounded(
+            client,
+            connect_timeout,
             servers=servers,
             name=name,
             allow_reconnect=True,
@@ -187,7 +234,7 @@ async def connect(
             **options,
         )
     except Exception as exc:
-        raise Unreachable(f"lost the NATS server at {url} while connecting: {exc!r}") from None
+        raise Unreachable(f"lost the NATS server at {url} while connecting: {_what(exc)}") from None
     stats.connected = True
     return NatsTransport(client, stats)
 

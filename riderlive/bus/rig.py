@@ -5,7 +5,9 @@
   the service's own codec), the status on ``...<rig>.status`` at once on change and every
   ``nats.status_interval`` s. The tick's callback only queues records (latest 0.25 s,
   older ones counted ``frames_dropped``); a task publishes them, so a slow or dead
-  broker never delays the tick, the websockets or the takes.
+  broker never delays the tick, the websockets or the takes. A tick that never reached
+  the web process (lapped in the output ring) is counted ``frames_skipped``: every
+  tick is ``frames_out``, ``frames_dropped``, ``frames_skipped`` or still queued.
 - **In**: horse and saddle input and control (:mod:`riderlive.bus.inbound`); the stage e-stop,
   which latches the e-stop exactly as ``POST /api/estop`` does (source ``nats``); the
   stage heartbeat; discovery requests of ``riderlive stage``.
@@ -107,6 +109,10 @@ class RigNode:
         self.queue: deque[np.ndarray] = deque()
         self.wake = asyncio.Event()
         self.counts: Counter[str] = Counter()
+        self.first_seq: int | None = None
+        """The first tick offered (since the tick last restarted)."""
+        self.last_seq: int | None = None
+        """The last tick offered (a restarted tick's seq starts again: counted from there)."""
         self.last_heartbeat: float | None = None
         self.heartbeat_lost = False
         self.started = time.perf_counter()
@@ -157,6 +163,14 @@ class RigNode:
 
     def offer(self, records: list[np.ndarray]) -> None:
         """The tick's callback: queue the new records (never waits)."""
+        if records:
+            first, last = int(records[0][L.OUT_SEQ]), int(records[-1][L.OUT_SEQ])
+            if self.last_seq is not None and first > self.last_seq + 1:
+                self.counts["frames_skipped"] += first - self.last_seq - 1
+            elif self.last_seq is None or first <= self.last_seq:
+                self.first_seq = first
+            self.counts["frames_skipped"] += max(0, last - first + 1 - len(records))  # a gap inside
+            self.last_seq = last
         self.queue.extend(records)
         if self.queue:
             oldest = float(self.queue[-1][L.OUT_ENGINE_T]) - QUEUE_SECONDS
@@ -200,6 +214,7 @@ class RigNode:
             "perf_origin": service.link.start,
             "channels": list(service.hub.names),
             "counts": dict(self.counts),
+            "frames": {"first_seq": self.first_seq, "last_seq": self.last_seq, "queued": len(self.queue)},
             "output_lapped": int(service.link.outputs.lapped),  # records read too late: never published
             "transport": dict(self.transport.stats.events),
         }

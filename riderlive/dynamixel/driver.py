@@ -33,6 +33,7 @@ from riderlive.devices.latch import StopLatch, StopView
 from riderlive.devices.lifecycle import DeviceError, HardwareFault, NoReply, Rejected, TickGap
 from riderlive.devices.plug import Motion, Move, Steps, ramp
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
+from riderlive.devices.stall import usable_between
 from riderlive.dynamixel.bringup import arm_watchdog, bring_up, first_spec, read_present, torque_on_here
 from riderlive.dynamixel.readback import Readback, raise_hardware_error
 from riderlive.dynamixel.rig import RigConfig, ServoMap, deg_to_pulses, load_rig, longest_tick_wait_s, wire_budget
@@ -120,14 +121,15 @@ class RigPlug:
         budget); a servo shut down by a hardware error would ignore torque-on: refused."""
         ids = self.map.ids
         spec = self._spec.spec(Item.HARDWARE_ERROR_STATUS)
-        deadline = time.perf_counter() + self.config.bus.reply_budget_s
+        host = self.readback.host
+        started = host.sample(time.perf_counter())
         while True:
             try:
                 present, alerts = read_present(self.bus, self.config, ids)
                 break
             except NoReply:
-                self.counters["arm_retries"] += 1
-                if time.perf_counter() > deadline:
+                self.counters["arm_retries"] += 1  # the budget is usable time, as the read's (devices/stall.py)
+                if usable_between(started, host.sample(time.perf_counter())) > self.config.bus.reply_budget_s:
                     raise
         for sid in alerts:
             raise_hardware_error(self.bus, sid, spec)
@@ -231,6 +233,7 @@ class RigPlug:
             "fast_sync_read": rb.use_fast,
             "reply_allowance_ms": {k: round(t.allowance_ms(), 3) for k, t in self.bus.timers.items()},
             "bus_error_level": rb.budget.level,
+            "silent_ms": {str(sid): {"charged": c, "host_stalled": h} for sid, (c, h) in rb.silent.items()},
             "transactions": self.bus.transactions,
         }
 

@@ -9,7 +9,10 @@ Hardware Error Status".
 Telling a miss from a failure (as ROS 2's Dynamixel hardware interface does):
 
 - A failed read is retried on the next tick and counted; a servo is declared silent
-  only when it has missed every read for ``reply_budget_s``.
+  only when it has missed every read for ``reply_budget_s`` of usable time: the time
+  the host itself could not run (steal, this thread's run-queue wait;
+  :mod:`riderlive.devices.stall`) is not charged to it, and a silence that outlived the
+  wall-clock budget only thanks to that discount is counted (``stall_ridethroughs``).
 - The bus has an error budget (:class:`~riderlive.devices.budget.ErrorBudget`): every
   failed read adds one, every good one takes ``bus_error_credit`` out; failures that
   outnumber good reads by ``bus_error_burst`` (persistent corruption) are a
@@ -28,6 +31,7 @@ from collections.abc import Sequence
 
 from riderlive.devices.budget import ErrorBudget
 from riderlive.devices.lifecycle import BusErrors, HardwareFault, NoReply
+from riderlive.devices.stall import HostClock, Sampler, SilenceState, lost_between, silence_step, usable_between
 from riderlive.dynamixel.bringup import servo_hardware_error
 from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
 from riderlive.dynamixel.sdkbus import SdkBus
@@ -40,8 +44,10 @@ MAX_FAST_RETRY_S = 600.0
 class Readback:
     """The read's state (fast or plain, retrying, who is missing) and the latest values."""
 
-    def __init__(self, rig: RigConfig) -> None:
+    def __init__(self, rig: RigConfig, host: Sampler | None = None) -> None:
         self.rig = rig
+        self.host: Sampler = HostClock() if host is None else host
+        """Where the host's stalls are read (only while a servo is silent)."""
         self.ids = rig.ids
         spec = next(iter(rig.servos.values())).spec  # every X-series model has the same layout
         self.address = spec.spec(Item.PRESENT_POSITION).address
@@ -68,7 +74,10 @@ class Readback:
         self._probing = False
         self._fast_retry_at: float | None = None
         self._retry_interval = self.rig.bus.fast_read_retry_s
-        self._missing_since: list[float | None] = [None] * len(self.ids)
+        self.silence = SilenceState.fresh(len(self.ids))
+        self.silent: dict[int, tuple[float, float]] = {}
+        """Each silent servo at the last read: ms of silence charged, ms the host stalled meanwhile."""
+        self._rode_through: set[int] = set()
         self.budget.reset()
 
     def read(self, bus: SdkBus, skip: set[int], now: float, counters: Counter[str]) -> None:
@@ -84,11 +93,17 @@ class Readback:
             block = bus.read_block(self.address, self.length, ids, fast)
         except NoReply as exc:
             block, failure = exc.partial, exc
-        for i, sid in enumerate(self.ids):
-            if sid in block:
-                self._missing_since[i] = None
-            elif sid in ids and self._missing_since[i] is None:
-                self._missing_since[i] = now
+        asked = [sid in ids for sid in self.ids]
+        heard = [sid in block for sid in self.ids]
+        quiet = any(a and not h for a, h in zip(asked, heard, strict=True))
+        sample = self.host.sample(now) if quiet else None
+        self.silence, over = silence_step(self.silence, asked, heard, sample, self.rig.bus.reply_budget_s)
+        self.silent = {
+            sid: (round(usable_between(since, sample) * 1000, 1), round(lost_between(since, sample) * 1000, 1))
+            for sid, since in zip(self.ids, self.silence.since, strict=True)
+            if since is not None and sample is not None
+        }
+        self._rode_through.intersection_update(i for i, h in enumerate(heard) if not h)
         self.fresh = set(block)
         for sid in self._decode(block):
             raise_hardware_error(bus, sid, self.status_spec)
@@ -110,16 +125,24 @@ class Readback:
                 f"failed reads outnumber good ones by {self.budget.burst:g} "
                 f"({self.budget.failures} failed, {self.budget.successes} good; last: {failure})"
             )
+        self._count_ridethroughs(now, {o.index for o in over}, counters)
+        if over:
+            stale = {self.ids[o.index]: o for o in over}
+            sid = failure.unit if failure.unit in stale else self.ids[over[0].index]
+            o = stale[sid]
+            lost = f", {o.lost_s * 1000:.0f} ms more while the host stalled" if o.lost_s >= 0.0005 else ""
+            raise NoReply(sid, f"no reply for {o.usable_s * 1000:.0f} ms of retries{lost} ({failure})") from failure
+
+    def _count_ridethroughs(self, now: float, over: set[int], counters: Counter[str]) -> None:
+        """Count each silence that is past the budget on the wall clock but not in usable
+        time (the host stalled): one per silence, however long it lasts."""
         budget = self.rig.bus.reply_budget_s
-        stale = {
-            sid: since
-            for sid, since in zip(self.ids, self._missing_since, strict=True)
-            if since is not None and now - since >= budget
-        }
-        if stale:
-            sid = failure.unit if failure.unit in stale else min(stale, key=stale.__getitem__)
-            silent_ms = (now - stale[sid]) * 1000
-            raise NoReply(sid, f"no reply for {silent_ms:.0f} ms of retries ({failure})") from failure
+        for i, since in enumerate(self.silence.since):
+            if since is None or i in over or i in self._rode_through:
+                continue
+            if now - since.wall_s >= budget:
+                self._rode_through.add(i)
+                counters["stall_ridethroughs"] += 1
 
     def _fast_failed(self, now: float, counters: Counter[str]) -> None:
         counters["fast_read_failures"] += 1

@@ -13,7 +13,9 @@ Beyond the schema (unknown keys, ranges), :func:`platform_problems` refuses what
 be driven safely: limits in the wrong order, a home or park pose outside the soft
 limits (naming the actuator and by how much), a home with no room on some axis, and a
 soft start or park too short for a full stroke within the speed and acceleration
-limits. Every error names the file and the key.
+limits, and limits so slow that the firmware's dead-man park over a full stroke would
+outlast ``link.PARK_BOUND_S`` (the firmware refuses such a CONFIG). Every error names the
+file and the key.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from riderlive.platform.cueing import PRESETS, CueingParams
 from riderlive.platform.geometry import Geometry, Kind, Pose, Vec3, hexagon, rotation, tangential_arms
 from riderlive.platform.ik import SCALAR, axis_ranges, make_ik
 from riderlive.platform.limits import ease_seconds
+from riderlive.platform.link import PARK_BOUND_S, PARK_SCALE, firmware_park_s
 
 PLATFORM_DIR = CONFIG_DIR / "platforms"
 """The shipped platform files (the repository's ``config/platforms``)."""
@@ -302,6 +305,15 @@ def platform_problems(cfg: PlatformConfig) -> list[tuple[str, str]]:
                     f"(needs >= {need:.2f} s)",
                 )
             )
+    firmware_park = max(map(firmware_park_s, span, g.max_speed, g.max_accel))
+    if firmware_park > PARK_BOUND_S:  # the firmware refuses such limits: docs/platform-link.md
+        problems.append(
+            (
+                "actuators.max_speed",
+                f"too slow for the firmware's dead-man park: at {PARK_SCALE:.0%} of max_speed over a full "
+                f"stroke it takes {firmware_park:.2f} s, at most {PARK_BOUND_S:g} s (raise max_speed or max_accel)",
+            )
+        )
     return problems
 
 

@@ -175,6 +175,11 @@ class PlatformPlug:
             yield
         for key, index, value in self._config_values():
             detail(f"configuring {key.name.lower()} {index}")
+            why = link.config_refusal(hello.profile, key, value)  # the firmware's table, said before it refuses
+            if why is not None:
+                raise Mismatch(
+                    index, f"{self.name}: actuator {index + 1}: {why}: the platform file asks what its profile refuses"
+                )
             try:
                 self._call(lambda k=key, i=index, v=value: self.link.command(link.Config(k, i, v)))  # type: ignore[misc]
             except Rejected as exc:

@@ -15,6 +15,7 @@ actuator, degrees for a rotary arm or a hobby servo): ±327.67 units.
 from __future__ import annotations
 
 import enum
+import math
 import struct
 from dataclasses import dataclass
 from typing import ClassVar
@@ -140,6 +141,64 @@ class Profile(enum.IntEnum):
     PLATFORM6 = 1
     PLATFORM3 = 2
     SERVO8 = 3
+
+
+PARK_BOUND_S = 5.0
+"""A device's park ends (outputs off) within this of its first step for any CONFIG it
+accepts: the speed and acceleration floors below (firmware ``PARK_BOUND_MS``)."""
+PARK_SCALE = 0.25
+"""The firmware parks at this fraction of each actuator's speed limit (profile ``park_scale``)."""
+
+
+def firmware_park_s(distance: float, speed: float, accel: float) -> float:
+    """An upper bound of the firmware's park (s) over ``distance`` under the speed and
+    acceleration limits (any one unit: counts, m or deg, per s and s^2), starting at full
+    speed the wrong way: brake (speed / accel), then a trapezoid at ``PARK_SCALE`` speed.
+    The formula of ``firmware_proto/src/profile.h``; test_config_bounds simulates it."""
+    cruise = PARK_SCALE * speed
+    if distance >= cruise * cruise / accel:
+        trapezoid = distance / cruise + cruise / accel
+    else:
+        trapezoid = 2.0 * math.sqrt(distance / accel)
+    return speed / accel + trapezoid
+
+
+def _ranges(
+    soft: tuple[int, int], home_park: tuple[int, int], speed: tuple[int, int], accel: tuple[int, int]
+) -> dict[ConfigKey, tuple[int, int]]:
+    """A profile's CONFIG ranges (inclusive) from its soft limits, poses and limit ranges (counts)."""
+    return {
+        ConfigKey.HEARTBEAT_TIMEOUT_MS: (20, 1000),
+        ConfigKey.TELEMETRY_PERIOD_MS: (4, 1000),  # the control period .. 1 s
+        ConfigKey.SOFT_MIN: (soft[0], min(home_park)),  # the park and home poses stay inside
+        ConfigKey.SOFT_MAX: (max(home_park), soft[1]),
+        ConfigKey.VELOCITY_LIMIT: speed,  # counts/s: the floor keeps a park within PARK_BOUND_S
+        ConfigKey.ACCELERATION_LIMIT: accel,  # counts/s^2
+        ConfigKey.PWM_HZ: (50, 330),
+    }
+
+
+_LINEAR_150MM = _ranges((500, 14500), (7500, 500), (13000, 25000), (125000, 500000))
+CONFIG_RANGES: dict[Profile, dict[ConfigKey, tuple[int, int]]] = {
+    Profile.PLATFORM6: _LINEAR_150MM,
+    Profile.PLATFORM3: _LINEAR_150MM,
+    Profile.SERVO8: _ranges((-8500, 8500), (0, 0), (8000, 30000), (75000, 300000)),
+}
+"""The values each profile's CONFIG accepts, inclusive (anything else: OUT_OF_RANGE, counted).
+The firmware's ``profile.c`` holds the same facts; ``link_vectors.json`` carries this table
+and the C tests send every edge and one beyond it to the device core. SOFT_MIN must also
+stay below the current SOFT_MAX and the other way round."""
+
+
+def config_refusal(profile: int, key: ConfigKey, value: int) -> str | None:
+    """Why a device of ``profile`` would refuse CONFIG ``key`` = ``value`` (OUT_OF_RANGE), or None."""
+    try:
+        lo, hi = CONFIG_RANGES[Profile(profile)][key]
+    except ValueError:
+        return None  # a profile this host does not know: the device decides
+    if lo <= value <= hi:
+        return None
+    return f"{key.name} {value} is outside {lo}..{hi} (firmware profile {Profile(profile).name.lower()})"
 
 
 COUNTERS = (

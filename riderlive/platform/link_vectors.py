@@ -219,6 +219,9 @@ def vectors() -> dict[str, Any]:
             "profile": {p.name: int(p) for p in Profile},
             "counters": list(COUNTERS),
         },
+        "config_ranges": {
+            p.name: {k.name: list(r) for k, r in ranges.items()} for p, ranges in link.CONFIG_RANGES.items()
+        },
         "frames": [
             {
                 "name": name,

@@ -2,7 +2,8 @@
 
 REST paths are stable (the browser page calls them); every body is described in the
 OpenAPI schema at ``/openapi.json`` (browsable at ``/docs``). Mutating calls need
-``Authorization: Bearer <token>`` when a token is required (see ``auth``). Bad bodies
+``Authorization: Bearer <token>`` when a token is required, checked for every write by
+``auth.WriteGuard`` before the body is read (see ``auth``). Bad bodies
 get a 4xx with a JSON ``detail``, never a 500 (``service/rest.py``).
 """
 
@@ -69,6 +70,18 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     app = FastAPI(title="riderlive", version=__version__, lifespan=lifespan)
     app.state.service = service
     app.add_exception_handler(RequestValidationError, invalid_request)
+
+    def unauthorized(action: str | None) -> None:
+        service.metrics.bad_frames[auth.UNAUTHORIZED] += 1
+        if action is not None:
+            service.device_metrics.refusals[(action, auth.UNAUTHORIZED)] += 1
+
+    # Innermost first: the token of every write before its body is read (auth.WriteGuard),
+    # inside the size limit (a Content-Length over it is 413 unread) and CORS (its headers
+    # reach a browser's 401 too).
+    app.add_middleware(
+        auth.WriteGuard, token=config.security.token, required=config.token_required, refused=unauthorized
+    )
     app.add_middleware(RestGuard, limit=config.input.max_message_bytes, rejected=service.metrics.rest_rejected)
     if config.server.cors_origins:
         app.add_middleware(
@@ -78,19 +91,17 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             allow_headers=["Authorization", "Content-Type"],
         )
 
-    def control(request: Request) -> None:
-        if config.token_required and not auth.token_matches(
-            config.security.token, auth.bearer(request.headers.get("authorization"))
-        ):
-            service.metrics.bad_frames["unauthorized"] += 1
-            raise HTTPException(401, "token required: Authorization: Bearer <token>")
-
     def observe(request: Request) -> None:
-        if config.security.publish_requires_token:
-            control(request)
+        """Reads need the token only with ``security.publish_requires_token`` (writes: auth.WriteGuard)."""
+        if (
+            config.security.publish_requires_token
+            and config.token_required
+            and not auth.token_matches(config.security.token, auth.bearer(request.headers.get("authorization")))
+        ):
+            service.metrics.bad_frames[auth.UNAUTHORIZED] += 1
+            raise HTTPException(401, auth.TOKEN_REQUIRED)
 
     preset_dirs = [Path(d) for d in config.tick.preset_dirs]
-    ctl = [Depends(control)]
     obs = [Depends(observe)]
     app.add_api_websocket_route("/ws/horse", service.ingest)
     app.add_api_websocket_route("/ws/saddle", service.saddle_ingest)
@@ -100,7 +111,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def get_state() -> dict[str, Any]:
         return service.state()
 
-    @app.put("/api/source", dependencies=ctl, summary="Choose the source: procedural, replay of a take, or live")
+    @app.put("/api/source", summary="Choose the source: procedural, replay of a take, or live")
     async def put_source(body: SourceRequest) -> dict[str, Any]:
         try:
             return await service.set_source(body.model_dump())
@@ -120,7 +131,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         ground = {"max_slope": MAX_SLOPE, "transition": TRANSITION}  # deg; m over which a new ground eases in
         return {"gaits": gaits, "moves": list(horse_module.MOVES), "terrain": ground}
 
-    @app.post("/api/horse/perform", dependencies=ctl, summary="Ask the procedural horse for a move")
+    @app.post("/api/horse/perform", summary="Ask the procedural horse for a move")
     async def perform(body: PerformRequest) -> dict[str, Any]:
         moves = getattr(horse_module, "MOVES", None)
         if moves is not None and body.move not in moves:
@@ -133,7 +144,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def presets() -> dict[str, Any]:
         return {"presets": shipped_presets(preset_dirs), "current": service.params.name}
 
-    @app.put("/api/preset", dependencies=ctl, summary="Load a preset by name (animator offsets are kept)")
+    @app.put("/api/preset", summary="Load a preset by name (animator offsets are kept)")
     async def put_preset(body: PresetRequest) -> dict[str, Any]:
         path = find_preset(body.name, preset_dirs)
         if path is None:
@@ -152,7 +163,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def get_params() -> dict[str, float]:
         return service.params.flat()
 
-    @app.patch("/api/params", dependencies=ctl, summary='Change parameters live: {"head.lift_gain": 10.0}')
+    @app.patch("/api/params", summary='Change parameters live: {"head.lift_gain": 10.0}')
     async def patch_params(changes: dict[str, float]) -> dict[str, float]:
         if any(not math.isfinite(v) for v in changes.values()):
             raise HTTPException(422, "parameters must be finite numbers")
@@ -167,7 +178,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def get_animator() -> AnimatorBody:
         return AnimatorBody(offsets=service.animator.offsets, gains=service.animator.gains)
 
-    @app.put("/api/animator", dependencies=ctl, summary="Replace the animator offsets and gains")
+    @app.put("/api/animator", summary="Replace the animator offsets and gains")
     async def put_animator(body: AnimatorBody) -> AnimatorBody:
         try:
             animator = AnimatorLayer(offsets=dict(body.offsets), gains=dict(body.gains))
@@ -176,7 +187,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             raise HTTPException(422, str(exc)) from None
         return body
 
-    @app.post("/api/record/start", dependencies=ctl, summary="Start recording a take (409 if it exists)")
+    @app.post("/api/record/start", summary="Start recording a take (409 if it exists)")
     async def record_start(body: RecordStart | None = None) -> dict[str, Any]:
         body = body or RecordStart()
         try:
@@ -187,7 +198,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             raise HTTPException(400, str(exc)) from None
         return {"recording": name}
 
-    @app.post("/api/record/stop", dependencies=ctl, summary="Stop recording; the take is complete on disk")
+    @app.post("/api/record/stop", summary="Stop recording; the take is complete on disk")
     async def record_stop() -> dict[str, Any]:
         return {"take": service.stop_recording()}
 
@@ -195,7 +206,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
     async def takes() -> dict[str, Any]:
         return {"takes": list_takes(config.takes.directory)}
 
-    add_take_routes(app, service, ctl, obs)  # take download and bake, parameter groups (the page)
+    add_take_routes(app, service, obs)  # take download and bake, parameter groups (the page)
 
     add_device_routes(app, service)  # arm, disarm, estop, reset, reload, devices, healthz, readyz
     add_platform_routes(app, service, obs)  # GET and PATCH /api/platform

@@ -8,7 +8,7 @@
 
 Arm, reset and reload need the token whenever one is configured, even on loopback;
 disarm and e-stop (stopping) follow the other control calls (a token when bound beyond
-loopback).
+loopback). ``auth.WriteGuard`` checks it (``auth.WRITE_RULES``) before a body is read.
     GET  /api/devices                             lifecycle of each device, supervision
     GET  /healthz, /readyz                        liveness and readiness (no token)
 
@@ -95,13 +95,8 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
         counts.refusals[(action, reason.value)] += 1
         return HTTPException(REFUSAL_STATUS.get(reason, 409), {"refusal": reason.value, "message": message})
 
-    def operator(request: Request, action: str, *, arming: bool = False) -> str:
-        """Check the token (arming: whenever one is configured); return who asks."""
-        given = auth.bearer(request.headers.get("authorization"))
-        needed = config.arming_token is not None if arming else config.token_required
-        if needed and not auth.token_matches(config.security.token, given):
-            service.metrics.bad_frames["unauthorized"] += 1
-            raise refuse(action, Refusal.UNAUTHORIZED, "token required: Authorization: Bearer <token>")
+    def operator(request: Request) -> str:
+        """Who asks (the token of every write was checked by auth.WriteGuard before its body)."""
         return f"rest {request.client.host if request.client else '?'}"
 
     async def answer(action: str, build: Any) -> dict[str, Any]:
@@ -115,7 +110,7 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
 
     @app.post("/api/arm", summary="Arm a device by name (token whenever one is configured): it soft-starts")
     async def arm(request: Request, body: DeviceRequest) -> dict[str, Any]:
-        by = who(operator(request, "arm", arming=True), body)
+        by = who(operator(request), body)
         for check in service.arm_checks:  # e.g. no stage heartbeat (riderlive.bus.rig)
             if (why := check()) is not None:
                 raise refuse("arm", Refusal.NOT_READY, why)
@@ -123,32 +118,36 @@ def add_device_routes(app: FastAPI, service: Service) -> None:
 
     @app.post("/api/disarm", summary="Ease a device (all when none named) to park, then outputs off")
     async def disarm(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
-        by = who(operator(request, "disarm"), body)
+        by = who(operator(request), body)
         return await answer("disarm", lambda r: cmd.Disarm(body.device if body else None, by, r))
 
     @app.post("/api/estop", summary="Emergency stop, latched: every device's outputs off at once")
     async def estop(request: Request) -> dict[str, Any]:
-        received = time.perf_counter()
-        operator(request, "estop")
+        received = time.perf_counter()  # the token was checked before (auth.WriteGuard)
         latched = service.supervisor.estop(StopSource.REST)
         counts.estops[StopSource.REST.label] += 1
         return {"estop": True, "received_at": received, "latched_at": latched}
 
     @app.post("/api/reset", summary="Clear the e-stop and device faults: disarmed (never arms)")
     async def reset(request: Request, body: AnyDeviceRequest | None = None) -> dict[str, Any]:
-        by = who(operator(request, "reset", arming=True), body)
+        by = who(operator(request), body)
         result = await answer("reset", lambda r: cmd.Reset(body.device if body else None, by, r))
         return {**result, "estop": False}
 
     @app.post("/api/reload", summary="Re-read a device's file and connect it again (refused while it moves)")
     async def reload(request: Request, body: DeviceRequest) -> dict[str, Any]:
-        by = who(operator(request, "reload", arming=True), body)
+        by = who(operator(request), body)
         return await answer("reload", lambda r: cmd.Reload(body.device, by, r))
 
     @app.get("/api/devices", summary="Each device's lifecycle state; tick supervision and guardian")
     async def devices(request: Request) -> dict[str, Any]:
-        if config.security.publish_requires_token:
-            operator(request, "observe")
+        if (
+            config.security.publish_requires_token
+            and config.token_required
+            and not auth.token_matches(config.security.token, auth.bearer(request.headers.get("authorization")))
+        ):
+            service.metrics.bad_frames[auth.UNAUTHORIZED] += 1
+            raise refuse("observe", Refusal.UNAUTHORIZED, auth.TOKEN_REQUIRED)
         status = service.link.status()
         return {
             "devices": status.get("devices", []),

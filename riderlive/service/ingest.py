@@ -20,9 +20,12 @@ Each producer is told ``{"type": "control", "driving": true|false}`` when that c
 
 Every value is checked against its plausible range (:mod:`riderlive.ranges`) after
 conversion to the service's units; a frame with one value outside is rejected whole.
-A producer whose clock jumps (:func:`clock_jump`) starts a new *stream segment*: the
-tick sees a new stream id, re-anchors its clock mapping and blends, and the producer is
-told ``{"type": "segment", ...}`` (docs/protocol.md, "Clocks that jump").
+A producer whose clock jumps, steps back, stands still or resumes
+(:func:`~riderlive.service.clocks.clock_step`) starts a new *segment* and is told
+``{"type": "segment", ...}`` (docs/protocol.md, "Clocks that jump"): after a jump the
+tick sees a new stream id, re-anchors its clock mapping and blends; after a step back, a
+pause (the service's clock stands in, so it keeps driving) or a resume, the time the
+tick is given stays continuous in the same stream.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from riderlive.ranges import Ranges
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
 from riderlive.service import auth
+from riderlive.service.clocks import ClockStep, ProducerClock, clock_step
 from riderlive.service.codecs import PROTOCOL_VERSION, BadFrame, channel_order, decode_frame, parse_message
 
 if TYPE_CHECKING:
@@ -52,6 +56,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
+PAUSE_S = 0.1
+"""A clock that stands still this long (or half ``input.hold``, if less) while frames
+keep coming is paused: the service's clock stands in before the tick's hold runs out."""
 LENGTH_SCALE_RANGE = (1e-6, 1e6)
 """Accepted ``length_scale`` of a producer's hello (thesis rig units per its length unit)."""
 
@@ -108,8 +115,8 @@ class Producer:
     stream: int = 0
     """The id the tick knows this producer's current stream segment by (0: ``id``)."""
     segment: int = 0
-    last_t: float | None = None
-    """Producer time of the last accepted frame (None before the first)."""
+    clock: ProducerClock = field(default_factory=ProducerClock)
+    """Its clock in the current segment (service/clocks.py)."""
     outbox: list[dict[str, Any]] = field(default_factory=list)
     """Messages for the producer decided while handling a frame, sent right after."""
     accepted: int = 0
@@ -153,19 +160,6 @@ class Producer:
         for index, value in values.items():
             self.last[index] = value
         return list(self.last)
-
-
-def clock_jump(last_t: float | None, last_rx: float, t: float, rx: float, threshold: float) -> float | None:
-    """How far a producer's clock jumped against the service's since its previous frame.
-
-    ``(t - last_t) - (rx - last_rx)`` seconds when that exceeds ``threshold`` either
-    way (positive: forward; negative: backward, or paused while the service's clock
-    went on), else None. Network jitter moves the difference by milliseconds.
-    """
-    if last_t is None:
-        return None
-    drift = (t - last_t) - (rx - last_rx)
-    return drift if abs(drift) > threshold else None
 
 
 class Arbiter:
@@ -317,33 +311,35 @@ class IngestEndpoint:
         spec = self.spec
         frame = decode_frame(obj, producer.order, spec.index, spec.names, spec.what)
         values = producer.merge(producer.convert(frame.values, self.low, self.high))
-        jump = clock_jump(producer.last_t, producer.last_frame_at, frame.t, now, limits.clock_jump)
-        if jump is not None:
-            self.new_segment(producer, frame.t, jump)
-        producer.last_t = frame.t
+        step = clock_step(producer.clock, frame.t, now, limits.clock_jump, min(PAUSE_S, limits.hold / 2.0))
+        producer.clock = step.clock
+        if step.event is not None:
+            self.new_segment(producer, frame.t, step)
         producer.accepted += 1
         self.service.metrics.count_frame_in(producer.name)
         arbiter = self.service.arbiter
         drives = arbiter.drives(producer, now)
         producer.last_frame_at = now
         if drives:
-            self.service.link.push_input(producer.stream, frame.t, now - self.service.link.start, values, spec.kind)
+            self.service.link.push_input(producer.stream, step.t, now - self.service.link.start, values, spec.kind)
         return drives
 
-    def new_segment(self, producer: Producer, t: float, jump: float) -> None:
-        """Re-anchor: the tick gets a new stream id (a fresh clock mapping, a blend)."""
-        direction = "forward" if jump > 0 else "backward"
+    def new_segment(self, producer: Producer, t: float, step: ClockStep) -> None:
+        """Tell the producer; after a jump the tick gets a new stream id (a fresh clock
+        mapping, a blend); a step back, a pause or a resume keeps it (the time given is continuous)."""
+        assert step.event is not None
         producer.segment += 1
-        producer.stream = next_producer_id()
-        self.service.metrics.clock_jumps[direction] += 1
+        if step.new_stream:
+            producer.stream = next_producer_id()
+        self.service.metrics.clock_jumps[step.event.direction] += 1
         producer.outbox.append(
             {
                 "type": "segment",
                 "segment": producer.segment,
-                "reason": f"clock_{direction}",
+                "reason": step.event.value,
                 "t": t,
-                "previous_t": producer.last_t,
-                "jump": jump,
+                "previous_t": step.previous_t,
+                "jump": step.jump,
             }
         )
 

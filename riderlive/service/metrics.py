@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from riderlive.realtime.latency import LatencyHistogram, LatencySnapshot
+from riderlive.service.clocks import ClockEvent
 
 TICK_LATENESS = "How late each tick started after its deadline."
 INGEST_TO_SEND = "Horse frame received to the first rider frame computed from it written to every client due that tick."
@@ -37,7 +38,8 @@ class ServiceMetrics:
     """Horse frame received (decoded) to the first rider frame computed from it written to every
     client due that tick (``Hub.publish``)."""
     vmc: Counter[str] = field(default_factory=Counter)
-    """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed)."""
+    """VMC bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error`` (send failed),
+    ``skipped`` (a chosen tick that got none)."""
 
     def count_disconnect(self, message: Mapping[str, Any]) -> None:
         """A websocket closed; uvicorn closes with 1009 a message beyond ``ws_max_size``: count it."""
@@ -93,13 +95,13 @@ PHASE_COUNTERS: tuple[tuple[str, str], ...] = (
 def render(
     metrics: ServiceMetrics,
     tick: dict[str, float],
-    clients: list[tuple[str, str, int, int]],
+    clients: list[tuple[str, str, int, int, int]],
     producers: int,
     saddle_producers: int = 0,
     *,
     latency: Mapping[str, LatencySnapshot] | None = None,
 ) -> str:
-    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped); ``producers``
+    """Prometheus text exposition; ``clients`` are (id, path, sent, dropped, skipped); ``producers``
     counts every input connection, ``saddle_producers`` those of them on ``/ws/saddle``;
     ``latency``: snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (``Service.latency``)."""
     latency = latency or {}
@@ -171,13 +173,19 @@ def render(
         "riderlive_frames_out_total",
         "counter",
         "Frames sent per client.",
-        [f'riderlive_frames_out_total{{client="{_escape(c)}"}} {sent}' for c, _, sent, _ in clients],
+        [f'riderlive_frames_out_total{{client="{_escape(c)}"}} {sent}' for c, _, sent, _, _ in clients],
     )
     metric(
         "riderlive_frames_dropped_total",
         "counter",
         "Frames replaced in a slow client's slot.",
-        [f'riderlive_frames_dropped_total{{client="{_escape(c)}"}} {dropped}' for c, _, _, dropped in clients],
+        [f'riderlive_frames_dropped_total{{client="{_escape(c)}"}} {dropped}' for c, _, _, dropped, _ in clients],
+    )
+    metric(
+        "riderlive_frames_skipped_total",
+        "counter",
+        "Ticks a client's decimation wanted that never reached it (skipped by the tick, coalesced or missed).",
+        [f'riderlive_frames_skipped_total{{client="{_escape(c)}"}} {skipped}' for c, _, _, _, skipped in clients],
     )
     metric(
         "riderlive_frames_in_total",
@@ -200,8 +208,11 @@ def render(
     metric(
         "riderlive_clock_jumps_total",
         "counter",
-        "Producer clock jumps (a new stream segment each), by direction.",
-        [f'riderlive_clock_jumps_total{{direction="{d}"}} {metrics.clock_jumps[d]}' for d in ("backward", "forward")],
+        "Producer clock jumps, steps back, pauses and resumes (a new stream segment each), by direction.",
+        [
+            f'riderlive_clock_jumps_total{{direction="{e.direction}"}} {metrics.clock_jumps[e.direction]}'
+            for e in ClockEvent
+        ],
     )
     metric(
         "riderlive_clients_cut_off_total",
@@ -219,7 +230,11 @@ def render(
         metric(
             "riderlive_vmc_bundles_total",
             "counter",
-            "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed).",
-            [f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}' for o in ("sent", "dropped", "error")],
+            "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed, skipped: a chosen tick "
+            "that got none).",
+            [
+                f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}'
+                for o in ("sent", "dropped", "error", "skipped")
+            ],
         )
     return "\n".join(out) + "\n"

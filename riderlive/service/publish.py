@@ -85,6 +85,14 @@ class Subscriber:
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     sent: int = 0
     dropped: int = 0
+    skipped: int = 0
+    """Ticks its decimation wanted that never reached it (skipped by a late tick, coalesced
+    after a late web process, lapped in the output ring): with ``sent`` and ``dropped``,
+    every wanted tick is counted."""
+    first_seq: int | None = None
+    """The first tick offered to it since its subscription (or the tick) last changed."""
+    last_seq: int | None = None
+    """The last tick offered to it (None: none yet, or its subscription changed)."""
     closed: bool = False
     transport: Any = None
     """The raw transport (fast path), or None: frames then go through the slot."""
@@ -243,6 +251,12 @@ class Hub:
                 sub = client.subscription
                 if seq % sub.decimation != client.phase:
                     continue
+                last = client.last_seq
+                if last is not None and seq > last:
+                    client.skipped += (seq - last) // sub.decimation - 1
+                else:  # the first, or a restarted tick's seq starting again: counted from here
+                    client.first_seq = seq
+                client.last_seq = seq
                 data = encoded.get(sub.key)
                 if data is None:
                     bones = np.asarray(poses.rider(record).local_rotations).ravel() if sub.bones else None
@@ -401,6 +415,7 @@ class Hub:
                     obj, client.subscription, service.config.tick.rate, self.index
                 )
                 client.phase = self.phase_for(client)
+                client.last_seq = None
                 client.offer_control(client.subscription.describe(service.config.tick.rate, self.names))
             elif kind == "ping":
                 pong = {"type": "pong", "id": decode_ping_id(obj), "engine_time": service.link.engine_time()}
@@ -421,5 +436,24 @@ class Hub:
             service.metrics.bad_frames[exc.reason] += 1
             client.offer_control({"type": "error", "reason": exc.reason, "message": str(exc)})
 
-    def snapshot(self) -> list[tuple[str, str, int, int]]:
-        return [(c.id, "/ws/rider", c.sent, c.dropped) for c in self.clients.values()]
+    def snapshot(self) -> list[tuple[str, str, int, int, int]]:
+        """Per client: id, path, frames sent, dropped (slot replaced), skipped (never offered)."""
+        return [(c.id, "/ws/rider", c.sent, c.dropped, c.skipped) for c in self.clients.values()]
+
+    def describe_clients(self) -> list[dict[str, Any]]:
+        """For ``/api/state``: each client's counts (since it connected) and the ticks its
+        current subscription covers: from ``first_seq`` to ``last_seq``, every tick its
+        decimation wanted was sent, dropped or skipped (+ 1 while a frame waits in its slot)."""
+        return [
+            {
+                "id": c.id,
+                "sent": c.sent,
+                "dropped": c.dropped,
+                "skipped": c.skipped,
+                "decimation": c.subscription.decimation,
+                "first_seq": c.first_seq,
+                "last_seq": c.last_seq,
+                "pending": c.frame is not None,
+            }
+            for c in self.clients.values()
+        ]

@@ -384,7 +384,7 @@ class Service:
                     for p in self.arbiter.producers.values()
                 ],
             },
-            "clients": [{"id": c, "sent": s, "dropped": d} for c, _, s, d in self.hub.snapshot()],
+            "clients": self.hub.describe_clients(),
             "recording": None if self.recorder is None else {"name": self.take_name, "rows": self.recorder.rows},
             "preset": self.params.name,
             "horse_channels": list(HORSE_NAMES),

@@ -18,8 +18,10 @@ import uvicorn
 
 from riderlive.configfile import ConfigError, validate
 from riderlive.devices.latch import StopSource
+from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime.pacing import try_realtime_priority
 from riderlive.service.config import ServiceConfig, load_config
+from riderlive.service.hostcheck import Advice, advise, device_ports, gather
 from riderlive.service.runtime import Service
 from riderlive.service.wsprotocol import protocol_class
 
@@ -78,6 +80,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="arm the rig once connected, at start only (rig.arm = true): unattended use, it moves unwatched",
     )
+
+
+def warn_host(devices: tuple[DeviceSpec, ...], config: ServiceConfig) -> list[Advice]:
+    """With a serial device configured: what this host should change for it, printed
+    with the fix (service/hostcheck.py, docs/deployment.md "A busy host")."""
+    if not devices:
+        return []
+    advice = advise(gather(device_ports(devices)), config.tick.realtime_priority, config.server.realtime_priority)
+    for a in advice:
+        print(f"riderlive serve: warning: {a}", file=sys.stderr, flush=True)
+    return advice
 
 
 def run(args: argparse.Namespace) -> int:
@@ -149,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
     if config.server.realtime_priority:
         try_realtime_priority(config.server.realtime_priority, reset_on_fork=True, who="the web process")
     service = app.state.service
+    warn_host(service.devices, config)
     server = RiderServer(uvicorn_config(app, config), service)
     try:
         server.run(sockets=[sock])

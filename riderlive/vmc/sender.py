@@ -7,7 +7,11 @@ hundred microseconds per bundle, ``bench/bench_vmc.py``) and never waits on the
 network: the socket is non-blocking, so a full send buffer drops that bundle
 (counted in ``dropped``) instead of blocking, and a send error (no route, an ICMP
 "port unreachable" from a receiver that is not running) is counted in ``errors`` and
-the next bundle is tried as usual. Names are resolved once, at start: a host that
+the next bundle is tried as usual. One bundle (per target) goes out per callback, for
+the newest chosen tick (``seq`` a multiple of the decimation); every chosen tick before
+it that got none (several arrived at once after the web loop was late, or never
+reached the web process) is counted in ``skipped``, per bundle: ``sent + dropped +
+error + skipped`` is the number of bundles the rate asked for. Names are resolved once, at start: a host that
 does not resolve, or a local port in use, is a :class:`VmcError` before the service
 starts.
 """
@@ -29,6 +33,8 @@ from riderlive.vmc.performer import horse_bundle, rider_bundle
 
 DEFAULT_PORT = 39539
 """The marionettes' usual port."""
+OUTCOMES = ("sent", "dropped", "error", "skipped")
+"""What became of each bundle the rate asked for (``VmcSender.counts``)."""
 
 
 class VmcError(ValueError):
@@ -63,7 +69,10 @@ class VmcSender:
     decimation: int = 1
     local_port: int = 0
     counts: Counter[str] = field(default_factory=Counter)
-    """Bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error``."""
+    """Bundles by outcome: ``sent``, ``dropped`` (send buffer full), ``error``, ``skipped``
+    (a chosen tick that got no bundle)."""
+    last_seq: int | None = None
+    """The last chosen tick a bundle was made for."""
     last_error: str | None = None
     _socket: socket.socket = field(init=False)
     _start: float | None = field(init=False, default=None)
@@ -102,6 +111,11 @@ class VmcSender:
         record = next((r for r in reversed(records) if int(r[L.OUT_SEQ]) % self.decimation == 0), None)
         if record is None:
             return
+        seq = int(record[L.OUT_SEQ])
+        if self.last_seq is not None and seq > self.last_seq:
+            missed = (seq - self.last_seq) // self.decimation - 1
+            self.counts["skipped"] += missed * (1 if self.horse is None else 2)
+        self.last_seq = seq  # a restarted tick's seq starts again: counted from there
         engine_t = float(record[L.OUT_ENGINE_T])
         if self._start is None:
             self._start = engine_t
@@ -133,7 +147,7 @@ class VmcSender:
             "target": f"{self.rider[1][0]}:{self.rider[1][1]}",
             "horse_target": None if self.horse is None else f"{self.horse[1][0]}:{self.horse[1][1]}",
             "decimation": self.decimation,
-            **{outcome: self.counts[outcome] for outcome in ("sent", "dropped", "error")},
+            **{outcome: self.counts[outcome] for outcome in OUTCOMES},
             "last_error": self.last_error,
         }
 

@@ -27,8 +27,16 @@ def make(*targets: str, timeout: float = 240) -> str:
 def test_c_tests_pass_under_sanitizers() -> None:
     out = make("test")
     results = dict(re.findall(r"^(test_\w+): (\d+) checks, 0 failed$", out, re.M))
-    assert set(results) == {"test_vectors", "test_device", "test_motion"}, out[-2000:]
+    assert set(results) == {"test_vectors", "test_device", "test_config_bounds", "test_motion", "test_estop_edges"}, (
+        out[-2000:]
+    )
     assert int(results["test_vectors"]) >= 300 and int(results["test_device"]) >= 3000
+    # the e-stop edge at every point of a step: none lost, the outputs never back on
+    masked = re.search(r"masked \(the board\): (\d+) points a step x 2 kinds of edge: (\d+) lost, (\d+) with", out)
+    assert masked is not None and int(masked[1]) >= 17 and masked.groups()[1:] == ("0", "0"), out[-2000:]
+    # every accepted CONFIG parks within 5 s
+    parks = [int(ms) for ms in re.findall(r"slowest park (\d+) ms", out)]
+    assert len(parks) == 3 and max(parks) <= 5000, out[-2000:]
     assert "runtime error" not in out and "AddressSanitizer" not in out
 
 

@@ -9,7 +9,14 @@ from typing import Any
 import pytest
 
 from riderlive.configfile import ConfigError, read_toml
-from riderlive.platform.config import PLATFORM_DIR, load_platform, platform_from_dict, shipped_platforms
+from riderlive.platform.config import (
+    PLATFORM_DIR,
+    build_geometry,
+    load_platform,
+    platform_from_dict,
+    platform_problems,
+    shipped_platforms,
+)
 from riderlive.platform.cueing import PRESETS
 from riderlive.platform.geometry import Kind
 
@@ -159,3 +166,20 @@ def test_missing_and_broken_files(tmp_path: Path) -> None:
     d = data("stewart_linear")
     d["kind"] = "hexapod"
     assert error_for(d).key == "kind"
+
+
+def test_limits_too_slow_for_the_firmwares_park_are_refused() -> None:
+    """The firmware parks at 25 % of max_speed: over a full stroke that must end within 5 s."""
+    cfg = load_platform("stewart_linear")
+    assert platform_problems(cfg) == []
+    slow = cfg.model_copy(update={"actuators": cfg.actuators.model_copy(update={"max_speed": 0.05})})
+    g = build_geometry(slow)
+    stroke = max(hi - lo for lo, hi in zip(g.lower, g.upper, strict=True))
+    # brake from 0.05 m/s at 20 m/s^2, then the stroke at 0.0125 m/s (+ its own ramps)
+    expected = 0.05 / 20.0 + stroke / 0.0125 + 0.0125 / 20.0
+    assert expected > 5.0
+    problems = dict(platform_problems(slow))
+    assert problems["actuators.max_speed"] == (
+        f"too slow for the firmware's dead-man park: at 25% of max_speed over a full stroke it takes "
+        f"{expected:.2f} s, at most 5 s (raise max_speed or max_accel)"
+    )

@@ -274,3 +274,36 @@ def test_state_labels_are_the_lifecycle_names() -> None:
         "running", "parking", "parked", "estop", "fault",
     ]  # fmt: skip
     assert all(t < 0x80 for t in FrameType if t.name in {"HELLO", "TARGET", "ARM", "CONFIG"})
+
+
+# --- CONFIG ranges (the table the firmware's tests check edge by edge) ---
+
+
+def test_config_ranges_edges_and_refusals() -> None:
+    velocity = link.ConfigKey.VELOCITY_LIMIT
+    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 13000) is None
+    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 25000) is None
+    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 12999) == (
+        "VELOCITY_LIMIT 12999 is outside 13000..25000 (firmware profile platform6)"
+    )
+    assert link.config_refusal(link.Profile.SERVO8, link.ConfigKey.ACCELERATION_LIMIT, 300001) is not None
+    assert link.config_refusal(link.Profile.SERVO8, link.ConfigKey.SOFT_MIN, 1) is not None  # park (0) outside
+    assert link.config_refusal(99, velocity, 1) is None  # a profile this host does not know: the device decides
+    for ranges in link.CONFIG_RANGES.values():
+        assert set(ranges) == set(link.ConfigKey) and all(lo <= hi for lo, hi in ranges.values())
+
+
+def test_the_slowest_accepted_limits_park_within_the_bound() -> None:
+    """Hand-computed: 14500 counts (out range 0..15000 from park 500) at 25 % of 13000 counts/s
+    with 125000 counts/s^2, from full speed: 0.104 + 4.4615 + 0.026 = 4.59 s."""
+    assert link.firmware_park_s(14500, 13000, 125000) == pytest.approx(0.104 + 14500 / 3250 + 3250 / 125000)
+    assert link.firmware_park_s(14500, 13000, 125000) == pytest.approx(4.5915, abs=1e-4)
+    assert link.firmware_park_s(1.0, 100.0, 1.0) == pytest.approx(100.0 + 2.0)  # short: a triangle
+    worst = {link.Profile.PLATFORM6: 14500, link.Profile.PLATFORM3: 14500, link.Profile.SERVO8: 9000}
+    for profile, distance in worst.items():
+        ranges = link.CONFIG_RANGES[profile]
+        for v in ranges[link.ConfigKey.VELOCITY_LIMIT]:
+            for a in ranges[link.ConfigKey.ACCELERATION_LIMIT]:
+                assert link.firmware_park_s(distance, v, a) <= link.PARK_BOUND_S - 0.2, (profile, v, a)
+        slower = ranges[link.ConfigKey.VELOCITY_LIMIT][0] * 0.8  # the floor is not far above what the bound needs
+        assert link.firmware_park_s(distance, slower, ranges[link.ConfigKey.ACCELERATION_LIMIT][0]) > link.PARK_BOUND_S

@@ -3,14 +3,21 @@
 from __future__ import annotations
 
 import json
+import re
+import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from fastapi import FastAPI
+from fastapi.routing import APIRoute
+from fastapi.testclient import TestClient
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from riderlive.cli import main
+from riderlive.service import auth
+from riderlive.service.app import create_app
 from riderlive.service.config import ServiceConfig
 from tests.service.live_server import LiveServer
 
@@ -117,3 +124,100 @@ def test_estop_on_the_websocket_needs_the_token_health_does_not(guarded: LiveSer
     assert guarded.request("POST", "/api/reset").status_code == 401
     assert guarded.request("POST", "/api/reset", headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200
     assert guarded.get("/healthz").status_code == 200 and guarded.get("/readyz").status_code == 200
+
+
+# --- every REST write: 401 before its body is read (auth.WriteGuard) ---
+
+BAD_BODIES = (b"{", b'{"device": 5, "nope": [1, 2', b'{"device": "no such device!", "intensity": "x"}', b"", b"[" * 64)
+NO_TOKEN = (
+    {},
+    {"Authorization": "Bearer wrong-token-123"},
+    {"Authorization": TOKEN},
+    {"Authorization": f"Basic {TOKEN}"},
+)
+DEVICE_WRITES = {
+    ("POST", "/api/arm"),
+    ("POST", "/api/disarm"),
+    ("POST", "/api/estop"),
+    ("POST", "/api/reset"),
+    ("POST", "/api/reload"),
+    ("PATCH", "/api/platform"),
+}
+
+
+def config_of(text: str) -> ServiceConfig:
+    return ServiceConfig.model_validate(tomllib.loads(text))
+
+
+def write_routes(app: FastAPI) -> list[tuple[str, str]]:
+    """(method, path) of every REST write in the app's route table; path parameters filled in."""
+    out = []
+    for route in app.routes:
+        if isinstance(route, APIRoute):
+            path = re.sub(r"\{[^}]+\}", "take1", route.path)
+            out += [(method, path) for method in sorted(route.methods & auth.WRITE_METHODS)]
+    return out
+
+
+def test_every_write_route_answers_401_before_its_body(guarded: LiveServer) -> None:
+    """Off loopback (require_token), each write of the route table with each bad body and no
+    valid token: 401 with the refusal, never 422 (the body is not even read)."""
+    routes = write_routes(create_app(config_of(CONFIG)))
+    assert set(routes) >= DEVICE_WRITES and len(routes) >= len(DEVICE_WRITES) + 7, routes
+    before = {
+        a: guarded.metric("riderlive_device_refusals_total", f'action="{a}",reason="unauthorized"')
+        for a in ("arm", "tune", "estop")
+    }
+    for method, path in routes:
+        for body in BAD_BODIES:
+            for headers in NO_TOKEN:
+                answer = guarded.request(
+                    method, path, content=body, headers={"Content-Type": "application/json", **headers}
+                )
+                assert answer.status_code == 401, (method, path, body, headers, answer.text)
+                assert answer.json()["detail"]["refusal"] == "unauthorized"
+                assert answer.headers["www-authenticate"] == "Bearer"
+    tries = len(BAD_BODIES) * len(NO_TOKEN)
+    for action, was in before.items():  # each refusal counted under its action
+        now = guarded.metric("riderlive_device_refusals_total", f'action="{action}",reason="unauthorized"')
+        assert now - was == tries, action
+    # with the token the same bad body is read and refused for what it is (not 401)
+    auth_header = {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"}
+    for method, path in (
+        ("POST", "/api/arm"),
+        ("PATCH", "/api/platform"),
+        ("PUT", "/api/source"),
+        ("PATCH", "/api/params"),
+    ):
+        assert guarded.request(method, path, content=b"{", headers=auth_header).status_code == 422, (method, path)
+
+
+def test_the_write_rules_on_loopback_and_for_a_route_added_later() -> None:
+    """Loopback with a token configured: the arming writes (arm, reset, reload, platform tune)
+    need it, the others read their body (a bad one: 422); a route added after the app was
+    built is a write like any other."""
+    loopback = create_app(config_of(f'[security]\ntoken = "{TOKEN}"\n'))
+    client = TestClient(loopback)  # no lifespan: the routes answer before any tick is needed
+    arming = {(m, p) for (m, p), rule in auth.WRITE_RULES.items() if rule.rule is auth.Rule.ARMING}
+    assert arming == {("POST", "/api/arm"), ("POST", "/api/reset"), ("POST", "/api/reload"), ("PATCH", "/api/platform")}
+    acting = {("POST", "/api/estop"), ("POST", "/api/record/stop")}  # no body: with none needed they would act
+    for method, path in sorted(set(write_routes(loopback)) - acting):
+        answer = client.request(method, path, content=b"{", headers={"Content-Type": "application/json"})
+        assert answer.status_code == (401 if (method, path) in arming else 422), (method, path, answer.text)
+    public = create_app(config_of(CONFIG))
+
+    @public.delete("/api/something-new")
+    async def something_new() -> dict[str, bool]:
+        return {"deleted": True}
+
+    public.router.routes.insert(0, public.router.routes.pop())  # before the page's mount at /
+    assert TestClient(public).delete("/api/something-new").status_code == 401
+    ok = TestClient(public).delete("/api/something-new", headers={"Authorization": f"Bearer {TOKEN}"})
+    assert ok.status_code == 200 and ok.json() == {"deleted": True}
+
+
+def test_write_rule_table() -> None:
+    assert auth.write_rule("GET", "/api/arm") is None and auth.write_rule("options", "/api/arm") is None
+    assert auth.write_rule("post", "/api/arm/") == auth.WriteRule(auth.Rule.ARMING, "arm")
+    assert auth.write_rule("POST", "/api/estop") == auth.WriteRule(auth.Rule.CONTROL, "estop")
+    assert auth.write_rule("PUT", "/api/anything") is auth.DEFAULT_WRITE

@@ -1,0 +1,159 @@
+"""A broker that is not there, or that never answers, is a one-line error and exit 2 in time.
+
+The real CLI (``riderlive serve --nats`` and every ``riderlive stage`` action) against a
+closed port and against a listening socket that accepts and never sends the NATS greeting.
+Time is measured from process start, so it includes the interpreter and the imports: the
+same command with a URL that nats-py rejects before any connect (port 99999: the same
+imports and event loop, no network), started at the same moment, is the baseline, and the
+budget is baseline + 25 % (load noise between the two) + 3 s (``nats.connect_timeout`` is
+2 s by default). On a busy host the start-up alone takes seconds. The connect alone, in
+process, is bounded without that noise (test_connect_itself_is_bounded).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BUDGET_S = 3.0
+BAD_URL = "nats://127.0.0.1:99999"
+NOISE = 0.25
+"""Two processes started together on a loaded host end their imports up to this apart."""
+
+STAGE_ACTIONS = {
+    "list": [],
+    "estop": ["--by", "test"],
+    "heartbeat": ["--duration", "1"],
+    "record": ["--rig", "r1", "--take", "t1", "--seconds", "1"],
+    "takes": [],
+    "replay": ["--take", "t1", "--rig", "r1"],
+    "export": ["--take", "t1", "--out", "out.csv"],
+}
+
+
+def closed_port() -> int:
+    """A loopback port nobody listens on (bound, then closed: the kernel refuses it)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def mute() -> Iterator[int]:
+    """A port that accepts connections and never writes a byte."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(64)
+    held: list[socket.socket] = []
+    stop = threading.Event()
+
+    def accept() -> None:
+        while not stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            held.append(conn)
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield int(server.getsockname()[1])
+    stop.set()
+    server.close()
+    for conn in held:
+        conn.close()
+
+
+def run_both(args: list[str], baseline: list[str], cwd: Path) -> tuple[tuple[int, list[str], float], float]:
+    """``riderlive ARGS`` (exit code, stderr lines, wall s from process start) and the wall
+    time of ``riderlive BASELINE`` started at the same moment (same load, same imports)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    start = time.perf_counter()
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "riderlive", *a],
+            cwd=cwd,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for a in (args, baseline)
+    ]
+    ends, errs = [0.0, 0.0], ["", ""]
+
+    def reap(i: int) -> None:  # each end timed by its own waiter: neither waits for the other
+        errs[i] = procs[i].communicate(timeout=120)[1]
+        ends[i] = time.perf_counter() - start
+
+    waiters = [threading.Thread(target=reap, args=(i,)) for i in range(2)]
+    for w in waiters:
+        w.start()
+    for w in waiters:
+        w.join()
+    assert procs[1].returncode == 2 and "invalid connect url" in errs[1], errs[1]
+    return (procs[0].returncode, errs[0].splitlines(), ends[0]), ends[1]
+
+
+SERVE = ["serve", "--nats", "{url}", "--rig", "r1", "--port", "0"]
+
+
+def stage(action: str) -> list[str]:
+    return ["stage", "--nats", "{url}", "--stage", "A", action, *STAGE_ACTIONS[action]]
+
+
+def assert_fails_fast(command: list[str], url: str, cwd: Path) -> None:
+    """``command`` (with ``{url}``) against url: exit 2, one line naming it, within the budget."""
+    (code, lines, wall_s), base_s = run_both(
+        [a.format(url=url) for a in command], [a.format(url=BAD_URL) for a in command], cwd
+    )
+    assert code == 2, lines
+    assert len(lines) == 1, lines
+    assert url in lines[0] and "no NATS server answers" in lines[0], lines
+    budget = base_s * (1.0 + NOISE) + BUDGET_S
+    assert wall_s < budget, f"{wall_s:.2f} s (start-up baseline {base_s:.2f} s, budget {budget:.2f} s): {lines}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["closed", "mute"])
+def test_serve_nats_fails_fast(kind: str, mute: int, tmp_path: Path) -> None:
+    url = f"nats://127.0.0.1:{closed_port() if kind == 'closed' else mute}"
+    assert_fails_fast(SERVE, url, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("action", sorted(STAGE_ACTIONS))
+@pytest.mark.parametrize("kind", ["closed", "mute"])
+def test_every_stage_action_fails_fast(kind: str, action: str, mute: int, tmp_path: Path) -> None:
+    url = f"nats://127.0.0.1:{closed_port() if kind == 'closed' else mute}"
+    assert_fails_fast(stage(action), url, tmp_path)
+
+
+@pytest.mark.slow
+def test_a_cluster_of_dead_servers_is_one_error(tmp_path: Path) -> None:
+    """Every server of a comma-separated URL is tried once, then the first error is told."""
+    url = f"nats://127.0.0.1:{closed_port()},nats://127.0.0.1:{closed_port()}"
+    assert_fails_fast(stage("list"), url, tmp_path)
+
+
+@pytest.mark.parametrize("kind", ["closed", "mute"])
+def test_connect_itself_is_bounded(kind: str, mute: int) -> None:
+    """In process, without start-up noise: the first connect ends within connect_timeout."""
+    from riderlive.bus.nats import connect
+    from riderlive.bus.transport import Unreachable
+
+    url = f"nats://127.0.0.1:{closed_port() if kind == 'closed' else mute}"
+    start = time.perf_counter()
+    with pytest.raises(Unreachable, match="no NATS server answers"):
+        asyncio.run(connect(url, connect_timeout=0.5))
+    assert time.perf_counter() - start < 0.5 + 0.5

@@ -1,0 +1,133 @@
+"""A producer's clock against the service's (pure, on scripted clocks): jumps, steps back,
+a clock that stands still, its resume, and the cap on segments."""
+
+from __future__ import annotations
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from riderlive.service.clocks import MAX_SEGMENTS_PER_S, STEP_S, ClockEvent, ClockStep, ProducerClock, clock_step
+
+JUMP, PAUSE = 0.5, 0.1
+DT = 1 / 120
+
+
+def feed(frames: list[tuple[float, float]]) -> list[ClockStep]:
+    """(producer t, receive time) per frame -> each frame's step."""
+    clock, out = ProducerClock(), []
+    for t, rx in frames:
+        step = clock_step(clock, t, rx, JUMP, PAUSE)
+        clock = step.clock
+        out.append(step)
+    return out
+
+
+def events(steps: list[ClockStep]) -> list[tuple[int, ClockEvent]]:
+    return [(i, s.event) for i, s in enumerate(steps) if s.event is not None]
+
+
+def test_a_steady_clock_passes_through() -> None:
+    steps = feed([(50.0 + i * DT, 7.0 + i * DT + (0.003 if i % 3 else 0.0)) for i in range(500)])  # jitter 3 ms
+    assert events(steps) == []
+    assert [s.t for s in steps] == [50.0 + i * DT for i in range(500)]
+
+
+def test_a_jump_either_way_starts_a_segment() -> None:
+    frames = [(100.0 + i * DT, i * DT) for i in range(10)]
+    frames += [(0.0 + i * DT, (10 + i) * DT) for i in range(10)]  # a scene reload
+    frames += [(5000.0 + i * DT, (20 + i) * DT) for i in range(10)]
+    steps = feed(frames)
+    assert events(steps) == [(10, ClockEvent.BACKWARD), (20, ClockEvent.FORWARD)]
+    assert steps[10].new_stream and steps[20].new_stream and [s.t for s in steps] == [t for t, _ in frames]
+    assert steps[10].previous_t == 100.0 + 9 * DT and steps[10].jump < -100.0 and steps[20].jump > 4000.0
+
+
+def test_a_clock_that_stands_still_is_paused_within_pause_s_and_the_service_clock_stands_in() -> None:
+    frames = [(10.0 + i * DT, i * DT) for i in range(60)]
+    paused_at = frames[-1][0]
+    frames += [(paused_at, (60 + i) * DT) for i in range(1, 200)]  # the game paused; frames keep coming
+    frames += [(paused_at + i * DT, (260 + i) * DT) for i in range(1, 30)]  # and resumes where it was
+    steps = feed(frames)
+    (p, paused), (r, resumed) = events(steps)
+    assert paused is ClockEvent.PAUSED and resumed is ClockEvent.RESUMED and r == 259
+    # paused once the clock stood still for PAUSE_S, not later than one frame after
+    still = frames[p][1] - frames[59][1]
+    assert PAUSE - 1e-9 <= still < PAUSE + DT and steps[p].jump == -still
+    # from the pause on, the time given to the tick goes on from the last frame that moved
+    # with the service's clock: continuous, the same stream (no blend)
+    given = [s.t for s in steps[p:]]
+    received = [rx for _, rx in frames[p:]]
+    assert given[0] == paused_at + still
+    assert all(abs((g - given[0]) - (x - received[0])) < 1e-9 for g, x in zip(given[: r - p], received))
+    # resumed: its own clock again, plus the offset that keeps the time given continuous
+    offset = steps[r].t - frames[r][0]
+    assert all(abs(s.t - (t + offset)) < 1e-9 for s, (t, _) in zip(steps[r:], frames[r:]))
+    assert not any(s.new_stream for s in steps)
+    times = [s.t for s in steps]
+    assert all(b >= a for a, b in zip(times, times[1:])), "the time given never goes back"
+    assert all(b > a for a, b in zip(times[p - 1 :], times[p:])), "nor stands still once paused"
+
+
+def test_small_backward_steps_are_re_anchored() -> None:
+    """0.2 s back every 2 s, as in the issue: every step is a segment, no frame is lost."""
+    frames = [(i * DT - 0.2 * (i // 240), i * DT) for i in range(1200)]
+    steps = feed(frames)
+    assert events(steps) == [(i, ClockEvent.BACKWARD) for i in range(240, 1200, 240)]
+    assert all(abs(steps[i].jump + 0.2 - DT) < 1e-9 for i in range(240, 1200, 240))
+    assert not any(s.new_stream for s in steps), "re-anchored in the same stream"
+    for a, b in zip(steps, steps[1:]):  # the time given advances with the service's clock, step or not
+        assert abs((b.t - a.t) - DT) < 1e-9
+
+
+def test_jitter_below_a_millisecond_is_no_segment() -> None:
+    frames = [(1.0, 0.0), (1.01, 0.01), (1.01 - STEP_S / 2, 0.02), (1.03, 0.03)]
+    assert events(feed(frames)) == []
+
+
+def test_a_clock_that_goes_back_on_every_frame_starts_at_most_the_cap_of_segments_a_second() -> None:
+    frames = [(-0.01 * i, i * DT) for i in range(600)]  # 5 s, every frame 10 ms older
+    steps = feed(frames)
+    small = [frames[i][1] for i, _ in events(steps) if abs(steps[i].jump) <= JUMP]
+    assert small[:4] == [frames[i][1] for i in range(1, 5)]  # the first four at once
+    for start in small:  # then at most the cap in any second
+        assert sum(1 for x in small if start <= x < start + 1.0) <= MAX_SEGMENTS_PER_S
+    # once dropped frames add up to a jump, that is a jump (not capped): every 0.5 s here
+    big = [i for i, _ in events(steps) if abs(steps[i].jump) > JUMP]
+    assert 8 <= len(big) <= 11
+
+
+frame_gaps = st.floats(min_value=0.0, max_value=0.05)
+clock_moves = st.one_of(
+    st.just(0.0), st.floats(min_value=-0.3, max_value=0.3), st.floats(min_value=-1e3, max_value=1e3)
+)
+
+
+@given(st.lists(st.tuples(frame_gaps, clock_moves), min_size=1, max_size=300))
+def test_invariants(moves: list[tuple[float, float]]) -> None:
+    """Whatever the clock does: step and pause segments stay within the cap in every
+    second; the time given is finite; while the service's clock stands in, it advances
+    exactly with the receive time."""
+    t = rx = 0.0
+    frames = []
+    for gap, move in moves:
+        rx += gap
+        t += move
+        frames.append((t, rx))
+    steps = feed(frames)
+    # steps back and pauses are capped (a jump, drift beyond JUMP, is not: its jump is > JUMP)
+    capped = [
+        frames[i][1]
+        for i, e in events(steps)
+        if e is ClockEvent.PAUSED or (e is ClockEvent.BACKWARD and abs(steps[i].jump) <= JUMP)
+    ]
+    for start in capped:
+        assert sum(1 for x in capped if start <= x < start + 1.0) <= MAX_SEGMENTS_PER_S
+    previous = None
+    for (_, rx), s in zip(frames, steps):
+        assert abs(s.t) < 1e9
+        if s.clock.standin is not None and s.event is None:
+            t0, rx0 = s.clock.standin
+            assert s.t == t0 + (rx - rx0)
+        if s.event is not None and not s.new_stream and previous is not None:
+            assert s.t >= previous.newest_eff - 1e-9, "a re-anchor never goes back"
+        previous = s.clock

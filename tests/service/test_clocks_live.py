@@ -1,0 +1,111 @@
+"""Producer clocks against the real server (uvicorn, a real websocket producer, a
+``/ws/rider`` follower): a paused clock keeps driving, a clock stepping back is
+re-anchored, and neither moves the rider by more per tick than a steady clock does."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+from websockets.sync.client import ClientConnection, connect
+
+from riderlive.channels import HORSE_INDEX, RIDER_INDEX
+from tests.service.live_server import LiveServer
+from tests.service.producers import Follower
+
+RZ = HORSE_INDEX["rearPivot.rz"]
+BACK = RIDER_INDEX["lower_back.rz"]
+HZ = 120.0
+
+
+def horse(t: float) -> float:
+    return 3.0 * math.sin(2.0 * math.pi * 1.5 * t)
+
+
+def drive(
+    ws: ClientConnection, seconds: float, clock: Callable[[float], float], segments: list[dict], game: bool
+) -> None:
+    """Send a smooth horse at HZ, stamped with ``clock(elapsed)``: a function of that clock
+    (``game``: a game's pose follows its clock, and stands still with it) or of real time
+    (a producer whose timestamps alone step); collect the segment messages that come back."""
+    start = time.perf_counter()
+    n = 0
+    while (elapsed := time.perf_counter() - start) < seconds:
+        t = clock(elapsed)
+        ws.send(json.dumps({"t": t, "values": {"rearPivot.rz": horse(t if game else elapsed)}}))
+        n += 1
+        time.sleep(max(0.0, start + n / HZ - time.perf_counter()))
+        try:
+            while True:
+                message = json.loads(ws.recv(timeout=0))
+                if message["type"] == "segment":
+                    message["at"] = time.perf_counter()
+                    segments.append(message)
+        except TimeoutError:
+            pass
+
+
+def drivers(frames: list[dict]) -> list[tuple[str, int, float]]:
+    """Runs of the same driver: (driver, frames, source time at its start), for messages."""
+    runs: list[tuple[str, int, float]] = []
+    for f in frames:
+        if runs and runs[-1][0] == f["driver"]:
+            runs[-1] = (runs[-1][0], runs[-1][1] + 1, runs[-1][2])
+        else:
+            runs.append((f["driver"], 1, f["source_t"]))
+    return runs
+
+
+def largest_step(frames: list[dict]) -> float:
+    """The largest change of the rider's lower back per tick between consecutive /ws/rider
+    frames (deg; a frame the follower missed makes a two-tick step, counted as two)."""
+    back = np.array([f["values"][BACK] for f in frames])
+    seq = np.array([f["seq"] for f in frames])
+    return float((np.abs(np.diff(back)) / np.diff(seq)).max())
+
+
+def run(
+    server: LiveServer, seconds: float, clock: Callable[[float], float], game: bool
+) -> tuple[list[dict], list[dict]]:
+    """0.5 s on a steady clock (to settle), then ``seconds`` on ``clock``, without a break
+    in the stream; the follower's frames of the second part and the segment messages."""
+    follower = Follower(server.ws)
+    segments: list[dict] = []
+    try:
+        with connect(server.ws + "/ws/horse") as ws:
+            ws.recv(timeout=5)
+            begin = time.perf_counter() + 0.5
+            drive(ws, 0.5 + seconds, lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5), segments, game)
+            end = time.perf_counter()
+        frames = [f for f in follower.frames if begin + 0.05 <= f["at"] <= end]
+        assert frames and any(f["driver"] == "input" for f in follower.frames if f["at"] < begin), "it drove at once"
+        return frames, segments
+    finally:
+        follower.close()
+
+
+def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: LiveServer) -> None:
+    baseline, none = run(server, 2.0, lambda e: e, game=True)
+    assert none == [] and all(f["driver"] == "input" for f in baseline)
+    bound = largest_step(baseline)
+
+    paused_before = server.metric("riderlive_clock_jumps_total", 'direction="paused"')
+    # the game pauses after 0.5 s for 1.5 s (its clock stands still, frames keep coming), then resumes
+    paused, segments = run(server, 3.0, lambda e: min(e, 0.5) + max(0.0, e - 2.0), game=True)
+    reasons = [s["reason"] for s in segments]
+    assert reasons == ["clock_paused", "clock_resumed"], segments
+    assert all(f["driver"] == "input" for f in paused), ("the producer kept control throughout", drivers(paused))
+    assert -0.5 <= segments[0]["jump"] < 0.0  # it stood still for less than 0.5 s before the segment
+    assert largest_step(paused) <= 1.5 * bound, (largest_step(paused), bound)
+    assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
+
+    # 0.2 s back every second (the issue: every 2 s; twice as many steps here)
+    stepping, segments = run(server, 3.5, lambda e: e - 0.2 * math.floor(e), game=False)
+    assert [s["reason"] for s in segments] == ["clock_backward"] * 3, segments
+    # the step is 0.2 s less the time between the two frames (8 ms at 120 Hz, more when the sender is late)
+    assert all(s["jump"] == s["t"] - s["previous_t"] and -0.2 < s["jump"] < -0.1 for s in segments), segments
+    assert all(f["driver"] == "input" for f in stepping)
+    assert largest_step(stepping) <= 1.5 * bound, (largest_step(stepping), bound)
