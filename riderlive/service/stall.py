@@ -13,8 +13,10 @@ the :class:`Model`'s thresholds and returns a :class:`Verdict`:
   beaten for reasons outside it, the largest of (they overlap in time, so they are not
   added): the supervisor's own wake-up lateness (it saw the age late), the tick's
   run-queue wait since its last beat (``/proc/<pid>/schedstat``: runnable but not run),
-  and the stall of another process's heartbeat (the guardian's on the safety board)
-  over the same time. What is left is measured against the threshold.
+  the stall of another process's heartbeat (the guardian's on the safety board) over the
+  same time, and the largest one-CPU steal time (a 2-vCPU guest's hypervisor takes a
+  whole vCPU for ~100 ms: ``riderlive.devices.stall``, whose reading is used). What is
+  left is measured against the threshold.
 - **stopped** (``T`` in ``/proc/<pid>/stat``, a SIGSTOP): nothing excuses it but the
   supervisor's own lateness.
 - **starved** for longer than ``Model.longest_excuse``: hung after all (killing it will
@@ -106,6 +108,9 @@ class Observation:
     """The tick's scheduling now; None: unknown (no /proc, a thread)."""
     others_stall: float = 0.0
     """How long other processes' heartbeats (the guardian's) stalled over the same time (s)."""
+    stolen: float = 0.0
+    """The largest one-CPU steal time since about the last beat (s, ``devices/stall.py``'s
+    reading of ``/proc/stat``): the hypervisor took the vCPU, nothing in the guest ran."""
     progress_age: float = 0.0
     """Starting only: seconds since the tick's CPU time or run-queue wait last grew."""
 
@@ -142,7 +147,7 @@ def classify(model: Model, seen: Observation) -> Finding:
     starved = 0.0
     if not stopped and seen.sched is not None and seen.at_beat is not None:
         starved = max(0.0, seen.sched.wait - seen.at_beat.wait)
-    others = 0.0 if stopped else max(0.0, seen.others_stall)
+    others = 0.0 if stopped else max(0.0, seen.others_stall, seen.stolen)
     excused = min(max(seen.woke_late, starved, others), age)
     left = age - excused
     if left > model.threshold:

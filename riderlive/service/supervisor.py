@@ -58,6 +58,7 @@ from riderlive.devices.guardian import POLL_S, launch
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
 from riderlive.devices.shared import pid_alive
+from riderlive.devices.stall import HostClock
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink, exit_reason
 from riderlive.service import stall
@@ -72,6 +73,9 @@ UNHEALTHY_AFTER_S = 60.0
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
 of compiled kernels, page faults) without being taken for hung, unless a device moves."""
+STEAL_BASE_S = 0.02
+"""The steal baseline is taken at a new beat at most this often (it may then count up to this
+much steal from before the beat: lenient by that, at ~50 us a read)."""
 SPARE_RETRY_S = 2.0
 """After a spare failed, the next is started this long later (doubling per failure in a row, up to 60 s)."""
 OWN_FAILURES = ("exit", "SIGSEGV", "SIGABRT", "SIGBUS", "SIGFPE", "SIGILL")
@@ -125,6 +129,9 @@ class TickSupervisor:
         self._progress: tuple[float, float, float] = (0.0, -1.0, -1.0)
         """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
         self._stalled = False
+        self._host = HostClock()
+        self._steal_base: tuple[float, tuple[float, ...]] = (0.0, ())
+        """When and what the CPUs' steal was, taken at most every ``STEAL_BASE_S`` at a new beat."""
         self.down_since: float | None = None
         self.last_down_at: float | None = None
         """When the tick was last found dead or hung (perf_counter s; kept after the restart)."""
@@ -246,6 +253,8 @@ class TickSupervisor:
             if beat != self._beat_value:
                 self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
                 self._stalled = False
+                if now - self._steal_base[0] > STEAL_BASE_S:
+                    self._steal_base = (now, self._host.steal_s())
             if self._first_beat is None:
                 self._on_first_beat(now)
         elif self._first_beat is not None:
@@ -258,6 +267,10 @@ class TickSupervisor:
             _, cpu, wait = self._progress
             if sched.process_cpu > cpu or sched.wait > wait:
                 self._progress = (now, sched.process_cpu, sched.wait)
+        stolen = 0.0
+        if age is not None and age > self.period * 2:  # only a late beat pays the read (~50 us)
+            base = self._steal_base[1]
+            stolen = max((b - a for a, b in zip(base, self._host.steal_s(), strict=False)), default=0.0)
         guardian_beat = link.board["guardian_beat"] if self.guardian is not None else 0.0
         others = max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0
         observation = stall.Observation(
@@ -268,6 +281,7 @@ class TickSupervisor:
             at_beat=self._at_beat,
             sched=sched,
             others_stall=others,
+            stolen=max(0.0, stolen),
             progress_age=now - self._progress[0],
         )
         finding = stall.classify(stall.Model(self.hang_threshold()), observation)

@@ -61,6 +61,13 @@ def test_another_processes_stalled_heartbeat_excuses_a_host_stall() -> None:
     assert classify(MODEL, seen(0.090, others_stall=0.020)).verdict is Verdict.HUNG
 
 
+def test_steal_time_excuses_a_host_stall_but_not_a_stopped_tick() -> None:
+    # The hypervisor took a vCPU for 90 of the 100 ms: nothing in the guest ran.
+    assert classify(MODEL, seen(0.100, stolen=0.090)).verdict is Verdict.STALLED
+    assert classify(MODEL, seen(0.100, stolen=0.030)).verdict is Verdict.HUNG
+    assert classify(MODEL, seen(0.100, stolen=0.090, stopped=True)).verdict is Verdict.HUNG
+
+
 def test_a_stopped_tick_is_excused_only_by_the_supervisors_own_lateness() -> None:
     # SIGSTOP: no run-queue wait counts, nor the guardian's stall; the supervisor's lateness does.
     assert classify(MODEL, seen(0.040, stopped=True, wait=0.040, others_stall=0.040)).verdict is Verdict.HUNG
