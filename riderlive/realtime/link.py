@@ -175,6 +175,9 @@ class TickLink:
                 spare.discard()
                 spare = self.spare = None
         warm = spare is not None and spare.ready
+        if spare is not None and not warm:  # still warming at its low priority: a cold start is sooner
+            spare.discard()
+            spare = self.spare = None
         if spare is None:
             spare = self.start_spare(urgent=True)
         self.spare = None
