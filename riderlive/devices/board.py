@@ -11,8 +11,10 @@ by exactly one of them:
   too, eases on from where the park had got, not from the dead tick's pose);
 - the guardian: its pid and heartbeat (from its first instant: imports come after),
   ``ready`` once its plugs are built, the last generation it has stopped, ``busy``
-  while it holds a bus, takeovers done; a standby guardian its pid (``guardian_standby``)
-  once its plugs are built, until it becomes the guardian (the beat, then the pid).
+  while it holds a bus, takeovers done, and per device what it did in its last stop
+  (:class:`GuardianReport`: what the web process shows for a device while no tick
+  generation is serving); a standby guardian its pid (``guardian_standby``) once its
+  plugs are built, until it becomes the guardian (the beat, then the pid).
 
 The tick watches the guardian as the guardian watches the tick (:func:`guardian_watching`).
 
@@ -21,6 +23,7 @@ Times are ``perf_counter`` seconds (CLOCK_MONOTONIC, shared by every process her
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Sequence
 
 from riderlive.devices.lifecycle import DeviceState
@@ -49,7 +52,29 @@ _HEADER = (
     "guardian_takeovers",
     "guardian_standby",
     "shutdown",
+    *(f"guardian_d{d}" for d in range(MAX_DEVICES)),
 )
+
+
+class GuardianReport(enum.IntEnum):
+    """What the guardian did with a device in its last stop (``guardian_dN`` on the board)."""
+
+    NONE = 0
+    """Nothing yet (or the slot was cleared for a new generation)."""
+    PARKING = 1
+    """Taking over a device that was moving: easing it to park, then outputs off."""
+    STOPPING = 2
+    """Taking over a device that was not moving: outputs off, read back."""
+    OUTPUTS_OFF = 3
+    """Stopped: every unit read back with its outputs off."""
+    UNCONFIRMED = 4
+    """Outputs off sent but not confirmed by a read back (handed back or given up)."""
+    UNREACHABLE = 5
+    """The port was gone or held by another process: the servos' own watchdog is all that is left."""
+    NOT_CONNECTED = 6
+    """The dead tick had not connected it: nothing of ours on its bus."""
+
+
 _DEVICE = ("state", "seq", "units")
 _PER_DEVICE = len(_DEVICE) + MAX_UNITS
 
@@ -103,6 +128,18 @@ class SafetyBoard(Slots):
         for device in range(MAX_DEVICES):
             self.values[self._base + device * _PER_DEVICE + 1] = 0.0
 
+    def report(self, device: int, report: GuardianReport) -> None:
+        """The guardian: what it is doing or did with ``device`` in its stop."""
+        self[f"guardian_d{device}"] = float(report)
+
+    def reported(self, device: int) -> GuardianReport:
+        """What the guardian last reported for ``device``."""
+        return GuardianReport(int(self[f"guardian_d{device}"]))
+
+    def clear_reports(self) -> None:
+        """The web process, when a generation fails: the guardian's reports are about it from now."""
+        for device in range(MAX_DEVICES):
+            self[f"guardian_d{device}"] = 0.0
 
 def guardian_watching(board: SafetyBoard, now: float) -> str | None:
     """None while a guardian is ready, its process alive and its heartbeat younger than

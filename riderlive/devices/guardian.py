@@ -42,7 +42,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from riderlive.devices.board import SafetyBoard
+from riderlive.devices.board import GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
@@ -181,10 +181,13 @@ class Guardian:
     def _stop_device(self, index: int, spec: DeviceSpec) -> None:
         last = self.board.device(index)
         if last is None:
+            self.board.report(index, GuardianReport.NOT_CONNECTED)
             return  # never connected by that tick: nothing of ours on its bus
         state, pose = last
+        self.board.report(index, GuardianReport.PARKING if state.moving else GuardianReport.STOPPING)
         device = Device(make_plug(spec), spec.period_s, self.latch)
         if not self._take(device, spec, pose, state.moving):
+            self.board.report(index, GuardianReport.UNREACHABLE)
             return
         off_since: float | None = None
         next_tick = time.perf_counter()
@@ -195,10 +198,12 @@ class Guardian:
                 self.board.publish(index, device.state, device.plug.pose)  # a successor goes on from here
                 if device.fault is not None and device.fault.kind is FaultKind.PORT_LOST:
                     log.error("%s: the port went away during the stop", spec.name)
+                    self.board.report(index, GuardianReport.UNREACHABLE)
                     return
                 if not device.state.moving:
                     if status.outputs_off_confirmed:
                         log.warning("%s: stopped, outputs off (read back)", spec.name)
+                        self.board.report(index, GuardianReport.OUTPUTS_OFF)
                         return
                     off_since = now if off_since is None else off_since  # the read-back's time starts here
                     web = int(self.board["web_pid"])
@@ -210,6 +215,7 @@ class Guardian:
                             now - off_since,
                             "handing the bus back" if handback else "giving up (the servos' watchdog holds them)",
                         )
+                        self.board.report(index, GuardianReport.UNCONFIRMED)
                         return
                 next_tick += spec.period_s
                 time.sleep(max(0.0, next_tick - time.perf_counter()))

@@ -1,11 +1,19 @@
 """The web process's handle on the tick process: spawn, rings, commands, shutdown.
 
-The shared memory (rings, counters, status, the e-stop latch and the safety board)
-outlives any one tick process: after a crash or a hang the supervisor
-(``riderlive.service.supervisor``) calls :meth:`TickLink.respawn`, which starts the
-next *generation* on the same memory with fresh pipes. Requests that want an answer
-(arm, disarm, reset, reload) travel on the duplex command pipe; the tick's replies
-come back on it.
+The shared memory (rings, counters, status, the handover snapshot, the e-stop latch and
+the safety board) outlives any one tick process. Beside the running tick waits a warm
+spare (``realtime/spare.py``: imported, kernels loaded, blocked on its pipe); after a
+crash or a hang the supervisor (``riderlive.service.supervisor``) calls
+:meth:`TickLink.promote`, which makes the spare the next *generation*: it gets the
+settings as the service reports them (:meth:`apply`) and the dead generation's state
+(``realtime/handover.py``), then :meth:`start_spare` warms the next spare in the
+background. Without a spare ready, a spare is started at normal priority and promoted at
+once (a cold start). Requests that want an answer (arm, disarm, reset, reload) travel on
+the duplex command pipe; the tick's replies come back on it.
+
+From a failure until the next generation's first heartbeat (:meth:`mark_down`,
+:meth:`mark_up`), :meth:`status` reports the tick down and each device as the guardian
+reports it (``realtime/down.py``), never the dead generation's status.
 """
 
 from __future__ import annotations
@@ -14,6 +22,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 import os
+import pickle
 import signal
 import threading
 import time
@@ -26,11 +35,61 @@ import orjson
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import latency
+from riderlive.realtime import handover, latency
 from riderlive.realtime import layout as L
+from riderlive.realtime.down import down_status
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
+from riderlive.realtime.spare import Failed, TakeOver, Warm, spare_main
 from riderlive.realtime.tick import tick_main
+
+
+def exit_reason(code: int | None) -> str:
+    """A process's ``exitcode`` said: ``exit 1``, ``SIGKILL``..., or ``running`` (None)."""
+    if code is None:
+        return "running"
+    if code < 0:
+        with contextlib.suppress(ValueError):
+            return signal.Signals(-code).name
+        return f"signal {-code}"
+    return f"exit {code}"
+
+
+@dataclasses.dataclass
+class Spare:
+    """The web side of a spare tick process (``realtime/spare.py``)."""
+
+    process: multiprocessing.process.BaseProcess
+    commands: Connection
+    notify: Connection
+    started_at: float
+    """perf_counter s."""
+    urgent: bool
+    warm: Warm | None = None
+    failed: str | None = None
+
+    def poll(self) -> None:
+        """Take the spare's messages (``Warm``, ``Failed``) without waiting."""
+        with contextlib.suppress(EOFError, OSError):
+            while self.warm is None and self.failed is None and self.commands.poll():
+                message = self.commands.recv()
+                if isinstance(message, Warm):
+                    self.warm = message
+                elif isinstance(message, Failed):
+                    self.failed = message.message
+
+    @property
+    def ready(self) -> bool:
+        self.poll()
+        return self.warm is not None and self.process.is_alive()
+
+    def discard(self) -> None:
+        """Close its pipes (it exits when it sees them close) and make sure it is gone."""
+        self.commands.close()
+        self.notify.close()
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(1.0)
 
 
 class TickLink:
@@ -44,6 +103,7 @@ class TickLink:
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
         """Filled by the tick: ``tick_lateness``, ``ingest_to_wire``, ``ingest_to_tick`` (``realtime.latency``)."""
         self.status_blob = SharedBlob()
+        self.handover_blob = SharedBlob(handover.SNAPSHOT_BYTES)
         self.latch = StopLatch()
         self.board = SafetyBoard()
         self.board["web_pid"] = float(os.getpid())
@@ -53,6 +113,7 @@ class TickLink:
             "counters": self.counters.name,
             "histograms": self.histogram_block.name,
             "status": self.status_blob.name,
+            "handover": self.handover_blob.name,
         }
         self.base_setup = dataclasses.replace(
             setup, shm_names=names, latch_name=self.latch.name, board_name=self.board.name
@@ -67,17 +128,94 @@ class TickLink:
         self.outputs.read_next = 0
         self._status_version = -1
         self._status: dict[str, Any] = {}
+        self.spare: Spare | None = None
+        self.spares_started = 0
+        self.spares_failed = 0
+        """Spares that died or failed their warm-up (each is replaced)."""
+        self.takeovers = 0
+        """Generations started from a spare that was warm when promoted."""
+        self.down_reason: str | None = None
+        """Why no generation is serving now (None: one is)."""
         self.respawn()
 
-    def respawn(self) -> None:
-        """Start the next generation of the tick (the first one from ``__init__``)."""
-        if self.generation:
-            self._commands.close()
-            self._notify.close()
+    @property
+    def spares_wanted(self) -> bool:
+        return self.setup.isolation == "process"
+
+    def start_spare(self, urgent: bool = False) -> Spare:
+        """Start a spare with the settings as they are now (``urgent``: at normal priority, to
+        be promoted at once), replacing one that is there."""
+        if self.spare is not None:
+            self.spare.discard()
+        context = multiprocessing.get_context("spawn")
+        commands, child_commands = context.Pipe(duplex=True)
+        notify_read, notify_write = context.Pipe(duplex=False)
+        setups = tuple(pickle.dumps(s, protocol=pickle.HIGHEST_PROTOCOL) for s in (self.base_setup, self.start_setup))
+        args = (setups, child_commands, notify_write, 0 if urgent else self.base_setup.spare_nice)
+        process = context.Process(target=spare_main, args=args, name="riderlive-tick-spare", daemon=True)
+        process.start()
+        child_commands.close()
+        notify_write.close()
+        self.spares_started += 1
+        self.spare = Spare(process, commands, notify_read, time.perf_counter(), urgent)
+        return self.spare
+
+    def promote(self) -> bool:
+        """Make the spare the next generation (after the running one is dead and its devices
+        stopped); a spare started now at normal priority if none is there. True if the spare
+        was warm (its first heartbeat is a tick away)."""
+        if not self.spares_wanted:
+            self.respawn()
+            return False
+        spare = self.spare
+        if spare is not None:
+            spare.poll()
+            if spare.failed is not None or not spare.process.is_alive():
+                self.spares_failed += 1
+                spare.discard()
+                spare = self.spare = None
+        warm = spare is not None and spare.ready
+        if spare is not None and not warm:  # still warming at its low priority: a cold start is sooner
+            spare.discard()
+            spare = self.spare = None
+        if spare is None:
+            spare = self.start_spare(urgent=True)
+        self.spare = None
+        self._commands.close()
+        self._notify.close()
+        self._next_generation()
+        self._commands, self._notify, self.process = spare.commands, spare.notify, spare.process
+        self.notify_fd = self._notify.fileno()
+        os.set_blocking(self.notify_fd, False)
+        with contextlib.suppress(OSError, ValueError):  # it died just now: the supervisor sees its sentinel
+            spare.commands.send(TakeOver(pickle.dumps(self.setup, protocol=pickle.HIGHEST_PROTOCOL)))
+        self.board["tick_pid"] = float(spare.process.pid or 0)
+        self.board["tick_generation"] = float(self.generation)
+        self.takeovers += warm
+        return warm
+
+    def _next_generation(self) -> None:
         self.generation += 1
         self.setup = dataclasses.replace(self.base_setup, generation=self.generation)
         self.board.forget_devices()
         self.board["tick_beat"] = 0.0
+
+    def mark_down(self, reason: str) -> None:
+        """No generation serves from now (a death, a hang): :meth:`status` says so."""
+        self.down_reason = reason
+        self.board.clear_reports()
+
+    def mark_up(self) -> None:
+        """The serving generation has beaten."""
+        self.down_reason = None
+
+    def respawn(self) -> None:
+        """Start the next generation of the tick cold (the first one from ``__init__``, and
+        every one of a tick thread)."""
+        if self.generation:
+            self._commands.close()
+            self._notify.close()
+        self._next_generation()
         context = multiprocessing.get_context("spawn")
         self._commands, child_commands = context.Pipe(duplex=True)
         notify_read, notify_write = context.Pipe(duplex=False)
@@ -137,6 +275,13 @@ class TickLink:
         with contextlib.suppress(OSError, ValueError):  # a broken or closed pipe: the tick is down
             self.send(command)
 
+    def keep_tune(self, device: str, changes: dict[str, Any]) -> None:
+        """A device's live parameters were changed (a ``Tune`` the tick accepted): the next
+        generation applies them too."""
+        tunes = dict(self.base_setup.tunes)
+        tunes[device] = {**tunes.get(device, {}), **changes}
+        self.base_setup = dataclasses.replace(self.base_setup, tunes=tunes)
+
     def forget_applied(self) -> bool:
         """The next generation starts as configured (what :meth:`apply` kept made a tick
         fail to start); False if there was nothing to forget."""
@@ -184,14 +329,26 @@ class TickLink:
         return self.outputs.read_new(limit)
 
     def status(self) -> dict[str, Any]:
-        """The tick's latest status (driver, mode, e-stop, devices...)."""
+        """The serving tick's latest status (driver, mode, e-stop, devices...); while none
+        serves, or before the new generation wrote one, the down status (``realtime/down.py``)."""
         version = self.status_blob.version
         if version != self._status_version:
             data = self.status_blob.read()
             if data is not None:
                 self._status = orjson.loads(data)
                 self._status_version = version
-        return self._status
+        if self.down_reason is None and self._status.get("generation", self.generation) == self.generation:
+            return self._status
+        devices = self.setup.devices
+        reports = [self.board.reported(i) for i in range(len(devices))]
+        return down_status(
+            self._status,
+            devices,
+            reports,
+            estop=self.latch.latched,
+            reason=self.down_reason or "starting",
+            generation=self.generation,
+        )
 
     def alive(self) -> bool:
         return self.process.is_alive()
@@ -205,25 +362,24 @@ class TickLink:
         """How the tick process ended: ``exit 1``, ``SIGKILL``..., or ``running``."""
         if isinstance(self.process, threading.Thread):
             return "running" if self.process.is_alive() else "thread ended"
-        code = self.process.exitcode
-        if code is None:
-            return "running"
-        if code < 0:
-            with contextlib.suppress(ValueError):
-                return signal.Signals(-code).name
-            return f"signal {-code}"
-        return f"exit {code}"
+        return exit_reason(self.process.exitcode)
 
     def kill(self) -> None:
-        """SIGKILL the tick process (a hung one) and reap it."""
+        """SIGKILL the tick process (a hung one). Not waited for: a killed process runs none of
+        its code once the signal is sent (the kernel kicks it into its exit at once, stopped
+        or not), and tearing a large one down takes tens of milliseconds that the next
+        generation need not wait; it is reaped later (``multiprocessing`` reaps finished
+        children at the next start, and :meth:`stop` joins)."""
         if isinstance(self.process, threading.Thread) or self.process.pid is None:
             return
         with contextlib.suppress(ProcessLookupError):
             os.kill(self.process.pid, signal.SIGKILL)
-        self.process.join(2.0)
 
     def stop(self, timeout: float) -> None:
-        """Ask the tick to park and stop; wait up to ``timeout`` seconds, then kill it."""
+        """Ask the tick to park and stop; wait up to ``timeout`` seconds, then kill it (and the spare)."""
+        if self.spare is not None:
+            self.spare.discard()
+            self.spare = None
         if self.process.is_alive():
             with contextlib.suppress(BrokenPipeError, OSError):
                 self.send(cmd.Stop())
@@ -241,7 +397,11 @@ class TickLink:
         self._commands.close()
         self._notify.close()
         self.histograms.clear()
+        if self.spare is not None:
+            self.spare.discard()
+            self.spare = None
         for shared in (self.inputs, self.outputs, self.counters, self.histogram_block, self.status_blob):
             shared.close()
+        self.handover_blob.close()
         self.latch.close()
         self.board.close()

@@ -4,6 +4,7 @@ pickled into the spawned tick (``riderlive.realtime.link``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.registry import DeviceSpec
@@ -64,5 +65,10 @@ class TickSetup:
     """Where the published saddle pose is taken, and where a saddle input's samples are from."""
     phase_lock: bool = True
     """Move the deadlines to just after the driving producer's frames arrive (``realtime/phase_lock.py``)."""
+    tunes: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Live parameters applied to devices since start (``Tune``, by device name): a new
+    generation applies them to its devices before connecting them."""
+    spare_nice: int = 10
+    """Nice value of the warm spare's warm-up thread (``realtime/spare.py``)."""
     phase_margin: float = 0.0003
     """Seconds: the least time from a frame's expected arrival to the deadline that takes it."""

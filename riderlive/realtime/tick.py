@@ -18,6 +18,7 @@ guardian look for a dead or hung tick.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import logging
 import math
@@ -36,7 +37,7 @@ from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.horse import ProceduralHorse, TerrainConfig
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import latency
+from riderlive.realtime import handover, latency
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, TickCore, TickResult, frame_of
 from riderlive.realtime.output import TickDevices
@@ -90,6 +91,12 @@ class TickLoop:
         self.phase = PhaseFollower(setup.rate, setup.phase_margin, setup.phase_lock)
         """The phase lock (started with the clock in :meth:`run`)."""
         self.status_blob = SharedBlob(name=names["status"])
+        self.handover_blob = SharedBlob(name=names["handover"]) if "handover" in names else None
+        """Where this tick writes its :class:`~riderlive.realtime.handover.TickSnapshot` (None: nobody takes over)."""
+        self.settings = handover.Settings(setup.gait, setup.speed, setup.terrain, setup.mode)
+        """As applied: the setup's, then the commands' (handed over)."""
+        self.resume: handover.TickSnapshot | None = None
+        """Set by a spare that takes over (``realtime/spare.py``): :meth:`run` goes on from it."""
         model = RiderModel(params=setup.params, scale=setup.length_scale, animator=setup.animator)
         ground = setup.terrain  # the procedural horse's ground, described in the status (None: flat)
         self.horse = ProceduralHorse(setup.gait, setup.speed, setup.seed, terrain=ground.terrain() if ground else None)
@@ -129,11 +136,14 @@ class TickLoop:
     def _handle(self, command: cmd.Command, now: float) -> None:
         if isinstance(command, cmd.SetMode):
             self.core.set_mode(command.mode, now)
+            self.settings = dataclasses.replace(self.settings, mode=command.mode)
         elif isinstance(command, cmd.SetGait):
             self.horse.set_gait(command.gait, command.speed)
+            self.settings = dataclasses.replace(self.settings, gait=command.gait, speed=command.speed)
         elif isinstance(command, cmd.SetTerrain):
             ground = command.terrain or TerrainConfig(slope=0.0)
             self.terrain = ground.describe(self.horse.set_terrain(ground.terrain()))
+            self.settings = dataclasses.replace(self.settings, terrain=command.terrain)
         elif isinstance(command, cmd.Perform):
             perform = getattr(self.horse, "perform", None)
             if perform is None:
@@ -197,6 +207,7 @@ class TickLoop:
             "estop": self.latch.latched,
             "realtime": self.realtime,
             "rate": self.setup.rate,
+            "generation": self.setup.generation,
             "preset": core.model.params.name,
             "stopping": self.stopping_since is not None,
             "rig": None,
@@ -239,6 +250,9 @@ class TickLoop:
         spin = setup.spin if setup.spin is not None else (0.00025 if self.realtime == "fifo" else 0.001)
         clock = DeadlineClock(period=1.0 / setup.rate, start=time.perf_counter(), spin=spin)
         self.phase.start(clock.start - setup.start)
+        if self.resume is not None:
+            self._resume_clock(clock, self.resume)
+        snapshot_every = max(1, round(setup.rate / handover.SNAPSHOT_RATE))
         arrivals: list[float] = []
         status_every = max(1, round(setup.rate / 30.0))
         values[index["realtime"]] = 1.0 if self.realtime == "fifo" else 0.0
@@ -268,10 +282,10 @@ class TickLoop:
                 rx = float(record[L.IN_RECEIVED])
                 kind = L.InputKind(int(record[L.IN_KIND]))
                 producer = int(record[L.IN_PRODUCER])
-                handover = producer != self.core.producer
+                switched = producer != self.core.producer
                 if self.core.push_input(producer, float(record[L.IN_T]), rx, values_list, kind):
                     values[index["input_frames"]] += 1
-                    if handover:  # only the new driver's frames count for the phase lock
+                    if switched:  # only the new driver's frames count for the phase lock
                         arrivals.clear()
                     if kind is L.InputKind.HORSE:
                         arrivals.append(rx)
@@ -335,6 +349,8 @@ class TickLoop:
                 os.write(self.notify_fd, b"\x01")
             if self.phase.enabled:  # after the output is out: never on the latency path
                 self._follow_phase(clock, now, arrivals, values)
+            if self.handover_blob is not None and clock.tick % snapshot_every == 0:
+                self._write_snapshot(clock, now)
             if result.driver is not last_driver:
                 last_driver = result.driver
                 self._status_dirty = True
@@ -356,6 +372,56 @@ class TickLoop:
         if devices is not None:
             self.device_status = devices.status()
         self._publish_status()
+
+    def _resume_clock(self, clock: DeadlineClock, snapshot: handover.TickSnapshot) -> None:
+        """Go on on the dead generation's deadline grid: the same origin (and locked phase), the
+        ``seq`` counting on; the deadlines of the gap are passed over, not counted as skipped."""
+        clock.start = snapshot.clock_start
+        clock.overruns, clock.skipped = snapshot.overruns, snapshot.skipped
+        clock.tick = max(snapshot.tick, int((time.perf_counter() - clock.start) / clock.period))
+        if self.phase.enabled:
+            self.phase.state = snapshot.phase
+
+    def _write_snapshot(self, clock: DeadlineClock, now: float) -> None:
+        """The state a spare needs to take over (``realtime/handover.py``), into shared memory."""
+        assert self.handover_blob is not None
+        snapshot = handover.TickSnapshot(
+            handover.VERSION,
+            self.setup.generation,
+            clock.tick,
+            clock.start,
+            now,
+            clock.overruns,
+            clock.skipped,
+            self.inputs.read_next,
+            handover.capture_core(self.core),
+            self.horse,
+            self.phase.state,
+            tuple(self.events),
+            self.settings,
+        )
+        self.handover_blob.write(handover.encode(snapshot))
+
+    def take_over(self, snapshot: handover.TickSnapshot | None) -> int:
+        """Before :meth:`run`, in a spare taking over: go on from ``snapshot`` (None: start
+        fresh, reading the input ring from where the web process's records are now). Blends
+        from the last rider the web process published. Returns the input records replayed."""
+        if snapshot is None:
+            self.inputs.read_next = self.inputs.head
+            return 0
+        self.resume = snapshot
+        now = time.perf_counter() - self.setup.start
+        blend = min(self.setup.timing.blend_time, handover.BLEND_S)
+        replayed = handover.restore(self.core, self.inputs, snapshot, now, blend, settings=self.settings)
+        self.horse = self.core.horse
+        last = self.outputs.latest()
+        if last is not None and self.core.last_rider is not None:
+            rider = last[L.OUT_RIDER : L.OUTPUT_WIDTH].tolist()
+            if len(rider) == len(self.core.last_rider) and all(math.isfinite(v) for v in rider):
+                self.core._blend_from = rider  # the last frame anyone saw, newer than the snapshot
+        self.events.extend(snapshot.events)
+        self.events.append(f"took over from generation {snapshot.generation} ({replayed} input records replayed)")
+        return replayed
 
     def _count_saddle(self, result: TickResult, values: Any, index: dict[str, int]) -> None:
         """The saddle estimator's counters into shared memory; a new lock or gait updates the status."""
@@ -409,6 +475,8 @@ class TickLoop:
         self.histograms.clear()
         for shared in (self.inputs, self.outputs, self.counters, self.histogram_block, self.status_blob):
             shared.close()
+        if self.handover_blob is not None:
+            self.handover_blob.close()
         if self._own_latch:
             self.latch.close()
 
@@ -419,20 +487,44 @@ def _code(value: float) -> int:
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:
-    """Entry point of the spawned tick process."""
+    """Entry point of the spawned tick process (a cold start: the first generation, or one
+    with no warm spare ready)."""
+    serve(prepare(setup, commands, notify.fileno()))
+
+
+def prepare(setup: TickSetup, commands: Connection, notify_fd: int) -> TickLoop:
+    """The loop, attached to the shared memory, without devices and not warmed yet."""
+    os.set_blocking(notify_fd, False)
+    latch = StopLatch(setup.latch_name) if setup.latch_name else StopLatch()
+    board = SafetyBoard(setup.board_name) if setup.board_name else None
+    return TickLoop(setup, commands, notify_fd, None, latch=latch, board=board)
+
+
+def discard(loop: TickLoop) -> None:
+    """Detach a loop that never ran (a spare's warm-up loop replaced at takeover)."""
+    loop.close()
+    loop.latch.close()
+    if loop.board is not None:
+        loop.board.close()
+
+
+def serve(loop: TickLoop, warmed: bool = False) -> None:
+    """Connect the devices (disarmed; armed once with ``serve --arm`` in the first generation
+    only), warm the kernels unless ``warmed``, and run until stopped; then detach."""
+    setup = loop.setup
     in_process = threading.current_thread() is threading.main_thread()
     if in_process:
         logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
-    notify_fd = notify.fileno()
-    os.set_blocking(notify_fd, False)
-    latch = StopLatch(setup.latch_name) if setup.latch_name else StopLatch()
-    board = SafetyBoard(setup.board_name) if setup.board_name else None
+    latch, board = loop.latch, loop.board
     devices: TickDevices | None = None
     if setup.devices:
         arm = setup.arm_on_start if setup.generation == 1 else None
-        devices = TickDevices(setup.devices, latch, board, setup.guardian, arm)
-    loop = TickLoop(setup, commands, notify_fd, devices, latch=latch, board=board)
+        devices = loop.devices = TickDevices(setup.devices, latch, board, setup.guardian, arm)
+        for name, changes in setup.tunes.items():  # live parameters applied before this generation
+            reply = devices.request(cmd.Tune(name, changes, "restart"))
+            if not reply.ok:
+                loop.events.append(f"{name}: the live parameters kept from before were refused: {reply.message}")
     if in_process:
         wake_read, wake_write = os.pipe()
         os.set_blocking(wake_read, False)
@@ -449,8 +541,10 @@ def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> Non
         # The parts and physics kernels compile (cold cache) or load here: before real-time priority
         # (a 10-20 s compile at FIFO would starve the web process), before the collector is
         # frozen (compiling makes cyclic garbage) and before the first deadline.
-        loop.warm()
-        loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
+        if not warmed:
+            loop.warm()
+        if not (warmed and loop.realtime == "fifo"):  # a spare asked before it blocked
+            loop.realtime = try_realtime_priority() if setup.realtime_priority else "off"
         if in_process:
             # The loop makes no reference cycles: refcounting frees everything, and a
             # collection of the whole heap would stall a tick for milliseconds.

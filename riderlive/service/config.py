@@ -69,6 +69,9 @@ class TickSection(StrictModel):
     and the shipped ``config/presets`` (by name, never by path)."""
     param_blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=10.0)
     """Seconds over which a change of preset, parameters or animator layer blends in."""
+    spare_nice: int = pydantic.Field(default=10, ge=0, le=19)
+    """Nice value of the warm spare tick's warm-up (``realtime/spare.py``): higher takes less
+    of the running tick's CPU on a busy host and warms the spare later."""
     hang_ticks: float = pydantic.Field(default=5.0, ge=2.0, le=1000.0)
     """A tick whose heartbeat is older than this many periods is hung: killed and
     restarted (its devices stay safe and are not re-armed). Raise it on a machine

@@ -212,13 +212,15 @@ def render_device_metrics(service: Service) -> str:
     metric(
         "riderlive_tick_up",
         "gauge",
-        "1 while the tick process runs and beats.",
+        "1 once the serving tick generation has beaten (0 from a failure until the next one beats).",
         [f"riderlive_tick_up {int(sup['up'])}"],
     )
     for key, help_text in (
         ("restarts", "Tick processes started again after a death or a hang."),
         ("deaths", "Tick processes that exited unasked."),
         ("hangs", "Tick processes killed for missing their heartbeat."),
+        ("stalls", "Heartbeat gaps past the hang threshold that the host explained: counted, not punished."),
+        ("takeovers", "Tick generations started from a warm spare."),
     ):
         metric(f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {sup[key]}"])
     guardian = sup["guardian"]

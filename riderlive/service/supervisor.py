@@ -1,35 +1,45 @@
-"""Keeping the tick alive: death and hang detection, restarts with backoff, the guardian.
+"""Keeping the tick alive: death and hang detection, warm failover, the guardian.
 
 The web process supervises the tick process it spawned:
 
 - **dead**: the process's sentinel becomes readable the moment it exits (SIGKILL, an
   exception, the OOM killer): noticed at once, on the event loop.
 - **hung**: its heartbeat on the safety board (written every tick) is older than
-  ``tick.hang_ticks - 1`` periods, checked every half period: noticed within
-  ``hang_ticks`` periods (SIGSTOP, a loop stuck in a call), but never sooner than
-  ``tick.hang_floor_realtime`` (30 ms: up to 150 ticks/s that is within 5 ticks) when
-  the tick runs at real-time priority, ``tick.hang_floor`` (0.25 s) when it does not (a
-  loaded machine stalls a normal process for tens of ms: no false restarts), nor sooner
-  than a device's longest legitimate wait plus those periods (``DeviceSpec.longest_wait_s``:
-  a servo reply awaited to its ceiling, 27.5 ms for the default rig bus; before, a tick
-  at 500 Hz waiting out one lost reply was killed as hung at 30 ms).
-  A hung tick is killed (SIGKILL) before anything else touches its bus.
+  ``tick.hang_ticks - 1`` periods, checked every half period, but never sooner than
+  ``tick.hang_floor_realtime`` (30 ms) when the tick runs at real-time priority,
+  ``tick.hang_floor`` (0.25 s) when it does not, nor sooner than a device's longest
+  legitimate wait plus those periods (``DeviceSpec.longest_wait_s``). The age is first
+  discounted by what the host, not the tick, explains (``service/stall.py``: the
+  supervisor's own wake-up lateness, the tick's run-queue wait from ``/proc``, the
+  guardian's stalled heartbeat): a host stall is counted (``stalls``), never punished.
+  A stopped tick (SIGSTOP) is not excused. A hung tick is killed (SIGKILL) before
+  anything else touches its bus.
+- **starting**: a tick that has not beaten yet is never killed while it makes progress
+  (CPU time or run-queue wait growing); only one stuck for ``stall.Model.start_stuck``.
 
 Then the guardian (when devices are configured) parks the devices and releases their
-buses; the supervisor waits for that, then starts the next tick generation after a
-backoff (``tick.restart_backoff``, doubling per failure in a row, reset after 30 s of
-good ticking). The new tick connects its devices and leaves them ``disarmed`` (or
-``estop`` while the latch is set): nothing is re-armed. It starts with the settings
-applied since start (preset, animator layer, mode, gait: :meth:`TickLink.apply`); one
-that dies before its first heartbeat with them makes the next start as configured
-(``setups_dropped``; the service reports the configured settings again), so a setting
-that kills a tick at start cannot make a crash loop. It all shows in the status
-(``tick_up``, ``restarting``), ``/api/state`` (``supervision``), ``/metrics``
-(``riderlive_tick_up``, ``riderlive_tick_restarts_total``) and ``/healthz`` / ``/readyz``.
+buses; the supervisor waits for that, then promotes the warm spare
+(:meth:`TickLink.promote`): it takes over with the settings as the service reports them
+and the dead generation's state, at its first deadline. A new spare warms up in the
+background once the new generation beats. Failures in a row (a generation that dies
+before its first heartbeat or within ``STABLE_S`` of it) wait ``tick.restart_backoff``,
+doubling, from the second on: a kill costs no backoff. The new tick connects its devices
+and leaves them ``disarmed`` (or ``estop`` while the latch is set): nothing is re-armed.
+It starts with the settings applied since start (preset, animator layer, mode, gait,
+terrain, platform cueing: :meth:`TickLink.apply`), whatever ended the last one, unless
+the last one failed by itself (an exit status or a crash signal, not a kill) before its
+first heartbeat: then the next starts as configured (``setups_dropped``; the service
+reports the configured settings again), so a setting that kills a tick at start cannot
+make a crash loop.
+
+Status: ``up`` (``riderlive_tick_up``, ``/readyz``) only from the serving generation's
+first heartbeat; from a failure until then the status says the tick is down and shows each
+device as the guardian reports it (``realtime/down.py``). ``/api/state`` (``supervision``)
+and ``/healthz`` say the rest.
 
 The supervisor also launches the guardian, restarts it if it dies, and answers the
 web side of e-stops (latch + wake) and of requests that want a reply (arm, disarm,
-reset, reload).
+reset, reload, tune).
 """
 
 from __future__ import annotations
@@ -38,33 +48,41 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import multiprocessing
 import subprocess
 import time
 from collections.abc import Callable
 from typing import Any
 
 from riderlive.devices.board import guardian_watching
-from riderlive.devices.guardian import launch
+from riderlive.devices.guardian import POLL_S, launch
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
+from riderlive.devices.stall import HostClock
 from riderlive.realtime import commands as cmd
-from riderlive.realtime.link import TickLink
+from riderlive.realtime.link import TickLink, exit_reason
+from riderlive.service import stall
 from riderlive.service.config import ServiceConfig
 
 log = logging.getLogger(__name__)
-STABLE_S = 30.0
-"""A tick that has run this long resets the backoff."""
+STABLE_S = 5.0
+"""A tick that has beaten this long ends a run of failures (the next one costs no backoff)."""
 MAX_BACKOFF_S = 30.0
 UNHEALTHY_AFTER_S = 60.0
 """``/healthz`` fails when the tick has been down this long (the supervisor cannot bring it back)."""
-START_GRACE_S = 60.0
-"""A new tick may take this long to its first heartbeat (imports, compiling kernels)."""
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
 of compiled kernels, page faults) without being taken for hung, unless a device moves."""
 GUARDIAN_START_S = 5.0
 """Allowance for a guardian relaunched during a stop to start and finish it (its imports
 on a loaded host), on top of the park timeout."""
+STEAL_BASE_S = 0.02
+"""The steal baseline is taken at a new beat at most this often (it may then count up to this
+much steal from before the beat: lenient by that, at ~50 us a read)."""
+SPARE_RETRY_S = 2.0
+"""After a spare failed, the next is started this long later (doubling per failure in a row, up to 60 s)."""
+OWN_FAILURES = ("exit", "SIGSEGV", "SIGABRT", "SIGBUS", "SIGFPE", "SIGILL")
+"""Exit reasons that are the tick's own failure (not a kill from outside): at start they drop the applied settings."""
 _ids = itertools.count(1)
 
 
@@ -92,16 +110,31 @@ class TickSupervisor:
         self.hang_s = (config.tick.hang_ticks - 1.0) * self.period
         self.device_wait_s = max((d.longest_wait_s for d in link.setup.devices), default=0.0)
         """The longest a tick may block in a device's call (s): the hang threshold adds it."""
-        self.up = True
+        self.up = False
+        """The serving generation has beaten (``riderlive_tick_up``, ``/readyz``)."""
         self.stopping = False
         self.restarts = 0
         self.deaths = 0
         self.hangs = 0
+        self.stalls = 0
+        """Heartbeat gaps past the threshold that the host explained (not punished)."""
+        self.stall_excused_max = 0.0
+        """The largest such gap's excused part (s)."""
         self.last_exit: str | None = None
+        self.last_outage: float | None = None
+        """Seconds from the last failure to the next generation's first heartbeat."""
         self.started_at = time.perf_counter()
         self._first_beat: float | None = None
         self._last_beat = 0.0
         """When the last heartbeat seen was written (perf_counter s)."""
+        self._beat_value = 0.0
+        self._at_beat: stall.Sched | None = None
+        self._progress: tuple[float, float, float] = (0.0, -1.0, -1.0)
+        """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
+        self._stalled = False
+        self._host = HostClock()
+        self._steal_base: tuple[float, tuple[float, ...]] = (0.0, ())
+        """When and what the CPUs' steal was, taken at most every ``STEAL_BASE_S`` at a new beat."""
         self.down_since: float | None = None
         self.last_down_at: float | None = None
         """When the tick was last found dead or hung (perf_counter s; kept after the restart)."""
@@ -115,6 +148,8 @@ class TickSupervisor:
         """A standby guardian: becomes the guardian the moment it is gone (guardian.py)."""
         self.guardian_restarts = 0
         self._guardian_launched_at = 0.0
+        self._spare_failures = 0
+        self._spare_next_at = 0.0
 
     @property
     def supervised(self) -> bool:
@@ -170,49 +205,137 @@ class TickSupervisor:
     # -- detection -----------------------------------------------------------------------
 
     def _on_exit(self) -> None:
-        """The tick process's sentinel is readable: it has exited."""
+        """The tick process's sentinel is readable (it has exited), or it is being torn down."""
         if self.stopping or self._recovery is not None:
             return
-        self.link.process.join(0.1)
         self.deaths += 1
-        why = f"died ({self.link.exit_reason()})"
-        if self.link.generation > 1 and self._first_beat is None and self.link.forget_applied():
-            # It died before its first heartbeat with the settings applied since start (a
-            # preset, a gait): the next one starts as configured, not into a crash loop.
+        reason = self.link.exit_reason()
+        self._begin_recovery(f"died ({'killed or exiting' if reason == 'running' else reason})", died=True)
+
+    async def _drop_settings_if_they_killed_it(self) -> None:
+        """A generation that died before its first heartbeat by its own failure (an exit status,
+        a crash signal; not a kill from outside) with the settings applied since start (a
+        preset, a gait): the next one starts as configured, not into a crash loop."""
+        link = self.link
+        if link.generation == 1 or self._first_beat is not None:
+            return
+        await asyncio.to_thread(link.process.join, 2.0)  # its exit status (it may still be torn down)
+        reason = link.exit_reason()
+        if reason.startswith(OWN_FAILURES) and link.forget_applied():
             self.setups_dropped += 1
-            why += " before ticking: the next one starts with the configured settings"
+            self.last_exit = f"died ({reason}) before ticking: the next one starts with the configured settings"
+            log.error("the tick %s", self.last_exit)
             self.on_setup_dropped()
-        self._begin_recovery(why)
 
     async def _watch(self) -> None:
-        """Every half period: the web heartbeat, a hung tick, the guardian."""
+        """Every half period: the web heartbeat, the tick (``_check_tick``), the spare, the guardian."""
         interval = max(self.period / 2.0, 0.005)  # the hang floors are >= 30 ms: 5 ms is fine grain
         board = self.link.board
+        due = time.perf_counter()
         while not self.stopping:
-            await asyncio.sleep(interval)
+            due += interval
+            await asyncio.sleep(max(0.0, due - time.perf_counter()))
             now = time.perf_counter()
+            woke_late = max(0.0, now - due)
+            if woke_late > interval:
+                due = now  # a stall of our own: do not run the missed checks back to back
             board["web_beat"] = now
-            if self.up and self._recovery is None and self.supervised:
-                age = self.link.beat_age()
-                if age is not None:
-                    self._last_beat = now - age
-                    if self._first_beat is None:
-                        self._first_beat = now
-                elif self._first_beat is not None:
-                    # A generation that has beaten never reads "no beat" again (only a respawn
-                    # clears it), yet one CI run restarted a ticking tick as "never started":
-                    # counted, and the age is taken from the last beat seen (a hang still shows).
-                    self.beats_unread += 1
-                    age = now - self._last_beat
-                if age is not None and age > self.hang_threshold():
-                    self.hangs += 1
-                    self._begin_recovery(f"hung (no heartbeat for {age * 1000:.0f} ms)")
-                elif age is None and now - self.started_at > START_GRACE_S:
-                    self.hangs += 1
-                    self._begin_recovery(f"never started ticking in {START_GRACE_S:.0f} s")
-            if self.up and now - self.started_at > STABLE_S:
+            if self._recovery is None and self.supervised:
+                self._check_tick(now, woke_late)
+            if self._first_beat is not None and now - self._first_beat > STABLE_S:
                 self._streak = 0
+            self._check_spare(now)
             self._check_guardian(now)
+
+    def _check_tick(self, now: float, woke_late: float) -> None:
+        """One look at the tick: its first heartbeat, a hang, a stall (``service/stall.py``)."""
+        link = self.link
+        beat = link.board["tick_beat"]
+        pid = int(link.board["tick_pid"])
+        sched = stall.read_sched(pid) if pid else None
+        age: float | None = None
+        if beat:
+            age = max(0.0, now - beat)
+            if beat != self._beat_value:
+                self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
+                self._stalled = False
+                if now - self._steal_base[0] > STEAL_BASE_S:
+                    self._steal_base = (now, self._host.steal_s())
+            if self._first_beat is None:
+                self._on_first_beat(now)
+        elif self._first_beat is not None:
+            # A generation that has beaten never reads "no beat" again (only a promotion clears
+            # it), yet one CI run restarted a ticking tick as "never started": counted, and the
+            # age is taken from the last beat seen (a hang still shows).
+            self.beats_unread += 1
+            age = now - self._last_beat
+        if age is None and sched is not None:
+            _, cpu, wait = self._progress
+            if sched.process_cpu > cpu or sched.wait > wait:
+                self._progress = (now, sched.process_cpu, sched.wait)
+        stolen = 0.0
+        if age is not None and age > self.period * 2:  # only a late beat pays the read (~50 us)
+            base = self._steal_base[1]
+            stolen = max((b - a for a, b in zip(base, self._host.steal_s(), strict=False)), default=0.0)
+        guardian_beat = link.board["guardian_beat"] if self.guardian is not None else 0.0
+        others = max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0
+        observation = stall.Observation(
+            now=now,
+            woke_late=woke_late,
+            beat_age=age,
+            since_start=now - self.started_at,
+            at_beat=self._at_beat,
+            sched=sched,
+            others_stall=others,
+            stolen=max(0.0, stolen),
+            progress_age=now - self._progress[0],
+        )
+        finding = stall.classify(stall.Model(self.hang_threshold()), observation)
+        if finding.verdict is stall.Verdict.DYING or not link.alive():
+            self._on_exit()  # killed or exiting, its sentinel not readable yet: a death, not a hang
+        elif finding.verdict in (stall.Verdict.HUNG, stall.Verdict.NEVER_STARTED):
+            self.hangs += 1
+            self._begin_recovery(finding.why)
+        elif finding.verdict is stall.Verdict.STALLED and not self._stalled:
+            self._stalled = True  # one count per gap
+            self.stalls += 1
+            self.stall_excused_max = max(self.stall_excused_max, finding.excused)
+            log.info("the tick is late, not hung: %s", finding.why)
+
+    def _on_first_beat(self, now: float) -> None:
+        """The serving generation has beaten: up, and a new spare warms in the background."""
+        self._first_beat = now
+        self.up = True
+        self.link.mark_up()
+        if self.last_down_at is not None and self.down_since is not None:
+            self.last_outage = now - self.down_since
+            log.warning(
+                "tick generation %d is up, %.0f ms after the failure", self.link.generation, self.last_outage * 1000
+            )
+        self.down_since = None
+        self.publish_status({**self.link.status(), "tick_up": True, "restarting": False})
+        self._spare_next_at = now
+
+    def _check_spare(self, now: float) -> None:
+        """Keep a spare beside a serving tick (none while starting: it would take its CPU)."""
+        link = self.link
+        if not self.up or not link.spares_wanted or now < self._spare_next_at or self._recovery is not None:
+            return
+        spare = link.spare
+        if spare is not None:
+            spare.poll()
+            if spare.failed is None and spare.process.is_alive():
+                if spare.warm is not None:
+                    self._spare_failures = 0
+                return
+            log.error("the spare tick %s: starting another", spare.failed or f"exited ({spare.process.exitcode})")
+            self._spare_failures += 1
+            link.spares_failed += 1
+            spare.discard()
+            link.spare = None
+            self._spare_next_at = now + min(SPARE_RETRY_S * 2 ** (self._spare_failures - 1), 60.0)
+            return
+        link.start_spare()
 
     def hang_threshold(self) -> float:
         """Seconds without a heartbeat that make a tick hung (see the module docstring)."""
@@ -220,6 +343,11 @@ class TickSupervisor:
         realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
         floor = tick.hang_floor_realtime if realtime else tick.hang_floor
         threshold = max(self.hang_s + self.device_wait_s, floor)
+        spare = self.link.spare
+        if self.link.spares_wanted and (spare is None or spare.warm is None):
+            # No warm spare: a failover would be a cold start (seconds on a busy host), dearer
+            # than most stalls; a moving device is the guardian's (``guardian.tick_timeout``).
+            threshold = max(threshold, tick.hang_floor)
         first = self._first_beat
         if (first is None or time.perf_counter() - first < WARMUP_S) and not self._a_device_moves():
             threshold = max(threshold, WARMUP_HANG_S)
@@ -235,39 +363,55 @@ class TickSupervisor:
                 return True
         return False
 
-    def _begin_recovery(self, why: str) -> None:
+    def _begin_recovery(self, why: str, died: bool = False) -> None:
         self.up = False
         self.down_since = self.last_down_at = time.perf_counter()
         self.last_exit = why
-        log.critical("the tick %s: its devices are being stopped; restarting it", why)
-        status = {**self.link.status(), "driver": "dead", "tick_alive": False, "tick_up": False}
-        self.publish_status({**status, "restarting": True, "reason": why})
+        log.critical("the tick %s: its devices are being stopped; failing over", why)
+        self.link.mark_down(why)
+        self.publish_status({**self.link.status(), "restarting": True})
         for future in self._pending.values():
             if not future.done():
                 future.set_result(cmd.Reply(0, False, {}, Refusal.TICK_DOWN.value, f"the tick {why}"))
-        self._recovery = asyncio.get_running_loop().create_task(self._recover())
+        self._recovery = asyncio.get_running_loop().create_task(self._recover(died))
 
-    async def _recover(self) -> None:
+    async def _recover(self, died: bool) -> None:
         link = self.link
         self._unbind()
-        if link.alive():
-            await asyncio.to_thread(link.kill)
+        if not died:
+            link.kill()  # SIGKILL: it runs none of its code once that returns (reaped later)
+        if died:
+            await self._drop_settings_if_they_killed_it()
         await self._wait_for_guardian(link.generation)
-        delay = min(self.config.tick.restart_backoff * 2**self._streak, MAX_BACKOFF_S)
+        if self._streak:  # failures in a row: back off (a first failure costs none)
+            await asyncio.sleep(min(self.config.tick.restart_backoff * 2 ** (self._streak - 1), MAX_BACKOFF_S))
         self._streak += 1
-        await asyncio.sleep(delay)
         if self.stopping:
             return
-        link.respawn()
+        dead = link.process
+        warm = link.promote()
         self._bind()
         self.restarts += 1
-        self.up = True
         self.started_at = time.perf_counter()
         self._first_beat = None
-        self.down_since = None
+        self._beat_value = 0.0
+        self._at_beat = None
+        self._progress = (self.started_at, -1.0, -1.0)
         self._recovery = None
-        log.warning("tick restarted (generation %d): devices connect and stay disarmed", link.generation)
-        self.publish_status({**link.status(), "tick_up": True, "restarting": False, "generation": link.generation})
+        log.warning(
+            "tick generation %d started from %s: devices connect and stay disarmed",
+            link.generation,
+            "the warm spare" if warm else "cold",
+        )
+        self.publish_status({**link.status(), "restarting": True})
+        if (
+            died
+            and isinstance(dead, multiprocessing.process.BaseProcess)
+            and "killed or exiting" in str(self.last_exit)
+        ):
+            await asyncio.to_thread(dead.join, 2.0)  # torn down by now, or soon: its exit status for the record
+            if dead.exitcode is not None:
+                self.last_exit = f"died ({exit_reason(dead.exitcode)})"
 
     async def _wait_for_guardian(self, generation: int) -> None:
         """Until the guardian has stopped that generation's devices (bounded)."""
@@ -339,14 +483,18 @@ class TickSupervisor:
 
     async def ask(self, build: Callable[[int], cmd.Request], timeout: float = 2.0) -> cmd.Reply:
         """Send a request to the tick and wait for its reply."""
-        if not self.up:
+        if self._recovery is not None or self.link.down_reason is not None:
             return cmd.Reply(0, False, {}, Refusal.TICK_DOWN.value, f"the tick is restarting ({self.last_exit})")
         request = next(_ids)
         future: asyncio.Future[cmd.Reply] = asyncio.get_running_loop().create_future()
         self._pending[request] = future
         try:
-            self.link.send(build(request))
-            return await asyncio.wait_for(future, timeout)
+            command = build(request)
+            self.link.send(command)
+            reply = await asyncio.wait_for(future, timeout)
+            if reply.ok and isinstance(command, cmd.Tune):  # a run-time setting: the next generation keeps it
+                self.link.keep_tune(command.device, command.changes)
+            return reply
         except (TimeoutError, OSError, ValueError):
             return cmd.Reply(request, False, {}, Refusal.TICK_DOWN.value, f"the tick did not answer in {timeout:g} s")
         finally:
@@ -369,6 +517,16 @@ class TickSupervisor:
         """Not stuck: the tick is up, or has been down for less than ``UNHEALTHY_AFTER_S``."""
         return self.down_since is None or time.perf_counter() - self.down_since < UNHEALTHY_AFTER_S
 
+    def _spare_snapshot(self) -> dict[str, Any]:
+        link, spare = self.link, self.link.spare
+        return {
+            "state": "none" if spare is None else "warm" if spare.warm is not None else "warming",
+            "pid": None if spare is None else spare.process.pid,
+            "warm_up_s": None if spare is None or spare.warm is None else spare.warm.wall_s,
+            "started": link.spares_started,
+            "failed": link.spares_failed,
+        }
+
     def snapshot(self) -> dict[str, Any]:
         board = self.link.board
         return {
@@ -378,6 +536,12 @@ class TickSupervisor:
             "restarts": self.restarts,
             "deaths": self.deaths,
             "hangs": self.hangs,
+            "stalls": self.stalls,
+            "stall_excused_max": self.stall_excused_max,
+            "takeovers": self.link.takeovers,
+            "last_outage": self.last_outage,
+            "hang_threshold": self.hang_threshold(),
+            "spare": self._spare_snapshot(),
             "setups_dropped": self.setups_dropped,
             "beats_unread": self.beats_unread,
             "last_exit": self.last_exit,

@@ -246,18 +246,24 @@ def test_a_restarted_tick_keeps_preset_animator_and_source_and_requests_never_fa
         # restarted tick could not start on a walk at 4.5: the CI's shared server once did).
         walk = {"kind": "procedural", "gait": "walk"}
         assert live.request("PUT", "/api/source", json=walk).status_code == 200
-        assert live.request("POST", "/api/horse/perform", json={"move": "rear"}).status_code in (200, 503)
+        performed = live.request("POST", "/api/horse/perform", json={"move": "rear"}).status_code
+        assert performed in (200, 503), "200 when the warm spare has taken over already (~20 ms), else 503"
         now = lambda: live.get("/api/devices").json()["supervision"]  # noqa: E731
-        wait_until(lambda: now()["restarts"] > supervision["restarts"], 20.0, now)
+        wait_until(lambda: now()["restarts"] > supervision["restarts"] and now()["up"], 20.0, now)
+        # The new generation beats; it goes on with the dead one's blends (the preset's 0.5 s
+        # parameter blend begun just before the kill) and blends from the last frame for 0.2 s.
         restarted = time.perf_counter()
-        frame = follower.wait_for(lambda f: f["at"] > restarted + 0.3, timeout=10.0)
+        frame = follower.wait_for(lambda f: f["at"] > restarted + 0.8, timeout=10.0)
         model = RiderModel(params=load_preset("child"), scale=25.0)
         expected = np.asarray(model.evaluate(frame["horse"]))
         expected[HEAD] += 3.0  # the animator's offset
         np.testing.assert_allclose(frame["values"], expected, atol=1e-9)
         state = live.get("/api/state").json()
         assert state["source"] == {**walk, "speed": None}
-        assert (state["tick"]["gait"], state["tick"]["speed"]) == ("walk", GAIT_TABLE[Gait.WALK].default_speed)
+        if performed == 503:  # the move did not reach the new generation: the walk, at its own speed
+            assert (state["tick"]["gait"], state["tick"]["speed"]) == ("walk", GAIT_TABLE[Gait.WALK].default_speed)
+        else:  # the new generation took the move: the walk it was started on, or the rear's halt
+            assert state["tick"]["gait"] in ("walk", "halt"), state["tick"]
         assert state["supervision"]["setups_dropped"] == 0 and state["supervision"]["deaths"] == 1
         assert live.get("/api/params").json() == load_preset("child").flat()
     finally:
