@@ -3,6 +3,9 @@
 Also checks the length scale: Appendix B's foot-height clamps (hoof height sums of
 15 and 18 for the lower back, 15 for the feet and knees, 20 for the wrists, in rig
 units) stay idle in the walk and the trot and engage in the jump and the rear.
+
+The thesis' rules alone (``jump.weight = 0``): the ``[jump]`` layer (rules/jump.py) moves the
+trunk over a fence and in a rear on top of them, and is tested in tests/rules/test_jump.py.
 """
 
 from __future__ import annotations
@@ -16,10 +19,12 @@ from riderlive.horse.script import Segment, ShotScript
 from riderlive.rules import RiderModel, RuleParams
 from tests.horse.signals import oscillations, touchdowns
 
-RIDER = RiderModel(scale=DEFAULT_SCALE)
+THESIS = {"jump.weight": 0.0}
+RIDER = RiderModel(params=RuleParams().with_values(THESIS), scale=DEFAULT_SCALE)
 UNCLAMPED = RiderModel(
     params=RuleParams().with_values(
         {
+            **THESIS,
             "lower_back.front_height_limit": 1e9,
             "lower_back.back_height_limit": 1e9,
             "feet.height_limit": 1e9,
