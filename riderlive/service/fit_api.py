@@ -39,7 +39,7 @@ from riderlive.names import NAME_PATTERN
 from riderlive.rules.params import find_preset
 from riderlive.service.fit_worker import FitJob
 from riderlive.service.rest import Body, BodyTooLarge, Name
-from riderlive.service.takes_api import TakeName
+from riderlive.service.takes_api import TakeName, finished_take
 from riderlive.takes.recorder import replay_path
 
 if TYPE_CHECKING:
@@ -135,13 +135,7 @@ def add_fit_routes(app: FastAPI, service: Service, observe: list[Any]) -> None:
     busy = asyncio.Lock()
 
     def take_file(name: str) -> Path:
-        path = replay_path(directory, name)
-        if not path.is_file():
-            raise HTTPException(404, "no such take")
-        recorder = service.recorder
-        if recorder is not None and recorder.path == path:
-            raise HTTPException(409, "that take is being recorded: stop it first")
-        return path
+        return finished_take(service, directory, name)
 
     @app.get("/api/takes/{name}/reference", dependencies=observe, summary="A take's reference rider (for a fit)")
     async def get_reference(name: TakeName) -> dict[str, Any]:

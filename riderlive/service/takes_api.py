@@ -81,19 +81,24 @@ def _bake(source: Path, target: Path, params: RuleParams, service: Service, use_
     return {"rows": len(result), "channels": list(result.names), "bytes": target.stat().st_size, "length_scale": scale}
 
 
+def finished_take(service: Service, directory: Path, name: str) -> Path:
+    """The file of take ``name`` in ``directory``: 404 when there is none, 409 while it is being recorded."""
+    path = replay_path(directory, name)
+    if not path.is_file():
+        raise HTTPException(404, "no such take")
+    recorder = service.recorder
+    if recorder is not None and recorder.path == path:
+        raise HTTPException(409, "that take is being recorded: stop it first")
+    return path
+
+
 def add_take_routes(app: FastAPI, service: Service, observe: list[Any]) -> None:
     directory = Path(service.config.takes.directory)
     preset_dirs = [Path(d) for d in service.config.tick.preset_dirs]
     busy = asyncio.Lock()
 
     def existing(name: str) -> Path:
-        path = replay_path(directory, name)
-        if not path.is_file():
-            raise HTTPException(404, "no such take")
-        recorder = service.recorder
-        if recorder is not None and recorder.path == path:
-            raise HTTPException(409, "that take is being recorded: stop it first")
-        return path
+        return finished_take(service, directory, name)
 
     def download(path: Path, name: str) -> FileResponse:
         return FileResponse(path, media_type=MEDIA.get(path.suffix, "application/octet-stream"), filename=name)
