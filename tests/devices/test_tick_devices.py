@@ -20,7 +20,7 @@ from riderlive.devices.lifecycle import DeviceState
 from riderlive.devices.registry import RateMismatch, plan
 from riderlive.dynamixel.rig import RIG_DIR
 from riderlive.realtime import commands as cmd
-from riderlive.realtime.output import TickDevices
+from riderlive.realtime.output import GUARDIAN_CHECK_S, TickDevices
 from tests.devices.memory_plug import rider_frame
 
 S = DeviceState
@@ -62,6 +62,20 @@ def run(devices: TickDevices, ticks: int, start: int = 0, beat: bool = True) -> 
             board["guardian_beat"] = time.perf_counter()
         devices.tick(rider_frame(1.0, tick=i, at=time.perf_counter()))
         time.sleep(0.001)
+
+
+def run_past(devices: TickDevices, until_s: float, start: int, beat: bool = True) -> int:
+    """Tick (as :func:`run`) until a tick's clock is past ``until_s`` (perf_counter s): the
+    guardian watch looks every ``GUARDIAN_CHECK_S`` of that clock, so a loss before
+    ``until_s - GUARDIAN_CHECK_S`` has been seen by then, whatever the host's load. Returns
+    the number of ticks."""
+    tick = start
+    while True:
+        at = time.perf_counter()
+        run(devices, 1, tick, beat)
+        tick += 1
+        if at > until_s:
+            return tick - start
 
 
 def until(devices: TickDevices, wanted: dict[str, str], beat: bool = True, timeout: float = 5.0) -> None:
@@ -152,8 +166,9 @@ def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is
     try:
         running_then_killed(devices, guardian)
         killed = time.perf_counter()
-        run(devices, 2, 100, beat=False)
-        assert devices.states()["left"] == "parking"  # on the next ticks, not after a timeout
+        ticks = run_past(devices, killed + GUARDIAN_CHECK_S, 100, beat=False)
+        assert devices.states()["left"] == "parking"  # on the next look, not after a timeout
+        assert ticks <= 2 + int(GUARDIAN_CHECK_S / 0.001)  # ticks of 1 ms and more: one look's period
         left = devices.devices[0]
         assert left.life.history[-1].by.startswith(f"tick: the guardian {guardian.pid} is dead")
         assert time.perf_counter() - killed < 0.5
@@ -173,7 +188,7 @@ def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is
         assert devices.states()["left"] == "parked"  # nothing re-arms by itself
         assert devices.request(cmd.Arm("left", "test", 3)).ok
         until(devices, {"left": "running", "right": "disarmed"})
-        hung_from = time.perf_counter()  # it stops beating (SIGSTOP, a stuck loop)
+        hung_from = board["guardian_beat"]  # its last beat: it stops beating (SIGSTOP, a stuck loop)
         while devices.states()["left"] == "running" and time.perf_counter() - hung_from < 5.0:
             run(devices, 1, 300, beat=False)
         assert devices.states()["left"] == "parking" and 0.15 <= time.perf_counter() - hung_from < 1.0

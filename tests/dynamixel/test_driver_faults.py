@@ -233,7 +233,7 @@ def test_estop_recorded_while_a_goal_write_drains_the_line_stops_that_write(
     bus._unsettled = True
     emu.settle()  # the goals written so far have all arrived
     writes = device.plug.counters["goal_writes"]
-    status = device.tick(NEUTRAL, time.perf_counter())
+    status = device.tick(rider_frame(*NEUTRAL), time.perf_counter())
     requester.join()
     emu.settle()
     assert status.state is S.ESTOP and device.plug.counters["goal_writes"] == writes
