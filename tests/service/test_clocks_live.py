@@ -13,6 +13,7 @@ import numpy as np
 from websockets.sync.client import ClientConnection, connect
 
 from riderlive.channels import HORSE_INDEX, RIDER_INDEX
+from riderlive.service.clocks import STEP_S
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
 
@@ -26,16 +27,23 @@ def horse(t: float) -> float:
 
 
 def drive(
-    ws: ClientConnection, seconds: float, clock: Callable[[float], float], segments: list[dict], game: bool
+    ws: ClientConnection,
+    seconds: float,
+    clock: Callable[[float], float],
+    segments: list[dict],
+    game: bool,
+    stamps: list[float],
 ) -> None:
     """Send a smooth horse at HZ, stamped with ``clock(elapsed)``: a function of that clock
     (``game``: a game's pose follows its clock, and stands still with it) or of real time
-    (a producer whose timestamps alone step); collect the segment messages that come back."""
+    (a producer whose timestamps alone step); collect the segment messages that come back
+    and the stamps sent (``stamps``, in order)."""
     start = time.perf_counter()
     n = 0
     while (elapsed := time.perf_counter() - start) < seconds:
         t = clock(elapsed)
         ws.send(json.dumps({"t": t, "values": {"rearPivot.rz": horse(t if game else elapsed)}}))
+        stamps.append(t)
         n += 1
         time.sleep(max(0.0, start + n / HZ - time.perf_counter()))
         try:
@@ -67,34 +75,45 @@ def largest_step(frames: list[dict]) -> float:
     return float((np.abs(np.diff(back)) / np.diff(seq)).max())
 
 
+def steps_back(stamps: list[float]) -> list[tuple[float, float]]:
+    """(previous, t) of each frame sent stamped more than clocks.STEP_S before the one before
+    it. A sender late by more than the step across it (a loaded host) sends none there: its
+    stamps only slow down, and the service has no step to see."""
+    return [(a, b) for a, b in zip(stamps, stamps[1:]) if b < a - STEP_S]
+
+
 def run(
     server: LiveServer, seconds: float, clock: Callable[[float], float], game: bool
-) -> tuple[list[dict], list[dict]]:
+) -> tuple[list[dict], list[dict], list[float]]:
     """0.5 s on a steady clock (to settle), then ``seconds`` on ``clock``, without a break
-    in the stream; the follower's frames of the second part and the segment messages."""
+    in the stream; the follower's frames of the second part, the segment messages and the
+    stamps sent."""
     follower = Follower(server.ws)
     segments: list[dict] = []
+    stamps: list[float] = []
     try:
         with connect(server.ws + "/ws/horse") as ws:
             ws.recv(timeout=5)
             begin = time.perf_counter() + 0.5
-            drive(ws, 0.5 + seconds, lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5), segments, game)
+            drive(
+                ws, 0.5 + seconds, lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5), segments, game, stamps
+            )
             end = time.perf_counter()
         frames = [f for f in follower.frames if begin + 0.05 <= f["at"] <= end]
         assert frames and any(f["driver"] == "input" for f in follower.frames if f["at"] < begin), "it drove at once"
-        return frames, segments
+        return frames, segments, stamps
     finally:
         follower.close()
 
 
 def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: LiveServer) -> None:
-    baseline, none = run(server, 2.0, lambda e: e, game=True)
+    baseline, none, _ = run(server, 2.0, lambda e: e, game=True)
     assert none == [] and all(f["driver"] == "input" for f in baseline)
     bound = largest_step(baseline)
 
     paused_before = server.metric("riderlive_clock_jumps_total", 'direction="paused"')
     # the game pauses after 0.5 s for 1.5 s (its clock stands still, frames keep coming), then resumes
-    paused, segments = run(server, 3.0, lambda e: min(e, 0.5) + max(0.0, e - 2.0), game=True)
+    paused, segments, _ = run(server, 3.0, lambda e: min(e, 0.5) + max(0.0, e - 2.0), game=True)
     reasons = [s["reason"] for s in segments]
     assert reasons == ["clock_paused", "clock_resumed"], segments
     assert all(f["driver"] == "input" for f in paused), ("the producer kept control throughout", drivers(paused))
@@ -103,9 +122,15 @@ def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: 
     assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
 
     # 0.2 s back every second (the issue: every 2 s; twice as many steps here)
-    stepping, segments = run(server, 3.5, lambda e: e - 0.2 * math.floor(e), game=False)
-    assert [s["reason"] for s in segments] == ["clock_backward"] * 3, segments
-    # the step is 0.2 s less the time between the two frames (8 ms at 120 Hz, more when the sender is late)
-    assert all(s["jump"] == s["t"] - s["previous_t"] and -0.2 < s["jump"] < -0.1 for s in segments), segments
+    stepping, segments, stamps = run(server, 3.5, lambda e: e - 0.2 * math.floor(e), game=False)
+    sent = steps_back(stamps)
+    # 3 steps sent, unless the sender was late across one (seen once in a full suite on a loaded host)
+    assert len(sent) >= 2, ("the sender was late across more than one step", sent)
+    # each step sent is one segment, told with the two stamps around it
+    assert [s["reason"] for s in segments] == ["clock_backward"] * len(sent), (segments, sent)
+    assert [(s["previous_t"], s["t"]) for s in segments] == sent, (segments, sent)
+    # the step is 0.2 s less the time between the two frames (8 ms at 120 Hz, more when the
+    # sender is late: by 0.15 s, -0.05 s; the two stamps are checked exactly above)
+    assert all(s["jump"] == s["t"] - s["previous_t"] and -0.2 < s["jump"] < 0.0 for s in segments), segments
     assert all(f["driver"] == "input" for f in stepping)
     assert largest_step(stepping) <= 1.5 * bound, (largest_step(stepping), bound)
