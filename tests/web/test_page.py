@@ -295,9 +295,15 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         s.start()
         without = open_page(browser, s.url)
         without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
+        # An e-stop is never locked (auth.Rule.NEVER_LOCKED): it latches without the token;
+        # the reset, a write that needs it, is refused, and the page says why.
+        devices = lambda: s.get("/api/devices")  # noqa: E731
+        estop = lambda: devices()["estop"]  # noqa: E731  (the latch, as the service reports it)
         without.page.locator("#estop").click()
+        wait_until(estop, 5.0, "an e-stop without the token was not latched", poll=0.05)
+        without.page.locator("#reset").click()
         without.wait_for("document.getElementById('message').textContent.includes('control token')", timeout=5)
-        assert s.get("/api/state")["tick"].get("estop") is not True
+        assert estop() is True
         without.page.close()
 
         p = open_page(browser, s.url, f"/#token={token}")
@@ -322,10 +328,14 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         p.wait_for(f"riderlive.connected && riderlive.session !== {first!r}", timeout=15)
         assert p.page.locator("#gone").is_hidden()
 
-        # The token survived the reconnect: the e-stop reaches the new service.
+        # The token survived the reconnect: the reset, which needs it, clears the new service's e-stop.
         p.page.locator("#estop").click()
-        estop = lambda: s.get("/api/state")["tick"].get("estop")  # noqa: E731
-        wait_until(estop, 5.0, "the e-stop with a token never reached the service", poll=0.05)
+        wait_until(estop, 5.0, lambda: f"the e-stop never reached the restarted service: {devices()}", poll=0.05)
+        # The reset needs the tick (503 while it starts): the page is live before the tick beats.
+        up = lambda: devices()["supervision"]["up"]  # noqa: E731
+        wait_until(up, 30.0, lambda: f"the tick never came up: {devices()}", poll=0.1)
+        p.page.locator("#reset").click()
+        wait_until(lambda: estop() is False, 10.0, "the reset with the token never reached the service", poll=0.05)
         p.page.close()
     finally:
         s.stop()
