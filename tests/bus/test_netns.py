@@ -112,6 +112,41 @@ asyncio.run(main())
 """
 
 
+TICKING_PROBE = """
+import asyncio, json, sys, time
+from riderlive.bus.nats import connect
+from riderlive.bus.stage import discover
+from riderlive.bus.subjects import Stage
+async def main():
+    t = await connect(sys.argv[1])
+    stage, want, deadline = Stage(sys.argv[2]), set(sys.argv[4].split(",")), time.perf_counter() + float(sys.argv[3])
+    while True:
+        rigs = await discover(t, stage, 0.5)
+        up = sorted(r["rig"] for r in rigs if r.get("tick_up"))
+        if want <= set(up) or time.perf_counter() > deadline:
+            break
+    print(json.dumps({"up": up, "rigs": [r["rig"] for r in rigs]}))
+    await t.close()
+asyncio.run(main())
+"""
+
+
+def wait_ticking(url: str, stage: str, rigs: list[str], timeout: float = 60.0) -> None:
+    """Until every rig's tick is up (its discovery status: the first heartbeat of its tick
+    process, so its frames flow). A rig joins the stage before its spawned tick has beaten;
+    on a loaded host that is seconds."""
+    done = subprocess.run(
+        ["ip", "netns", "exec", ENGINE, sys.executable, "-c", TICKING_PROBE, url, stage, str(timeout), ",".join(rigs)],
+        capture_output=True,
+        text=True,
+        timeout=timeout + 30,
+        env=ENV,
+    )
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(rigs) <= set(seen["up"]), seen
+
+
 def engine_sees(url: str, stage: str, seconds: float = 2.0) -> dict:
     done = subprocess.run(
         ["ip", "netns", "exec", ENGINE, sys.executable, "-c", ENGINE_PROBE, url, stage, str(seconds)],
@@ -169,6 +204,7 @@ def test_two_rigs_and_an_engine_across_links_and_a_cut_link(namespaces: None, tm
             started.append(rigs[name])
         for rig in rigs.values():
             rig.wait_for("joined stage 'net'", 60.0)
+        wait_ticking(url_of[ENGINE], stage, ["a", "b"])  # joined is not ticking yet
         seen = engine_sees(url_of[ENGINE], stage)
         assert seen["rigs"] == ["a", "b"]
         # 60 Hz over 2 s; this test is about the links, not the rate (a loaded machine starves rigs)
