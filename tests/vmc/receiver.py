@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import threading
 from typing import Any
 
@@ -19,6 +20,14 @@ class VmcReceiver:
         table.set_default_handler(self._on_message)
         self.server = osc_server.BlockingOSCUDPServer(("127.0.0.1", 0), table)
         self.port = self.server.server_address[1]
+        # Room for a whole burst (a test publishing hundreds of records at once): the kernel's
+        # default buffer (~200 KiB) overflows while this thread parses, and loopback UDP then
+        # loses datagrams the sender counted as sent.
+        force = getattr(socket, "SO_RCVBUFFORCE", None)
+        try:
+            self.server.socket.setsockopt(socket.SOL_SOCKET, force or socket.SO_RCVBUF, 8 << 20)
+        except PermissionError:  # not root: as much as rmem_max allows
+            self.server.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
         self._thread = threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
         self._thread.start()
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -24,14 +23,6 @@ from tests.service.live_server import LiveServer
 
 pytest.importorskip("pythonosc")
 from tests.vmc.receiver import VmcReceiver
-
-
-@pytest.fixture
-def receivers() -> Iterator[tuple[VmcReceiver, VmcReceiver]]:
-    rider, horse = VmcReceiver(), VmcReceiver()
-    yield rider, horse
-    rider.close()
-    horse.close()
 
 
 def test_the_service_sends_the_rider_and_the_horse_each_to_its_port(

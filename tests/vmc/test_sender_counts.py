@@ -5,7 +5,6 @@ and through the live service."""
 from __future__ import annotations
 
 import ast
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,14 +20,6 @@ from tests.vmc.test_sender import _records
 
 pytest.importorskip("pythonosc")
 from tests.vmc.receiver import VmcReceiver
-
-
-@pytest.fixture
-def receivers() -> Iterator[tuple[VmcReceiver, VmcReceiver]]:
-    rider, horse = VmcReceiver(), VmcReceiver()
-    yield rider, horse
-    rider.close()
-    horse.close()
 
 
 def test_sent_plus_skipped_is_every_chosen_tick(receivers: tuple[VmcReceiver, VmcReceiver]) -> None:
