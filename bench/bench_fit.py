@@ -21,7 +21,6 @@ replace. Its ratio and the largest difference between the two fits' values are p
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import os
 import sys
 import time
@@ -34,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np
 from scipy.optimize import least_squares
 
-from bench.serving import burn
+from bench.serving import busy_cores
 from riderlive.fit.identify import Status
 from riderlive.fit.noise import mocap
 from riderlive.fit.problem import TakePair, align, residuals
@@ -89,15 +88,8 @@ def main() -> None:
     truth, start = load_preset(args.truth), load_preset(args.start)
     pairs = takes(truth, args.noise)
     seconds = sum(float(p.rider.t[-1] - p.rider.t[0]) for p in pairs)
-    burners = []
-    if args.loaded:
-        stop = time.perf_counter() + 3600.0
-        burners = [multiprocessing.Process(target=burn, args=(stop,), daemon=True) for _ in range(2)]
-        for b in burners:
-            b.start()
-    state = "loaded (2 burners)" if args.loaded else "quiet (other users' load not controlled)"
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    try:
+    with busy_cores(2 if args.loaded else 0) as state:
         fit([pairs[-1]], start)  # imports and first-use costs out of the way
         wall, cpu = time.perf_counter(), time.process_time()
         solution = fit(pairs, start, FitOptions(drift=args.noise))
@@ -131,9 +123,6 @@ def main() -> None:
             print(
                 f"  ratio baseline / fit: {b_wall / wall:.1f}x wall, {b_cpu / cpu:.1f}x CPU; values agree to {diff:.1e}"
             )
-    finally:
-        for b in burners:
-            b.terminate()
 
 
 if __name__ == "__main__":

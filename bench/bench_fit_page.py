@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import sys
 import tempfile
@@ -31,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import httpx
 import numpy as np
 
-from bench.serving import burn, start_server
+from bench.serving import busy_cores, start_server
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
@@ -65,14 +64,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--loaded", action="store_true")
     args = parser.parse_args()
-    burners = []
-    if args.loaded:
-        stop = time.perf_counter() + 3600.0
-        burners = [multiprocessing.Process(target=burn, args=(stop,), daemon=True) for _ in range(2)]
-        for b in burners:
-            b.start()
-    state = "loaded (2 burners)" if args.loaded else "quiet (other users' load not controlled)"
-    with tempfile.TemporaryDirectory() as tmp:
+    with busy_cores(2 if args.loaded else 0) as state, tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         (root / "takes").mkdir()
         (root / "presets").mkdir()
@@ -115,8 +107,6 @@ def main() -> None:
         finally:
             proc.terminate()
             proc.communicate(timeout=30)
-            for b in burners:
-                b.terminate()
 
 
 if __name__ == "__main__":

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import re
 import sys
@@ -34,7 +33,7 @@ from websockets.sync.client import connect
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.serving import burn, start_server
+from bench.serving import busy_cores, start_server
 from tests.service.foxglove_client import FoxgloveClient
 
 CONFIG = """
@@ -130,17 +129,12 @@ def main() -> None:
             break
     threading.Thread(target=lambda: [None for _ in proc.stderr or ()], daemon=True).start()  # keep the pipe drained
     total = 3 * args.seconds + 10.0
-    burners = [multiprocessing.Process(target=burn, args=(time.perf_counter() + total,)) for _ in range(args.burners)]
-    for b in burners:
-        b.start()
-    load = "quiet" if args.burners == 0 else f"loaded ({args.burners} busy process{'es' if args.burners > 1 else ''})"
     try:
-        fox_cpu, (fox_rate, fox_got, fox_span) = foxglove_phase(port, fox_port, args.seconds, proc.pid)
-        ws_cpu, (ws_rate, ws_got, ws_span) = ws_rider_phase(port, args.seconds, proc.pid)
-        idle_cpu = idle_phase(args.seconds, proc.pid)
+        with busy_cores(args.burners, total) as load:
+            fox_cpu, (fox_rate, fox_got, fox_span) = foxglove_phase(port, fox_port, args.seconds, proc.pid)
+            ws_cpu, (ws_rate, ws_got, ws_span) = ws_rider_phase(port, args.seconds, proc.pid)
+            idle_cpu = idle_phase(args.seconds, proc.pid)
     finally:
-        for b in burners:
-            b.terminate()
         proc.terminate()
         proc.wait(30)
     print(f"bench_foxglove: tick 120 Hz, {args.seconds:g} s per phase, {load}, {os.cpu_count()} CPUs")

@@ -12,23 +12,18 @@ shared host). ``--burn N`` starts N busy-loop processes for the run (a loaded ho
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import os
 import statistics
 import time
 
 import numpy as np
 
+from bench.serving import busy_cores
 from riderlive.channels import HORSE_NAMES
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.horse.script import gait_script, generate, load_script
 from riderlive.rules import RiderModel
 from riderlive.rules.params import RuleParams
-
-
-def _burn() -> None:
-    while True:
-        pass
 
 
 def _per_frame(model: RiderModel, frames: list[list[float]]) -> float:
@@ -43,10 +38,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--burn", type=int, default=0, help="busy processes during the run")
     args = parser.parse_args()
-    burners = [multiprocessing.Process(target=_burn, daemon=True) for _ in range(args.burn)]
-    for b in burners:
-        b.start()
-    try:
+    with busy_cores(args.burn, 3600) as state:
         on = RiderModel(scale=DEFAULT_SCALE)
         off = RiderModel(RuleParams().with_values({"jump.weight": 0.0}), scale=DEFAULT_SCALE)
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -54,7 +46,7 @@ def main() -> None:
             "canter": generate(gait_script("canter", 10.0), 120.0),
             "jump shot": generate(load_script(os.path.join(root, "config", "shots", "jump.toml")), 120.0),
         }
-        print(f"load average {os.getloadavg()[0]:.1f}, {args.burn} burners")
+        print(f"{state}, load average {os.getloadavg()[0]:.1f}")
         for name, table in takes.items():
             frames = np.column_stack([table.column(n) for n in HORSE_NAMES]).tolist()
             with_layer, without = [], []
@@ -63,9 +55,6 @@ def main() -> None:
                 with_layer.append(_per_frame(on, frames))
             a, b = statistics.median(without), statistics.median(with_layer)
             print(f"{name}: evaluate {b:.2f} us/frame with [jump], {a:.2f} without (baseline), ratio {b / a:.3f}")
-    finally:
-        for b in burners:
-            b.terminate()
 
 
 if __name__ == "__main__":

@@ -52,7 +52,7 @@ import orjson
 from websockets.asyncio.client import connect
 
 from bench import serving
-from bench.serving import burn
+from bench.serving import busy_cores
 from riderlive.realtime.latency import N_BOUNDS, LatencySnapshot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -406,21 +406,13 @@ def main() -> None:
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-service-"))
     variants = ["design", "today", *(["unlocked"] if args.unlocked else []), *(["thread"] if args.thread else [])]
-    burner = None
-    if not args.no_burner:
-        total = len(variants) * len(args.rates) * (args.seconds + 40)
-        burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + total,))
-        burner.start()
+    total = len(variants) * len(args.rates) * (args.seconds + 40)
     results: dict[tuple[str, float], dict[str, float]] = {}
-    try:
+    with busy_cores(0 if args.no_burner else 1, total):
         for rate in args.rates:
             for variant in variants:
                 print(f"{variant} at {rate:g} Hz ...", flush=True)
                 results[variant, rate] = run(variant, rate, args, workdir)
-    finally:
-        if burner is not None:
-            burner.terminate()
-            burner.join()
     print(
         f"{args.clients} clients at {args.client_rate:g} Hz, producer at {args.producer_rate:g} Hz, rig: {args.rig}, "
         f"other core busy: {not args.no_burner}, {args.seconds:g} s per run, load average {os.getloadavg()[0]:.1f}"

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import os
 import random
 import signal
@@ -29,7 +28,7 @@ from pathlib import Path
 import httpx
 from websockets.sync.client import connect
 
-from bench.serving import ROOT, burn, start_server
+from bench.serving import ROOT, busy_cores, start_server
 
 SIDECAR_KEYS = {"name", "session", "tick_rate", "preset", "length_scale", "engine_t0", "monotonic_t0", "rows"}
 
@@ -96,12 +95,8 @@ def main() -> None:
     parser.add_argument("--no-burner", action="store_true")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-takes-"))
-    burner = None
-    if not args.no_burner:
-        burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + 3600,))
-        burner.start()
     results = []
-    try:
+    with busy_cores(0 if args.no_burner else 1, 3600):
         for i in range(args.runs):
             result = one_run(workdir, f"kill{i}")
             results.append(result)
@@ -111,10 +106,6 @@ def main() -> None:
                 f"replays {result['replayed']}",
                 flush=True,
             )
-    finally:
-        if burner is not None:
-            burner.terminate()
-            burner.join()
     worst = max(float(r["lost"]) for r in results)  # type: ignore[arg-type]
     every = all(r["sidecar"] and r["listed"] and r["baked"] and r["replayed"] for r in results)
     print(f"{args.runs} runs, other core busy: {not args.no_burner}; worst loss {worst * 1e3:.1f} ms (goal <= 500 ms)")

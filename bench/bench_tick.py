@@ -15,12 +15,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import time
 
 import numpy as np
 
-from bench.serving import burn
+from bench.serving import busy_cores
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Timing
 from riderlive.realtime.link import TickLink
@@ -97,18 +96,10 @@ def main() -> None:
     parser.add_argument("--tail", action="store_true", help="tail + braid physics on vs off (both in their process)")
     args = parser.parse_args()
     total = args.seconds + (args.baseline_seconds or args.seconds) + 10
-    burner = None
-    if not args.no_burner:
-        burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + total,))
-        burner.start()
-    try:
+    with busy_cores(0 if args.no_burner else 1, total):
         design = run("process", args.rate, args.seconds, not args.no_realtime, tail=args.tail)
         baseline_isolation = "process" if args.tail else "thread"
         baseline = run(baseline_isolation, args.rate, args.baseline_seconds or args.seconds, not args.no_realtime)
-    finally:
-        if burner is not None:
-            burner.terminate()
-            burner.join()
     print(f"tick at {args.rate:g} Hz, other core busy: {not args.no_burner}, SCHED_FIFO: {bool(design['realtime'])}")
     labels = ("tail on", "tail off (baseline)") if args.tail else ("own process (design)", "thread (baseline)")
     print(f"{'':22}{'ticks':>8}{'skipped':>9}  lateness ms: {'p50':>7}{'p99':>7}{'p99.9':>7}{'max':>7}", end="")

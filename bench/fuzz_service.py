@@ -45,7 +45,7 @@ import msgpack
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
-from bench.serving import burn, start_server
+from bench.serving import busy_cores, start_server
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.ranges import DEFAULT_RANGES
 
@@ -500,23 +500,19 @@ def main() -> None:
     workdir = Path(tempfile.mkdtemp(prefix="fuzz-service-"))
     (workdir / "service.toml").write_text(CONFIG)
     server, port = start_server(workdir / "service.toml")
-    burner = None
     try:
-        if not args.no_burner:
-            burner = multiprocessing.get_context("spawn").Process(target=burn, args=(time.perf_counter() + 7200,))
-            burner.start()
         failure = None
-        try:
-            result = asyncio.run(
-                fuzz(f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}", args.messages, args.connections, args.seed)
-            )
-        except Exception as exc:  # the service went away under the hostile clients: say what it said
-            failure = exc
+        with busy_cores(0 if args.no_burner else 1, 7200):
+            try:
+                result = asyncio.run(
+                    fuzz(
+                        f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}", args.messages, args.connections, args.seed
+                    )
+                )
+            except Exception as exc:  # the service went away under the hostile clients: say what it said
+                failure = exc
         alive = server.poll() is None
     finally:
-        if burner is not None:
-            burner.terminate()
-            burner.join()
         server.terminate()
         try:
             _, log = server.communicate(timeout=30)

@@ -21,7 +21,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from bench.serving import burn
+from bench.serving import busy_cores
 from riderlive.configfile import CONFIG_DIR
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import Instruction, Item
@@ -97,20 +97,9 @@ def torque_offs(packets: list[tuple[float, bytes]]) -> list[float]:
 @contextlib.contextmanager
 def other_core_busy(seconds: float, enabled: bool = True, burners: int = 1) -> Iterator[None]:
     """``burners`` busy-loop processes at normal priority for ``seconds`` (1: the other of
-    two cores busy; 2: both)."""
-    if not enabled:
+    two cores busy; 2: both); nothing when not ``enabled``."""
+    with busy_cores(burners if enabled else 0, seconds):
         yield
-        return
-    context = mp.get_context("spawn")
-    procs = [context.Process(target=burn, args=(time.perf_counter() + seconds,), daemon=True) for _ in range(burners)]
-    for proc in procs:
-        proc.start()
-    try:
-        yield
-    finally:
-        for proc in procs:
-            proc.terminate()
-            proc.join()
 
 
 def bench_rig(path: Path, tick_hz: float, baud: int = 1_000_000, **bus: Any) -> RigConfig:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing as mp
 import os
 import re
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
@@ -20,9 +23,32 @@ def burn(stop_at: float) -> None:
     real-time priority and compete with the very loop it is meant to stand beside)."""
     if hasattr(os, "sched_setscheduler"):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    if hasattr(os, "sched_setaffinity"):  # nor the bench's pinning: other work runs where it likes
+        os.sched_setaffinity(0, range(os.cpu_count() or 1))
     x = 0
     while time.perf_counter() < stop_at:
         x += 1
+
+
+@contextlib.contextmanager
+def busy_cores(count: int, seconds: float = 7200.0) -> Iterator[str]:
+    """``count`` burners (``burn``) beside the body, for at most ``seconds``; yields the words
+    every figure printed inside should carry ("quiet" or "loaded (N busy processes)").
+
+    Spawned, not forked, so a burner never inherits the bench's SCHED_FIFO or its threads;
+    stopped and joined on the way out, whatever the body raised."""
+    context = mp.get_context("spawn")
+    procs = [context.Process(target=burn, args=(time.perf_counter() + seconds,), daemon=True) for _ in range(count)]
+    for proc in procs:
+        proc.start()
+    try:
+        plural = "es" if count > 1 else ""
+        yield f"loaded ({count} busy process{plural})" if count else "quiet (other users' load not controlled)"
+    finally:
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.join()
 
 
 def start_server(config: Path, min_ticks: float = 20.0, timeout: float = 60.0) -> tuple[subprocess.Popen[str], int]:

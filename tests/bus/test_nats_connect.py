@@ -13,20 +13,15 @@ process, is bounded without that noise (test_connect_itself_is_bounded).
 from __future__ import annotations
 
 import asyncio
-import os
-import socket
-import subprocess
-import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.bus.dead_brokers import closed_port, mute_port, race_with_baseline
+
 BUDGET_S = 3.0
-BAD_URL = "nats://127.0.0.1:99999"
 NOISE = 0.25
 """Two processes started together on a loaded host end their imports up to this apart."""
 
@@ -41,68 +36,11 @@ STAGE_ACTIONS = {
 }
 
 
-def closed_port() -> int:
-    """A loopback port nobody listens on (bound, then closed: the kernel refuses it)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def mute() -> Iterator[int]:
     """A port that accepts connections and never writes a byte."""
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen(64)
-    held: list[socket.socket] = []
-    stop = threading.Event()
-
-    def accept() -> None:
-        while not stop.is_set():
-            try:
-                conn, _ = server.accept()
-            except OSError:
-                return
-            held.append(conn)
-
-    thread = threading.Thread(target=accept, daemon=True)
-    thread.start()
-    yield int(server.getsockname()[1])
-    stop.set()
-    server.close()
-    for conn in held:
-        conn.close()
-
-
-def run_both(args: list[str], baseline: list[str], cwd: Path) -> tuple[tuple[int, list[str], float], float]:
-    """``riderlive ARGS`` (exit code, stderr lines, wall s from process start) and the wall
-    time of ``riderlive BASELINE`` started at the same moment (same load, same imports)."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
-    start = time.perf_counter()
-    procs = [
-        subprocess.Popen(
-            [sys.executable, "-m", "riderlive", *a],
-            cwd=cwd,
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        for a in (args, baseline)
-    ]
-    ends, errs = [0.0, 0.0], ["", ""]
-
-    def reap(i: int) -> None:  # each end timed by its own waiter: neither waits for the other
-        errs[i] = procs[i].communicate(timeout=120)[1]
-        ends[i] = time.perf_counter() - start
-
-    waiters = [threading.Thread(target=reap, args=(i,)) for i in range(2)]
-    for w in waiters:
-        w.start()
-    for w in waiters:
-        w.join()
-    assert procs[1].returncode == 2 and "invalid connect url" in errs[1], errs[1]
-    return (procs[0].returncode, errs[0].splitlines(), ends[0]), ends[1]
+    with mute_port() as port:
+        yield port
 
 
 SERVE = ["serve", "--nats", "{url}", "--rig", "r1", "--port", "0"]
@@ -114,9 +52,9 @@ def stage(action: str) -> list[str]:
 
 def assert_fails_fast(command: list[str], url: str, cwd: Path) -> None:
     """``command`` (with ``{url}``) against url: exit 2, one line naming it, within the budget."""
-    (code, lines, wall_s), base_s = run_both(
-        [a.format(url=url) for a in command], [a.format(url=BAD_URL) for a in command], cwd
-    )
+    run, base = race_with_baseline(command, url, cwd)
+    assert base.code == 2 and "invalid connect url" in base.stderr, base.stderr
+    code, lines, wall_s, base_s = run.code, run.stderr.splitlines(), run.wall_s, base.wall_s
     assert code == 2, lines
     assert len(lines) == 1, lines
     assert url in lines[0] and "no NATS server answers" in lines[0], lines
