@@ -97,7 +97,7 @@ class TickResult:
     saddle: list[float] = field(default_factory=lambda: [0.0] * 6)
     """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
     estimate: tuple[float, ...] = NO_ESTIMATE
-    """The saddle estimate (``layout.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
+    """The saddle estimate (``record.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
     parts: list[float] = field(default_factory=list)
     """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
 

@@ -16,7 +16,7 @@ the running tick:
    and the new generation): a loop rebuilt if the settings changed since the warm-up
    (cheap: the kernels are loaded), the newest snapshot of the dead generation restored
    (``realtime/handover.py``), then the devices connected disarmed, real-time priority
-   and the loop, exactly as a cold tick (``tick.serve``).
+   and the loop, exactly as a cold tick (``tick_process.serve``).
 
 The pipe closing (the web process gone or the spare not wanted) ends it at any stage.
 This module imports only the standard library: the spawned process's main thread
@@ -79,7 +79,7 @@ def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connecti
         if nice:
             with contextlib.suppress(OSError):  # this thread only (Linux): the main thread keeps its priority
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
-        from riderlive.realtime import tick
+        from riderlive.realtime import tick_process as tick
 
         for setup in setups:
             try:
@@ -119,7 +119,8 @@ def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connecti
 def take_over(loop: Any, setup: Any) -> None:
     """Become generation ``setup.generation``: rebuild the loop if the settings changed, restore
     the dead generation's snapshot, serve."""
-    from riderlive.realtime import handover, tick
+    from riderlive.realtime import handover
+    from riderlive.realtime import tick_process as tick
 
     began = time.perf_counter()
     rebuilt = dataclasses.replace(loop.setup, generation=setup.generation) != setup

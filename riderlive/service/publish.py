@@ -33,7 +33,7 @@ from riderlive import __version__
 from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, RIDER_PART_NAMES, RIDER_PARTS, SADDLE, lookup
 from riderlive.devices.latch import StopSource
 from riderlive.horse import DEFAULT_SCALE
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service import auth
 from riderlive.service.codecs import (
@@ -234,9 +234,9 @@ class Hub:
         ``now``: ``perf_counter`` seconds (None: the clock's), for the behind clients' timeout.
         """
         metrics = self.service.metrics
-        oldest = float(records[-1][L.OUT_ENGINE_T]) - CATCH_UP if records else 0.0
-        if records and float(records[0][L.OUT_ENGINE_T]) < oldest:
-            kept = [r for r in records if float(r[L.OUT_ENGINE_T]) >= oldest]
+        oldest = RecordLayout.engine_t.at(records[-1]) - CATCH_UP if records else 0.0
+        if records and RecordLayout.engine_t.at(records[0]) < oldest:
+            kept = [r for r in records if RecordLayout.engine_t.at(r) >= oldest]
             metrics.ticks_coalesced += len(records) - len(kept)
             records = kept
         clients = [c for c in self.clients.values() if not c.closed]
@@ -244,9 +244,9 @@ class Hub:
         now = time.perf_counter() if now is None else now
         timeout = self.service.config.publish.send_timeout
         for record in records:
-            seq = int(record[L.OUT_SEQ])
+            seq = RecordLayout.seq.count(record)
             # The newest input not yet in a frame sent: a tick may take one while no client is due.
-            unsent_rx = max(self._unsent_rx, float(record[L.OUT_INPUT_RX]))
+            unsent_rx = max(self._unsent_rx, RecordLayout.input_rx.at(record))
             encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
             written = offered = False
             for client in clients:
