@@ -45,7 +45,6 @@ def busy_python(link: TickLink, seconds: float) -> list[np.ndarray]:
 
 
 def run(isolation: str, rate: float, seconds: float, realtime: bool, tail: bool = False) -> dict[str, float]:
-    extra = physics_channels() if tail else ()
     setup = TickSetup(
         rate=rate,
         start=time.perf_counter(),
@@ -56,7 +55,7 @@ def run(isolation: str, rate: float, seconds: float, realtime: bool, tail: bool 
         realtime_priority=realtime,
         isolation=isolation,
         tail=tail,
-        extra_channels=extra,
+        layout=RecordLayout(physics_channels() if tail else ()),
     )
     link = TickLink(setup)
     try:

@@ -41,7 +41,7 @@ from riderlive.realtime.counters import COUNTERS
 from riderlive.realtime.down import down_status
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.realtime.spare import Failed, TakeOver, Warm, spare_main
+from riderlive.realtime.spare import Spare, TakeOver, spare_main
 from riderlive.realtime.tick_process import tick_main
 
 
@@ -54,43 +54,6 @@ def exit_reason(code: int | None) -> str:
             return signal.Signals(-code).name
         return f"signal {-code}"
     return f"exit {code}"
-
-
-@dataclasses.dataclass
-class Spare:
-    """The web side of a spare tick process (``realtime/spare.py``)."""
-
-    process: multiprocessing.process.BaseProcess
-    commands: Connection
-    notify: Connection
-    started_at: float
-    """perf_counter s."""
-    urgent: bool
-    warm: Warm | None = None
-    failed: str | None = None
-
-    def poll(self) -> None:
-        """Take the spare's messages (``Warm``, ``Failed``) without waiting."""
-        with contextlib.suppress(EOFError, OSError):
-            while self.warm is None and self.failed is None and self.commands.poll():
-                message = self.commands.recv()
-                if isinstance(message, Warm):
-                    self.warm = message
-                elif isinstance(message, Failed):
-                    self.failed = message.message
-
-    @property
-    def ready(self) -> bool:
-        self.poll()
-        return self.warm is not None and self.process.is_alive()
-
-    def discard(self) -> None:
-        """Close its pipes (it exits when it sees them close) and make sure it is gone."""
-        self.commands.close()
-        self.notify.close()
-        if self.process.is_alive():
-            self.process.kill()
-        self.process.join(1.0)
 
 
 class TickLink:

@@ -236,12 +236,17 @@ class RecordLayout:
         parts: Sequence[float],
     ) -> list[float]:
         """One record's slots in layout order; a field of the wrong length is a ValueError naming it."""
-        runs = (saddle, estimate, horse, rider, physics, parts)
-        for values, f in zip(runs, (_SADDLE, _ESTIMATE, _HORSE, _RIDER, self.physics, self.parts), strict=True):
-            if len(values) != f.width:
-                raise ValueError(f"record field {f.name!r} needs {f.width} values, got {len(values)}")
+        widths = (len(saddle), len(estimate), len(horse), len(rider), len(physics), len(parts))
+        if widths != self._run_widths:
+            runs = (_SADDLE, _ESTIMATE, _HORSE, _RIDER, self.physics, self.parts)
+            f, got = next((f, n) for f, n in zip(runs, widths, strict=True) if n != f.width)
+            raise ValueError(f"record field {f.name!r} needs {f.width} values, got {got}")
         head = [float(seq), engine_t, source_t, float(driver), float(producer), input_rx, done, lateness]
         return [*head, *saddle, *estimate, *horse, *rider, *physics, *parts]
+
+    @functools.cached_property
+    def _run_widths(self) -> tuple[int, ...]:
+        return tuple(f.width for f in (_SADDLE, _ESTIMATE, _HORSE, _RIDER, self.physics, self.parts))
 
     def pack_values(self, values: RecordValues) -> list[float]:
         return self.pack(**{f.name: getattr(values, f.name) for f in dataclasses.fields(values)})

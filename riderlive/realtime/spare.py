@@ -29,6 +29,7 @@ import contextlib
 import dataclasses
 import gc
 import logging
+import multiprocessing.process
 import os
 import pickle
 import signal
@@ -64,6 +65,43 @@ class Failed:
     """Spare -> web: the warm-up failed (the message says why); the spare exits."""
 
     message: str
+
+
+@dataclasses.dataclass
+class Spare:
+    """The web side of a spare tick process (``realtime/spare.py``)."""
+
+    process: multiprocessing.process.BaseProcess
+    commands: Connection
+    notify: Connection
+    started_at: float
+    """perf_counter s."""
+    urgent: bool
+    warm: Warm | None = None
+    failed: str | None = None
+
+    def poll(self) -> None:
+        """Take the spare's messages (``Warm``, ``Failed``) without waiting."""
+        with contextlib.suppress(EOFError, OSError):
+            while self.warm is None and self.failed is None and self.commands.poll():
+                message = self.commands.recv()
+                if isinstance(message, Warm):
+                    self.warm = message
+                elif isinstance(message, Failed):
+                    self.failed = message.message
+
+    @property
+    def ready(self) -> bool:
+        self.poll()
+        return self.warm is not None and self.process.is_alive()
+
+    def discard(self) -> None:
+        """Close its pipes (it exits when it sees them close) and make sure it is gone."""
+        self.commands.close()
+        self.notify.close()
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(1.0)
 
 
 def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connection, nice: int = WARM_NICE) -> None:

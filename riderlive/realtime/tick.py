@@ -32,8 +32,9 @@ from riderlive.devices.latch import StopLatch
 from riderlive.horse import ProceduralHorse
 from riderlive.realtime import handover, latency
 from riderlive.realtime import layout as L
-from riderlive.realtime.core import Driver, TickCore, TickResult, frame_of
+from riderlive.realtime.core import Driver, TickCore, TickResult
 from riderlive.realtime.counters import COUNTERS, TickCounters
+from riderlive.realtime.frame import frame_of
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of
 from riderlive.realtime.phase_follow import PhaseFollower

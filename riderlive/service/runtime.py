@@ -106,8 +106,7 @@ class Service:
             self.physics_channels = physics_channels(config.physics.file)
         self.layout = RecordLayout(self.physics_channels, RIDER_PART_NAMES)
         """The tick's output record (``realtime/record.py``): after the rider, the tail and braid, then the parts."""
-        self.extra_channels: tuple[str, ...] = self.layout.extra_channels
-        """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
+        self.extra_channels = self.layout.extra_channels
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params: RuleParams
@@ -213,17 +212,14 @@ class Service:
         records = link.read_outputs()
         if self.recorder is not None:
             start = link.start
-            recorded = slice(RecordLayout.rider.start, self.layout.physics.stop)  # the rider and the physics
+            recorded = slice(
+                RecordLayout.rider.start, self.layout.physics.stop
+            )  # the rider and the physics, not the parts
             for record in records:
                 engine_t = RecordLayout.engine_t.at(record)
                 if self.recorder.rows == 0:  # the take's start timecode, in its sidecar from the first flush
                     self.recorder.meta.update(self.timecode.of_record(record).as_meta())
-                rider = np.concatenate(  # the rider and the physics (not the rider parts), then the saddle
-                    (
-                        record[recorded],
-                        record[RecordLayout.saddle.slice],
-                    )
-                )
+                rider = np.concatenate((record[recorded], record[RecordLayout.saddle.slice]))  # then the saddle
                 self.recorder.add(engine_t, record[RecordLayout.horse.slice], rider, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)

@@ -20,7 +20,7 @@ from riderlive.service.codecs import (
     decode_subscription,
     encode_frame,
 )
-from riderlive.service.publish import pose_floats, units
+from riderlive.service.hello import pose_floats, units
 from riderlive.skeleton import HORSE_RIG, horse_pose, rider_pose, rider_rig
 from tests.service.live_server import LiveServer
 from tests.service.test_publish import frames
