@@ -38,7 +38,7 @@ from riderlive.realtime.frame import frame_of
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock, bucket_of
 from riderlive.realtime.phase_follow import PhaseFollower
-from riderlive.realtime.record import RecordLayout
+from riderlive.realtime.record import LayoutMismatch, RecordLayout
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.realtime.tick_control import TickControl
@@ -131,6 +131,10 @@ class TickLoop(TickControl):
         self.layout = RecordLayout(self.physics.names if self.physics else (), PART_NAMES)
         """The output record as this tick packs it: the setup's, or the tick refuses to start."""
         setup.layout.require_same(self.layout, "the web process's setup", "the tick")
+        if self.outputs.width != self.layout.width:
+            raise LayoutMismatch(
+                f"the output ring has {self.outputs.width} slots a record, the tick's layout {self.layout.describe()}"
+            )
 
     def warm(self) -> None:
         """Compile or load the rider parts and physics kernels now, so compile time never lands in a tick."""

@@ -25,7 +25,7 @@ from riderlive.rules.animator import AnimatorLayer
 def loop():
     shared = [
         SharedRing(64, L.INPUT_WIDTH),
-        SharedRing(64, RecordLayout.rider.stop),
+        SharedRing(64, RecordLayout().width),
         SharedCounters(COUNTERS),
         SharedBlob(),
     ]
@@ -117,6 +117,13 @@ def test_a_tick_built_from_another_record_layout_refuses_to_start(loop: TickLoop
     _ours, theirs = multiprocessing.Pipe()
     with pytest.raises(LayoutMismatch, match=r"the web process's setup has .*tail_00.rx.*the tick has"):
         TickLoop(setup, theirs, loop.notify_fd, None)
+    narrow = SharedRing(64, RecordLayout.rider.stop)  # a ring made for records without the rider parts
+    try:
+        names = {**loop.setup.shm_names, "output": narrow.name}
+        with pytest.raises(LayoutMismatch, match=r"the output ring has 84 slots a record, the tick's layout 99 slots"):
+            TickLoop(dataclasses.replace(loop.setup, shm_names=names), theirs, loop.notify_fd, None)
+    finally:
+        narrow.close()
 
 
 def test_the_counters_segment_keeps_its_names_and_typed_writes_land_on_them(loop: TickLoop) -> None:
