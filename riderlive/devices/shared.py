@@ -130,6 +130,7 @@ class Slot(Generic[N]):
 
     def __init__(self, kind: type[N], writer: str, doc: str = "") -> None:
         self.kind: type[N] = kind
+        self._int = kind is int
         self.writer = writer
         self.doc = doc
         self.name = ""
@@ -145,8 +146,9 @@ class Slot(Generic[N]):
     def __get__(self, obj: _Holder | None, owner: type) -> Slot[N] | N:
         if obj is None:
             return self
-        value: N = self.kind(obj.values[self.index])
-        return value
+        value = obj.values[self.index]  # a float (numpy's float64 is one): no conversion on the hot path
+        out: N = int(value) if self._int else value
+        return out
 
     def __set__(self, obj: _Holder, value: N) -> None:
         obj.values[self.index] = value

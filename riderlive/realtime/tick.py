@@ -320,14 +320,8 @@ class TickLoop(TickControl):
 
     def _count_tick(self, clock: DeadlineClock, deadline: float, lateness: float, done: float) -> None:
         """The pacing counters and the lateness histogram."""
-        counter = self.counter
-        counter.ticks += 1
-        counter.overruns = clock.overruns
-        counter.skipped = clock.skipped
-        counter.lateness_sum += lateness
-        counter.lateness_max = max(counter.lateness_max, lateness)
-        counter.step_max = max(counter.step_max, done + self.setup.start - deadline)
-        counter.count_lateness(bucket_of(lateness))
+        step = done + self.setup.start - deadline
+        self.counter.count_tick(clock.overruns, clock.skipped, lateness, step, bucket_of(lateness))
         self.histograms["tick_lateness"].observe(lateness)
 
     def _check_stopped(self, now: float) -> None:

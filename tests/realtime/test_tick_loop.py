@@ -145,3 +145,9 @@ def test_the_counters_segment_keeps_its_names_and_typed_writes_land_on_them(loop
     assert snapshot["saddle_samples"] == 5 and snapshot["saddle_stale"] == 2 and snapshot["lateness_bucket_1"] == 1
     with pytest.raises(KeyError):
         counter.set_saddle({"unknown": 1})
+    counter.count_tick(2, 3, 0.001, 0.0015, 1)
+    counter.count_tick(2, 3, 0.0005, 0.0004, 0)
+    after = loop.counters.snapshot()
+    assert (after["ticks"], after["overruns"], after["skipped"]) == (3, 2, 3)
+    assert after["lateness_sum"] == pytest.approx(0.0015) and after["lateness_max"] == 0.002, "the max kept"
+    assert after["step_max"] == 0.0015 and after["lateness_bucket_1"] == 2 and after["lateness_bucket_0"] == 1
