@@ -20,9 +20,9 @@ import time
 import numpy as np
 
 from bench.serving import busy_cores
-from riderlive.realtime import layout as L
 from riderlive.realtime.core import Timing
 from riderlive.realtime.link import TickLink
+from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.tail import physics_channels
 from riderlive.rules import RuleParams
@@ -44,7 +44,6 @@ def busy_python(link: TickLink, seconds: float) -> list[np.ndarray]:
 
 
 def run(isolation: str, rate: float, seconds: float, realtime: bool, tail: bool = False) -> dict[str, float]:
-    extra = physics_channels() if tail else ()
     setup = TickSetup(
         rate=rate,
         start=time.perf_counter(),
@@ -55,7 +54,7 @@ def run(isolation: str, rate: float, seconds: float, realtime: bool, tail: bool 
         realtime_priority=realtime,
         isolation=isolation,
         tail=tail,
-        extra_channels=extra,
+        layout=RecordLayout(physics_channels() if tail else ()),
     )
     link = TickLink(setup)
     try:
@@ -68,9 +67,9 @@ def run(isolation: str, rate: float, seconds: float, realtime: bool, tail: bool 
         link.stop(3.0)
         link.close()
     data = np.array(records)
-    late = data[:, L.OUT_LATENESS] * 1e3
-    cost = (data[:, L.OUT_DONE] - data[:, L.OUT_ENGINE_T]) * 1e3 - late
-    seq = data[:, L.OUT_SEQ]
+    late = data[:, RecordLayout.lateness.start] * 1e3
+    cost = (data[:, RecordLayout.done.start] - data[:, RecordLayout.engine_t.start]) * 1e3 - late
+    seq = data[:, RecordLayout.seq.start]
     expected = int(seq[-1] - seq[0]) + 1
     return {
         "ticks": float(len(data)),

@@ -26,13 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import HORSE_NAMES
 from riderlive.horse import DEFAULT_SCALE, generate_gait
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.rules import RiderModel
 from riderlive.service.codecs import Subscription, encode_frame
+from riderlive.service.hello import pose_floats
 from riderlive.service.poses import RecordPoses
-from riderlive.service.publish import pose_floats
 from riderlive.service.wsprotocol import wire_frame
 from riderlive.skeleton import HORSE_RIG
 from riderlive.vmc.performer import horse_bundle, rider_bundle
@@ -46,10 +46,10 @@ def records(frames: int, rate: float = 120.0) -> list[np.ndarray]:
     rider = RiderModel(scale=DEFAULT_SCALE).evaluate_batch(horse)
     out = []
     for k in range(frames):
-        record = np.zeros(L.OUTPUT_WIDTH)
-        record[L.OUT_SEQ], record[L.OUT_ENGINE_T] = k, k / rate
-        record[L.OUT_HORSE : L.OUT_RIDER] = horse[k]
-        record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)] = rider[k]
+        record = np.zeros(RecordLayout.rider.stop)
+        record[RecordLayout.seq.start], record[RecordLayout.engine_t.start] = k, k / rate
+        record[RecordLayout.horse.slice] = horse[k]
+        record[RecordLayout.rider.slice] = rider[k]
         out.append(record)
     return out
 

@@ -63,7 +63,7 @@ class Flag(enum.IntFlag):
 
 
 class Estimate(NamedTuple):
-    """The saddle estimate of a tick (``realtime.layout.ESTIMATE_FIELDS``)."""
+    """The saddle estimate of a tick (``realtime.record.ESTIMATE_FIELDS``)."""
 
     lock: int
     """Lock code (``realtime.saddle_input.LOCKS``: no_signal 0, still 1, searching 2, locked 3)."""

@@ -8,7 +8,8 @@ import math
 import pytest
 
 from riderlive.channels import HORSE, HORSE_INDEX, RIDER, RIDER_INDEX
-from riderlive.realtime.core import Driver, TickResult, frame_of
+from riderlive.realtime.core import Driver, TickResult
+from riderlive.realtime.frame import frame_of
 from riderlive.tickframe import (
     ALWAYS,
     Estimate,

@@ -44,7 +44,7 @@ from riderlive.channels import HORSE_NAMES
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import DeviceState
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.codecs import PROTOCOL_VERSION, encode_frame
 from riderlive.timecode import TimecodeError
 
@@ -165,7 +165,7 @@ class RigNode:
     def offer(self, records: list[np.ndarray]) -> None:
         """The tick's callback: queue the new records (never waits)."""
         if records:
-            first, last = int(records[0][L.OUT_SEQ]), int(records[-1][L.OUT_SEQ])
+            first, last = RecordLayout.seq.count(records[0]), RecordLayout.seq.count(records[-1])
             if self.last_seq is not None and first > self.last_seq + 1:
                 self.counts["frames_skipped"] += first - self.last_seq - 1
             elif self.last_seq is None or first <= self.last_seq:
@@ -174,8 +174,8 @@ class RigNode:
             self.last_seq = last
         self.queue.extend(records)
         if self.queue:
-            oldest = float(self.queue[-1][L.OUT_ENGINE_T]) - QUEUE_SECONDS
-            while float(self.queue[0][L.OUT_ENGINE_T]) < oldest:
+            oldest = RecordLayout.engine_t.at(self.queue[-1]) - QUEUE_SECONDS
+            while RecordLayout.engine_t.at(self.queue[0]) < oldest:
                 self.queue.popleft()
                 self.counts["frames_dropped"] += 1
         self.wake.set()

@@ -27,7 +27,7 @@ import enum
 from collections.abc import Sequence
 
 from riderlive.devices.lifecycle import DeviceState
-from riderlive.devices.shared import Slots, pid_alive
+from riderlive.devices.shared import Slot, SlotBlock, Slots, pid_alive
 
 GUARDIAN_HANG_S = 0.5
 """A guardian whose heartbeat (written every 5 ms by its watch loop) is older than this is
@@ -37,23 +37,6 @@ tens of ms is normal there, 0.5 s is not); a dead guardian is seen at once (its 
 MAX_DEVICES = 4
 MAX_UNITS = 64
 STATES: tuple[DeviceState, ...] = tuple(DeviceState)
-_HEADER = (
-    "web_pid",
-    "web_beat",
-    "tick_pid",
-    "tick_generation",
-    "tick_beat",
-    "tick_clean_exit",
-    "guardian_pid",
-    "guardian_beat",
-    "guardian_ready",
-    "guardian_done",
-    "guardian_busy",
-    "guardian_takeovers",
-    "guardian_standby",
-    "shutdown",
-    *(f"guardian_d{d}" for d in range(MAX_DEVICES)),
-)
 
 
 class GuardianReport(enum.IntEnum):
@@ -80,18 +63,44 @@ _PER_DEVICE = len(_DEVICE) + MAX_UNITS
 
 
 def _names() -> tuple[str, ...]:
-    names = list(_HEADER)
+    names = [*SafetyBoard.slot_names(), *(f"guardian_d{d}" for d in range(MAX_DEVICES))]
     for d in range(MAX_DEVICES):
         names += [f"d{d}.{k}" for k in _DEVICE] + [f"d{d}.pose{u}" for u in range(MAX_UNITS)]
     return tuple(names)
 
 
-class SafetyBoard(Slots):
-    """The board; ``SafetyBoard()`` creates it, ``SafetyBoard(name)`` attaches."""
+WEB = "the web process"
+TICK = "the tick (every generation in turn)"
+GUARDIAN = "the guardian"
+
+
+class SafetyBoard(Slots, SlotBlock):
+    """The board; ``SafetyBoard()`` creates it, ``SafetyBoard(name)`` attaches.
+
+    The header's slots by attribute (each with the one process that writes it); per device,
+    :meth:`publish` / :meth:`device` (the tick's state and pose, seqlock'd) and
+    :meth:`report` / :meth:`reported` (the guardian's ``GuardianReport``)."""
+
+    web_pid = Slot(int, WEB, "the web process's pid")
+    web_beat = Slot(float, WEB, "perf_counter s of the web process's last beat")
+    tick_pid = Slot(int, WEB, "the tick process's pid (0: none; set by the web process at each spawn or takeover)")
+    tick_generation = Slot(int, WEB, "the serving tick's generation (1, 2... : +1 per spawn or takeover)")
+    tick_beat = Slot(float, TICK, "perf_counter s of the tick's last beat (every tick; 0: a new generation)")
+    tick_clean_exit = Slot(int, TICK, "the generation that stopped cleanly (the guardian has nothing to stop)")
+    guardian_pid = Slot(int, GUARDIAN, "the watching guardian's pid (a standby writes it when it takes over)")
+    guardian_beat = Slot(float, GUARDIAN, "perf_counter s of the guardian's last beat (every 5 ms)")
+    guardian_ready = Slot(float, GUARDIAN, "1 once the guardian's plugs are built")
+    guardian_done = Slot(int, GUARDIAN, "the last generation the guardian stopped")
+    guardian_busy = Slot(float, GUARDIAN, "1 while the guardian holds a bus")
+    guardian_takeovers = Slot(int, GUARDIAN, "stops the guardian made")
+    guardian_standby = Slot(int, "the standby guardian", "the standby's pid once its plugs are built (0: none)")
+    shutdown = Slot(float, WEB, "1: the service stops (the guardians exit)")
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(_names(), name)
-        self._base = len(_HEADER)
+        self._reports = len(self.slots())
+        """Index of ``guardian_d0`` (one :class:`GuardianReport` per device follows)."""
+        self._base = self._reports + MAX_DEVICES
 
     def publish(self, device: int, state: DeviceState, pose: Sequence[float]) -> None:
         """The tick, once per tick per device: its state and last goal pose."""
@@ -130,26 +139,32 @@ class SafetyBoard(Slots):
 
     def report(self, device: int, report: GuardianReport) -> None:
         """The guardian: what it is doing or did with ``device`` in its stop."""
-        self[f"guardian_d{device}"] = float(report)
+        self.values[self._report_slot(device)] = float(report)
 
     def reported(self, device: int) -> GuardianReport:
         """What the guardian last reported for ``device``."""
-        return GuardianReport(int(self[f"guardian_d{device}"]))
+        return GuardianReport(int(self.values[self._report_slot(device)]))
 
     def clear_reports(self) -> None:
         """The web process, when a generation fails: the guardian's reports are about it from now."""
         for device in range(MAX_DEVICES):
-            self[f"guardian_d{device}"] = 0.0
+            self.values[self._report_slot(device)] = 0.0
+
+    def _report_slot(self, device: int) -> int:
+        if not 0 <= device < MAX_DEVICES:
+            raise IndexError(f"device {device}: the board has slots for devices 0-{MAX_DEVICES - 1}")
+        return self._reports + device
+
 
 def guardian_watching(board: SafetyBoard, now: float) -> str | None:
     """None while a guardian is ready, its process alive and its heartbeat younger than
     ``GUARDIAN_HANG_S`` (``now``: perf_counter s); else why not, for the log and refusals."""
-    pid = int(board["guardian_pid"])
+    pid = board.guardian_pid
     if not pid or not pid_alive(pid):
         return "no guardian (dead-man process) is running" if not pid else f"the guardian {pid} is dead"
-    if board["guardian_ready"] != 1.0:
+    if board.guardian_ready != 1.0:
         return f"the guardian {pid} is starting"
-    age = now - board["guardian_beat"]
+    age = now - board.guardian_beat
     if age > GUARDIAN_HANG_S:
         return f"the guardian {pid} has not beaten for {age * 1000:.0f} ms (hung)"
     return None

@@ -95,21 +95,21 @@ class Guardian:
 
     def run(self) -> int:
         board = self.board
-        board["guardian_pid"] = float(os.getpid())
-        board["guardian_beat"] = time.perf_counter()
-        board["guardian_ready"] = 1.0
+        board.guardian_pid = os.getpid()
+        board.guardian_beat = time.perf_counter()
+        board.guardian_ready = 1.0
         log.info("watching %s", ", ".join(s.name for s in self.specs))
-        while not self.exit and not board["shutdown"]:
+        while not self.exit and not board.shutdown:
             now = time.perf_counter()
-            board["guardian_beat"] = now
-            generation = int(board["tick_generation"])
+            board.guardian_beat = now
+            generation = int(board.tick_generation)
             web_why = self._web_failed(now)
-            pending = generation > board["guardian_done"] and board["tick_clean_exit"] != generation
+            pending = generation > board.guardian_done and board.tick_clean_exit != generation
             if pending:
                 why = self._tick_failed(now) or web_why
                 if why:
                     self.stop(generation, why)
-                    if web_why or not board["web_pid"]:
+                    if web_why or not board.web_pid:
                         return 0  # nobody left to hand the bus back to
             elif web_why:
                 log.warning("%s; no tick to stop: exiting", web_why)
@@ -118,26 +118,25 @@ class Guardian:
         return 0
 
     def _web_failed(self, now: float) -> str | None:
-        return self._failed("web", self.web_timeout_s, now)
+        return self._failed("web", self.board.web_pid, self.board.web_beat, self.web_timeout_s, now)
 
     def _tick_failed(self, now: float) -> str | None:
-        return self._failed("tick", self.tick_timeout_s, now)
+        return self._failed("tick", self.board.tick_pid, self.board.tick_beat, self.tick_timeout_s, now)
 
-    def _failed(self, process: str, timeout_s: float, now: float) -> str | None:
-        """Why the ``web`` or ``tick`` process counts as failed (None: it does not)."""
-        pid = int(self.board[f"{process}_pid"])
+    @staticmethod
+    def _failed(process: str, pid: int, beat: float, timeout_s: float, now: float) -> str | None:
+        """Why the ``web`` or ``tick`` process (``pid``, last beat ``beat``) counts as failed (None: it does not)."""
         if not pid:
             return None
         if not pid_alive(pid):
             return f"the {process} process {pid} is gone"
-        beat = self.board[f"{process}_beat"]
         if beat and now - beat > timeout_s:
             return f"the {process} process {pid} has not beaten for {(now - beat) * 1000:.0f} ms"
         return None
 
     def _wait(self) -> None:
         """Sleep ``POLL_S``, waking at once when a watched process exits."""
-        wanted = {int(self.board["web_pid"]), int(self.board["tick_pid"])} - {0}
+        wanted = {int(self.board.web_pid), int(self.board.tick_pid)} - {0}
         for pid in set(self._pidfds) - wanted:
             os.close(self._pidfds.pop(pid))
         for pid in wanted - set(self._pidfds):
@@ -152,7 +151,7 @@ class Guardian:
         """Category 1 stop of every device of tick ``generation``."""
         board = self.board
         log.critical("%s: category 1 stop of %s", why, ", ".join(s.name for s in self.specs))
-        board["guardian_busy"] = 1.0
+        board.guardian_busy = 1.0
         try:
             self._kill_tick()
             threads = [
@@ -164,12 +163,12 @@ class Guardian:
             for thread in threads:
                 thread.join()
         finally:
-            board["guardian_takeovers"] += 1.0
-            board["guardian_done"] = float(generation)
-            board["guardian_busy"] = 0.0
+            board.guardian_takeovers += 1
+            board.guardian_done = generation
+            board.guardian_busy = 0.0
 
     def _kill_tick(self) -> None:
-        pid = int(self.board["tick_pid"])
+        pid = int(self.board.tick_pid)
         if not pid_alive(pid):
             return
         with contextlib.suppress(ProcessLookupError):
@@ -206,7 +205,7 @@ class Guardian:
                         self.board.report(index, GuardianReport.OUTPUTS_OFF)
                         return
                     off_since = now if off_since is None else off_since  # the read-back's time starts here
-                    web = int(self.board["web_pid"])
+                    web = int(self.board.web_pid)
                     handback = bool(web and pid_alive(web))
                     if now - off_since > (HANDBACK_AFTER_S if handback else self.give_up_s):
                         log.error(
@@ -297,12 +296,12 @@ def stand_by(board: SafetyBoard, after: int, poll_s: float = POLL_S) -> bool:
     pidfd: int | None = None
     watched = 0
     try:
-        while not board["shutdown"]:
-            active = int(board["guardian_pid"]) or after
+        while not board.shutdown:
+            active = int(board.guardian_pid) or after
             if not pid_alive(active):
-                board["guardian_beat"] = time.perf_counter()
-                board["guardian_pid"] = float(os.getpid())
-                board["guardian_standby"] = 0.0
+                board.guardian_beat = time.perf_counter()
+                board.guardian_pid = os.getpid()
+                board.guardian_standby = 0
                 log.warning("the guardian %d is gone: the standby %d takes over", active, os.getpid())
                 return True
             if active != watched:
@@ -333,8 +332,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     board, latch = SafetyBoard(args.board), StopLatch(args.latch)
     if not args.standby_after:
-        board["guardian_beat"] = time.perf_counter()  # alive from here (ready once the plugs are built)
-        board["guardian_pid"] = float(os.getpid())
+        board.guardian_beat = time.perf_counter()  # alive from here (ready once the plugs are built)
+        board.guardian_pid = os.getpid()
     guardian = Guardian(
         board,
         latch,
@@ -349,7 +348,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, on_term)
     if args.standby_after:
-        board["guardian_standby"] = float(os.getpid())  # ready to take over from here
+        board.guardian_standby = os.getpid()  # ready to take over from here
     try:
         if args.standby_after and not stand_by(board, args.standby_after):
             return 0

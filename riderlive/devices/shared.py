@@ -13,6 +13,9 @@ import struct
 import tempfile
 from multiprocessing import resource_tracker, shared_memory
 from pathlib import Path
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, overload
+
+N = TypeVar("N", int, float)
 
 
 def attach(name: str) -> shared_memory.SharedMemory:
@@ -106,3 +109,79 @@ def pid_alive(pid: int) -> bool:
     except OSError:
         return True  # no /proc: trust kill(0)
     return stat.rsplit(")", 1)[-1].split()[0] not in ("Z", "X")
+
+
+class _Store(Protocol):
+    def __getitem__(self, i: int, /) -> Any: ...
+    def __setitem__(self, i: int, value: float, /) -> None: ...
+
+
+class _Holder(Protocol):
+    @property
+    def values(self) -> _Store: ...
+
+
+class Slot(Generic[N]):
+    """One named float64 slot of a :class:`SlotBlock`, read and written by attribute.
+
+    ``kind`` is how a reader sees it (``int``: a pid, a count, a generation; ``float``: a
+    time or a value); it is stored as float64 either way (exact for integers below 2**53).
+    ``writer`` documents the one process that writes it (each slot has exactly one)."""
+
+    def __init__(self, kind: type[N], writer: str, doc: str = "") -> None:
+        self.kind: type[N] = kind
+        self._int = kind is int
+        self.writer = writer
+        self.doc = doc
+        self.name = ""
+        self.index = -1
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type) -> Slot[N]: ...
+    @overload
+    def __get__(self, obj: _Holder, owner: type) -> N: ...
+    def __get__(self, obj: _Holder | None, owner: type) -> Slot[N] | N:
+        if obj is None:
+            return self
+        value = obj.values[self.index]  # a float (numpy's float64 is one): no conversion on the hot path
+        out: N = int(value) if self._int else value
+        return out
+
+    def __set__(self, obj: _Holder, value: N) -> None:
+        obj.values[self.index] = value
+
+
+class SlotBlock:
+    """A typed set of :class:`Slot` over a store of float64 (declaration order is slot order).
+
+    A subclass declares its slots as class attributes and has a ``values`` store (a float64
+    array, or :class:`Slots`' values); :meth:`slot_names` lists them (the names the store's
+    segment is made with: one source for both processes)."""
+
+    _slots: ClassVar[tuple[Slot[Any], ...]] = ()
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = [v for v in vars(cls).values() if isinstance(v, Slot)]
+        for i, slot in enumerate(own, start=len(cls._slots)):
+            slot.index = i
+        cls._slots = (*cls._slots, *own)
+
+    @classmethod
+    def slot_names(cls) -> tuple[str, ...]:
+        return tuple(s.name for s in cls._slots)
+
+    @classmethod
+    def slots(cls) -> tuple[Slot[Any], ...]:
+        return cls._slots
+
+    @classmethod
+    def slot(cls, name: str) -> Slot[Any]:
+        """The slot called ``name`` (KeyError naming the known ones otherwise)."""
+        for s in cls._slots:
+            if s.name == name:
+                return s
+        raise KeyError(f"{cls.__name__} has no slot {name!r} (slots: {', '.join(cls.slot_names())})")

@@ -72,7 +72,7 @@ def drive(rig: RigConfig, seconds: float, gait: str, arm: bool = False, rig_file
 
     horse, model = ProceduralHorse(gait), RiderModel(scale=DEFAULT_SCALE)
     latch, board = StopLatch(), SafetyBoard()
-    board["tick_pid"], board["tick_generation"] = float(os.getpid()), 1.0
+    board.tick_pid, board.tick_generation = os.getpid(), 1
     guardian = None
     if rig_file is not None:
         spec = DeviceSpec("dynamixel", rig_file, rig.bus.port, rig.name, 1, rig.bus.tick_s)
@@ -94,7 +94,7 @@ def drive(rig: RigConfig, seconds: float, gait: str, arm: bool = False, rig_file
         while True:
             woke = clock.wait_or_wake([wake_read], lambda: device.stops.pending)
             now = time.perf_counter()
-            board["tick_beat"] = now
+            board.tick_beat = now
             if woke is None:
                 _drain(wake_read)
                 device.poll_stop(now)
@@ -131,7 +131,7 @@ def drive(rig: RigConfig, seconds: float, gait: str, arm: bool = False, rig_file
                 say(_summary(status.to_dict(), now - start, clock.overruns))
     finally:
         device.close("cli")
-        board["tick_clean_exit"], board["shutdown"] = 1.0, 1.0
+        board.tick_clean_exit, board.shutdown = 1, 1.0
         if guardian is not None:
             guardian.wait(5.0)
         signal.set_wakeup_fd(previous_fd)
@@ -153,7 +153,7 @@ def _wait_for_guardian(board: SafetyBoard, guardian: subprocess.Popen[bytes] | N
     if guardian is None:
         return
     deadline = time.perf_counter() + 15.0
-    while board["guardian_ready"] != 1.0:
+    while board.guardian_ready != 1.0:
         if time.perf_counter() > deadline or guardian.poll() is not None:
             raise RuntimeError("the guardian did not start: nothing will move without it (--no-guardian to skip)")
         time.sleep(0.02)

@@ -53,7 +53,6 @@ from riderlive.rules.animator import DamperState, SpringState, damper_start, dam
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.parts import PART_OUTPUTS, RiderParts
 from riderlive.saddle.pose import SaddlePoint
-from riderlive.tickframe import Flag, TickFrame
 
 
 class Driver(enum.IntEnum):
@@ -97,36 +96,9 @@ class TickResult:
     saddle: list[float] = field(default_factory=lambda: [0.0] * 6)
     """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
     estimate: tuple[float, ...] = NO_ESTIMATE
-    """The saddle estimate (``layout.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
+    """The saddle estimate (``record.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
     parts: list[float] = field(default_factory=list)
     """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
-
-
-_DRIVER_FLAGS = {Driver.INPUT: Flag.INPUT, Driver.PROCEDURAL: Flag.PROCEDURAL, Driver.NEUTRAL: Flag.NEUTRAL}
-
-
-def frame_of(  # noqa: PLR0917
-    result: TickResult, tick: int, t: float, at: float, metres_per_unit: float, held: bool = False
-) -> TickFrame:
-    """The tick's typed frame (metres, degrees) of ``result`` (service units): tick index,
-    engine time ``t``, deadline ``at`` (perf_counter s); ``held``: the last good result again."""
-    flags = _DRIVER_FLAGS[result.driver]
-    if not math.isnan(result.estimate[0]):
-        flags |= Flag.SADDLE_INPUT
-    if held:
-        flags |= Flag.HELD
-    return TickFrame.build(
-        tick,
-        t,
-        at,
-        result.source_time,
-        flags,
-        result.rider,
-        result.horse,
-        result.saddle,
-        result.estimate,
-        metres_per_unit,
-    )
 
 
 _TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)

@@ -37,11 +37,12 @@ from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
 from riderlive.realtime import handover, latency
 from riderlive.realtime import layout as L
+from riderlive.realtime.counters import COUNTERS
 from riderlive.realtime.down import down_status
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
-from riderlive.realtime.spare import Failed, TakeOver, Warm, spare_main
-from riderlive.realtime.tick import tick_main
+from riderlive.realtime.spare import Spare, TakeOver, spare_main
+from riderlive.realtime.tick_process import tick_main
 
 
 def exit_reason(code: int | None) -> str:
@@ -55,50 +56,13 @@ def exit_reason(code: int | None) -> str:
     return f"exit {code}"
 
 
-@dataclasses.dataclass
-class Spare:
-    """The web side of a spare tick process (``realtime/spare.py``)."""
-
-    process: multiprocessing.process.BaseProcess
-    commands: Connection
-    notify: Connection
-    started_at: float
-    """perf_counter s."""
-    urgent: bool
-    warm: Warm | None = None
-    failed: str | None = None
-
-    def poll(self) -> None:
-        """Take the spare's messages (``Warm``, ``Failed``) without waiting."""
-        with contextlib.suppress(EOFError, OSError):
-            while self.warm is None and self.failed is None and self.commands.poll():
-                message = self.commands.recv()
-                if isinstance(message, Warm):
-                    self.warm = message
-                elif isinstance(message, Failed):
-                    self.failed = message.message
-
-    @property
-    def ready(self) -> bool:
-        self.poll()
-        return self.warm is not None and self.process.is_alive()
-
-    def discard(self) -> None:
-        """Close its pipes (it exits when it sees them close) and make sure it is gone."""
-        self.commands.close()
-        self.notify.close()
-        if self.process.is_alive():
-            self.process.kill()
-        self.process.join(1.0)
-
-
 class TickLink:
     """Owns the shared memory and the tick process; used from the web process only."""
 
     def __init__(self, setup: TickSetup) -> None:
         self.inputs = SharedRing(L.INPUT_CAPACITY, L.INPUT_WIDTH)
-        self.outputs = SharedRing(L.OUTPUT_CAPACITY, L.OUTPUT_WIDTH + len(setup.extra_channels))
-        self.counters = SharedCounters(L.COUNTERS)
+        self.outputs = SharedRing(L.OUTPUT_CAPACITY, setup.layout.width)
+        self.counters = SharedCounters(COUNTERS)
         self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS))
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
         """Filled by the tick: ``tick_lateness``, ``ingest_to_wire``, ``ingest_to_tick`` (``realtime.latency``)."""
@@ -106,7 +70,7 @@ class TickLink:
         self.handover_blob = SharedBlob(handover.SNAPSHOT_BYTES)
         self.latch = StopLatch()
         self.board = SafetyBoard()
-        self.board["web_pid"] = float(os.getpid())
+        self.board.web_pid = os.getpid()
         names = {
             "input": self.inputs.name,
             "output": self.outputs.name,
@@ -189,8 +153,8 @@ class TickLink:
         os.set_blocking(self.notify_fd, False)
         with contextlib.suppress(OSError, ValueError):  # it died just now: the supervisor sees its sentinel
             spare.commands.send(TakeOver(pickle.dumps(self.setup, protocol=pickle.HIGHEST_PROTOCOL)))
-        self.board["tick_pid"] = float(spare.process.pid or 0)
-        self.board["tick_generation"] = float(self.generation)
+        self.board.tick_pid = spare.process.pid or 0
+        self.board.tick_generation = self.generation
         self.takeovers += warm
         return warm
 
@@ -198,7 +162,7 @@ class TickLink:
         self.generation += 1
         self.setup = dataclasses.replace(self.base_setup, generation=self.generation)
         self.board.forget_devices()
-        self.board["tick_beat"] = 0.0
+        self.board.tick_beat = 0.0
 
     def mark_down(self, reason: str) -> None:
         """No generation serves from now (a death, a hang): :meth:`status` says so."""
@@ -225,14 +189,14 @@ class TickLink:
         if self.setup.isolation == "thread":
             self.process = threading.Thread(target=tick_main, args=args, name="riderlive-tick", daemon=True)
             self.process.start()
-            self.board["tick_pid"] = float(os.getpid())
+            self.board.tick_pid = os.getpid()
         else:
             self.process = context.Process(target=tick_main, args=args, name="riderlive-tick", daemon=True)
             self.process.start()
             child_commands.close()
             notify_write.close()
-            self.board["tick_pid"] = float(self.process.pid or 0)
-        self.board["tick_generation"] = float(self.generation)
+            self.board.tick_pid = self.process.pid or 0
+        self.board.tick_generation = self.generation
         os.set_blocking(self.notify_fd, False)
 
     @property
@@ -355,7 +319,7 @@ class TickLink:
 
     def beat_age(self) -> float | None:
         """Seconds since the tick's last heartbeat (None before its first)."""
-        beat = self.board["tick_beat"]
+        beat = self.board.tick_beat
         return None if not beat else time.perf_counter() - beat
 
     def exit_reason(self) -> str:

@@ -155,7 +155,7 @@ class TickDevices:
                 self.arms_refused_no_guardian += 1
                 raise Refused(Refusal.NO_GUARDIAN, f"{why}: nothing may move until a guardian watches")
             self.guardian_lost, self._guardian_seen = None, True  # seen watching: a loss from here counts
-            self._guardian_pid = 0 if self.board is None else int(self.board["guardian_pid"])
+            self._guardian_pid = 0 if self.board is None else int(self.board.guardian_pid)
         device.arm(device.name, by)
 
     def guardian_alive(self) -> bool:
@@ -172,7 +172,7 @@ class TickDevices:
             return False
         self._guardian_next = now + GUARDIAN_CHECK_S
         why = self._guardian_why(time.perf_counter())
-        pid = 0 if self.board is None else int(self.board["guardian_pid"])
+        pid = 0 if self.board is None else int(self.board.guardian_pid)
         replaced_now = False
         if why is None:
             replaced_now, self._guardian_pid = self._guardian_pid not in (0, pid), pid

@@ -10,10 +10,13 @@ procedural horse, nothing): then the clock is left as it is.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from riderlive.realtime import phase_lock as phase
 from riderlive.realtime.pacing import DeadlineClock
+
+if TYPE_CHECKING:
+    from riderlive.realtime.counters import TickCounters
 
 
 class PhaseFollower:
@@ -37,24 +40,22 @@ class PhaseFollower:
         now: float,
         producer: int,
         arrivals: list[float],
-        *,
-        values: Any,
-        index: dict[str, int],
+        counter: TickCounters,
     ) -> bool:
         """One tick at engine time ``now``: step the lock, move ``clock``, write the ``phase_*``
-        counters into ``values``; True when the lock was taken or let go."""
+        counters; True when the lock was taken or let go."""
         assert self.model is not None
         was = self.state.locked
         self.state = s = phase.step(self.model, self.state, now, producer, arrivals)
         clock.start += s.shift  # |shift| <= slew * period: the next deadline is that much nearer or later
         lead = phase.lead(self.model, s)
-        values[index["phase_locked"]] = float(s.locked)
-        values[index["phase_lead"]] = lead if math.isfinite(lead) else -1.0
-        values[index["phase_margin"]] = s.margin if math.isfinite(s.margin) else -1.0
-        values[index["phase_resultant"]] = s.resultant
-        values[index["phase_slews"]] = s.slews
-        values[index["phase_locks"]] = s.locks
-        values[index["phase_losses"]] = s.losses
+        counter.phase_locked = float(s.locked)
+        counter.phase_lead = lead if math.isfinite(lead) else -1.0
+        counter.phase_margin = s.margin if math.isfinite(s.margin) else -1.0
+        counter.phase_resultant = s.resultant
+        counter.phase_slews = s.slews
+        counter.phase_locks = s.locks
+        counter.phase_losses = s.losses
         return s.locked is not was
 
     def status(self) -> dict[str, Any] | None:

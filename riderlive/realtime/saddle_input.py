@@ -56,7 +56,7 @@ def saddle_pose(horse: Sequence[float], to_metres: float, point: SaddlePoint) ->
 
 
 def estimate_row(state: State, t: float) -> tuple[float, ...]:
-    """The estimate at producer time ``t`` as a record carries it (``layout.ESTIMATE_FIELDS``)."""
+    """The estimate at producer time ``t`` as a record carries it (``record.ESTIMATE_FIELDS``)."""
     found = estimate(state, t)
     gait = GAITS.index(found.gait) if found.gait is not None else math.nan
     age = found.age if found.age is not None else math.nan

@@ -6,10 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import TerrainConfig
 from riderlive.realtime.core import Mode, Timing
+from riderlive.realtime.record import RecordLayout
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import RuleParams
 from riderlive.saddle.pose import SaddlePoint
@@ -55,9 +55,9 @@ class TickSetup:
     """Run the tail and braid physics (``riderlive.realtime.tail``) and publish their channels."""
     physics_file: str | None = None
     """Physics TOML (None: ``config/physics/tail.toml``)."""
-    extra_channels: tuple[str, ...] = PART_NAMES
-    """Channels appended to each output record after the rider's: the tail's (when on),
-    then the rider parts (``channels.RIDER_PARTS``)."""
+    layout: RecordLayout = field(default_factory=RecordLayout)
+    """The output record's layout (``realtime/record.py``): the tail's channels when on, then
+    the rider parts after the rider's; the tick refuses to start with another one."""
     shm_names: dict[str, str] = field(default_factory=dict)
     rider_bounds: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     """Lowest and highest value of each rider channel in service units (``riderlive.ranges``)."""
@@ -72,3 +72,8 @@ class TickSetup:
     """Nice value of the warm spare's warm-up thread (``realtime/spare.py``)."""
     phase_margin: float = 0.0003
     """Seconds: the least time from a frame's expected arrival to the deadline that takes it."""
+
+    @property
+    def extra_channels(self) -> tuple[str, ...]:
+        """Channels of each output record after the rider's (``layout.extra_channels``)."""
+        return self.layout.extra_channels

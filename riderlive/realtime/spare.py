@@ -16,7 +16,7 @@ the running tick:
    and the new generation): a loop rebuilt if the settings changed since the warm-up
    (cheap: the kernels are loaded), the newest snapshot of the dead generation restored
    (``realtime/handover.py``), then the devices connected disarmed, real-time priority
-   and the loop, exactly as a cold tick (``tick.serve``).
+   and the loop, exactly as a cold tick (``tick_process.serve``).
 
 The pipe closing (the web process gone or the spare not wanted) ends it at any stage.
 This module imports only the standard library: the spawned process's main thread
@@ -29,6 +29,7 @@ import contextlib
 import dataclasses
 import gc
 import logging
+import multiprocessing.process
 import os
 import pickle
 import signal
@@ -66,6 +67,43 @@ class Failed:
     message: str
 
 
+@dataclasses.dataclass
+class Spare:
+    """The web side of a spare tick process (``realtime/spare.py``)."""
+
+    process: multiprocessing.process.BaseProcess
+    commands: Connection
+    notify: Connection
+    started_at: float
+    """perf_counter s."""
+    urgent: bool
+    warm: Warm | None = None
+    failed: str | None = None
+
+    def poll(self) -> None:
+        """Take the spare's messages (``Warm``, ``Failed``) without waiting."""
+        with contextlib.suppress(EOFError, OSError):
+            while self.warm is None and self.failed is None and self.commands.poll():
+                message = self.commands.recv()
+                if isinstance(message, Warm):
+                    self.warm = message
+                elif isinstance(message, Failed):
+                    self.failed = message.message
+
+    @property
+    def ready(self) -> bool:
+        self.poll()
+        return self.warm is not None and self.process.is_alive()
+
+    def discard(self) -> None:
+        """Close its pipes (it exits when it sees them close) and make sure it is gone."""
+        self.commands.close()
+        self.notify.close()
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(1.0)
+
+
 def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connection, nice: int = WARM_NICE) -> None:
     """Entry point of a spare process. ``setups``: pickled ``TickSetup`` objects to warm up with,
     the first that works (the settings as applied, then as configured: a setting that fails
@@ -79,7 +117,7 @@ def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connecti
         if nice:
             with contextlib.suppress(OSError):  # this thread only (Linux): the main thread keeps its priority
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
-        from riderlive.realtime import tick
+        from riderlive.realtime import tick_process as tick
 
         for setup in setups:
             try:
@@ -119,7 +157,8 @@ def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connecti
 def take_over(loop: Any, setup: Any) -> None:
     """Become generation ``setup.generation``: rebuild the loop if the settings changed, restore
     the dead generation's snapshot, serve."""
-    from riderlive.realtime import handover, tick
+    from riderlive.realtime import handover
+    from riderlive.realtime import tick_process as tick
 
     began = time.perf_counter()
     rebuilt = dataclasses.replace(loop.setup, generation=setup.generation) != setup

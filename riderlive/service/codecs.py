@@ -19,7 +19,7 @@ import numpy as np
 import orjson
 
 from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER_NAMES
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.saddle_input import GAITS, LOCKS
 
 PROTOCOL_VERSION = 1
@@ -279,7 +279,7 @@ def _code(value: float) -> int:
 
 
 def saddle_estimate(row: np.ndarray) -> dict[str, Any] | None:
-    """The estimate block of a record (``layout.ESTIMATE_FIELDS``) as published (None: no saddle input drives)."""
+    """The estimate block of a record (``record.ESTIMATE_FIELDS``) as published (None: no saddle input drives)."""
     lock, gait, stride_hz, phase, age = (float(x) for x in row)
     if math.isnan(lock):
         return None
@@ -306,18 +306,18 @@ def encode_frame(
     ``bones``: the rider's bone quaternions for this record, added when ``sub.bones``.
     ``pose``: skeleton -> its pose floats (7 per bone) for this record, added for ``sub.pose``.
     """
-    seq = int(record[L.OUT_SEQ])
-    engine_t = float(record[L.OUT_ENGINE_T])
-    source_t = float(record[L.OUT_SOURCE_T])
-    driver = int(record[L.OUT_DRIVER])
-    horse = record[L.OUT_HORSE : L.OUT_RIDER]
-    rider = record[L.OUT_RIDER :]
+    seq = RecordLayout.seq.count(record)
+    engine_t = RecordLayout.engine_t.at(record)
+    source_t = RecordLayout.source_t.at(record)
+    driver = RecordLayout.driver.count(record)
+    horse = record[RecordLayout.horse.slice]
+    rider = record[RecordLayout.rider.start :]
     rider_values = rider[list(sub.rider)] if len(sub.rider) != len(rider) else rider
     horse_values = horse[list(sub.horse)] if sub.horse else None
     bone_values = bones if sub.bones else None
     poses = [np.asarray(pose[name], dtype="<f8") if pose else np.zeros(0) for name in sub.pose]
-    saddle = record[L.OUT_SADDLE : L.OUT_ESTIMATE]
-    estimate = record[L.OUT_ESTIMATE : L.OUT_HORSE]
+    saddle = record[RecordLayout.saddle.slice]
+    estimate = record[RecordLayout.estimate.slice]
     if sub.encoding == "binary":
         flags = (FLAG_HORSE if horse_values is not None else 0) | (FLAG_BONES if bone_values is not None else 0)
         flags |= (FLAG_POSE if sub.pose else 0) | (FLAG_SADDLE if sub.saddle else 0)

@@ -29,7 +29,7 @@ from foxglove.websocket import ServerListener
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.export import foxglove as fx
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 
 if TYPE_CHECKING:
     import foxglove
@@ -96,15 +96,15 @@ class FoxgloveLive:
         if want_rider or want_horse or want_tf:
             stamps = self.service.timecode
             for record in records:
-                engine_t, seq = float(record[L.OUT_ENGINE_T]), int(record[L.OUT_SEQ])
+                engine_t, seq = RecordLayout.engine_t.at(record), RecordLayout.seq.count(record)
                 time_ns = wall(engine_t)
                 label = stamps.of_record(record).label if (want_rider or want_horse) else ""
                 if want_rider:
-                    values = record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)]
+                    values = record[RecordLayout.rider.slice]
                     rider.log(self.rider_joints.encode(seq, engine_t, label, values), log_time=time_ns)
                     self.counts["rider_messages"] += 1
                 if want_horse:
-                    values = record[L.OUT_HORSE : L.OUT_RIDER]
+                    values = record[RecordLayout.horse.slice]
                     horse.log(self.horse_joints.encode(seq, engine_t, label, values), log_time=time_ns)
                 if want_tf and seq % self.tf_every == 0:
                     tf.log(fx.frame_transforms(time_ns, self.frames, self._poses(record)), log_time=time_ns)

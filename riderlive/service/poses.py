@@ -12,7 +12,7 @@ import numpy as np
 
 from riderlive.channels import HORSE, RIDER, Kind
 from riderlive.horse import DEFAULT_SCALE
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.skeleton import horse_pose, rider_pose
 from riderlive.skeleton.rig import Pose
 
@@ -28,26 +28,25 @@ class RecordPoses:
         self._rider: dict[int, Pose] = {}
         self._horse: dict[int, Pose] = {}
 
-    def _values(self, record: np.ndarray, start: int, count: int, lengths: list[int]) -> list[float]:
-        values = record[start : start + count]
+    def _values(self, values: np.ndarray, lengths: list[int]) -> list[float]:
         if self.to_metres != 1.0:
             values = values.copy()
             values[lengths] *= self.to_metres
         return values.tolist()  # type: ignore[no-any-return]
 
     def rider(self, record: np.ndarray) -> Pose:
-        seq = int(record[L.OUT_SEQ])
+        seq = RecordLayout.seq.count(record)
         pose = self._rider.get(seq)
         if pose is None:
-            pose = rider_pose(self._values(record, L.OUT_RIDER, len(RIDER), _RIDER_LENGTHS))
+            pose = rider_pose(self._values(RecordLayout.rider.of(record), _RIDER_LENGTHS))
             self._remember(self._rider, seq, pose)
         return pose
 
     def horse(self, record: np.ndarray) -> Pose:
-        seq = int(record[L.OUT_SEQ])
+        seq = RecordLayout.seq.count(record)
         pose = self._horse.get(seq)
         if pose is None:
-            pose = horse_pose(self._values(record, L.OUT_HORSE, len(HORSE), _HORSE_LENGTHS))
+            pose = horse_pose(self._values(RecordLayout.horse.of(record), _HORSE_LENGTHS))
             self._remember(self._horse, seq, pose)
         return pose
 

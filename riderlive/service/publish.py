@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
 import itertools
 import logging
 import time
@@ -29,17 +28,11 @@ import numpy as np
 import orjson
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from riderlive import __version__
-from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_NAMES, RIDER_PART_NAMES, RIDER_PARTS, SADDLE, lookup
+from riderlive.channels import RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.devices.latch import StopSource
-from riderlive.horse import DEFAULT_SCALE
-from riderlive.realtime import layout as L
-from riderlive.realtime.saddle_input import GAITS, LOCKS
+from riderlive.realtime.record import RecordLayout
 from riderlive.service import auth
 from riderlive.service.codecs import (
-    POSE_FLOATS_PER_BONE,
-    PROTOCOL_VERSION,
-    SKELETONS,
     BadFrame,
     Subscription,
     decode_ping_id,
@@ -47,8 +40,8 @@ from riderlive.service.codecs import (
     encode_frame,
     parse_message,
 )
+from riderlive.service.hello import hello, pose_floats
 from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
-from riderlive.skeleton import hello_skeletons
 from riderlive.skeleton.rig import Pose
 
 if TYPE_CHECKING:
@@ -56,9 +49,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 _ids = itertools.count(1)
-HELLO_VERSION = 3
-"""1: ``length_unit`` was a sentence. 2: it is a unit symbol (``"m"``), with ``metres_per_length_unit``,
-``time_unit`` and ``pose``. 3: ``saddle`` (the saddle subscription) (docs/protocol.md, "Hello versions")."""
 CONTROL_QUEUE = 64
 CONTROL_BUFFER_LIMIT = 1 << 20
 """A client that neither reads nor stops asking gets no more answers past this backlog."""
@@ -121,29 +111,6 @@ class Subscriber:
             transport.write(wire_frame(text))
 
 
-@functools.cache
-def skeletons() -> dict[str, Any]:
-    """``hello_skeletons()``, computed once per process (it is the same for every hello)."""
-    return hello_skeletons()
-
-
-def pose_floats(pose: Pose) -> np.ndarray:
-    """A pose as the wire carries it: per bone ``tx ty tz qx qy qz qw`` (local, metres), flattened."""
-    out = np.empty((len(pose.local_offsets), POSE_FLOATS_PER_BONE), dtype=np.float64)
-    out[:, :3] = pose.local_offsets
-    out[:, 3:] = pose.local_rotations
-    return out.ravel()
-
-
-def units(length_scale: float) -> tuple[str, float]:
-    """The service length unit as a symbol (``m``, ``cm``, ``mm``, else ``"<k> m"``) and in metres."""
-    metres = length_scale / DEFAULT_SCALE
-    for symbol, size in (("m", 1.0), ("cm", 0.01), ("mm", 0.001)):
-        if abs(metres - size) <= 1e-12 * size:
-            return symbol, size
-    return f"{metres:g} m", metres
-
-
 def abort_transport(websocket: WebSocket) -> None:
     """Drop a stuck connection at once (see :mod:`riderlive.service.wsprotocol`)."""
     abort = websocket.scope.get("extensions", {}).get(ABORT)
@@ -173,55 +140,7 @@ class Hub:
         self.default = Subscription(rider=tuple(i for i, n in enumerate(self.names) if n not in parts))
 
     def hello(self) -> dict[str, Any]:
-        service = self.service
-        config = service.config
-        length_unit, metres = units(config.tick.length_scale)
-        return {
-            "type": "hello",
-            "protocol": PROTOCOL_VERSION,
-            "server": f"riderlive {__version__}",
-            "session": service.session,
-            "tick_rate": config.tick.rate,
-            "engine_time": service.link.engine_time(),
-            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in self._channels()],
-            "rider_part_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER_PARTS],
-            "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],
-            "axis_convention": AXIS_CONVENTION,
-            "length_scale": config.tick.length_scale,
-            "length_unit": length_unit,
-            "metres_per_length_unit": metres,
-            "rotation_unit": "deg",
-            "time_unit": "s",
-            "hello_version": HELLO_VERSION,
-            "encodings": ["json", "binary"],
-            "drivers": ["procedural", "input", "neutral"],
-            "skeletons": skeletons(),
-            "pose": {
-                "skeletons": list(SKELETONS),
-                "floats_per_bone": POSE_FLOATS_PER_BONE,
-                "layout": ["tx", "ty", "tz", "qx", "qy", "qz", "qw"],
-                "length_unit": "m",
-                "frame": "local: position in the parent's frame, rotation from the rest (identity); skeletons.axes",
-            },
-            "saddle": self._saddle_hello(),
-            "timecode": {"rate": self.service.timecode.rate.value, "subscribe": "timecode: true"},
-        }
-
-    def _saddle_hello(self) -> dict[str, Any]:
-        """What a ``saddle`` subscription carries (docs/protocol.md, "Saddle")."""
-        point = self.service.config.saddle
-        return {
-            "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in SADDLE],
-            "point": {"forward": point.forward, "up": point.up, "unit": "m"},
-            "estimate": ["lock", "gait", "stride_hz", "phase", "age"],
-            "locks": list(LOCKS),
-            "gaits": list(GAITS),
-        }
-
-    def _channels(self) -> list[Any]:
-        """The default subscription's channels (the rider parts are listed apart, by subscription only)."""
-        parts = set(RIDER_PART_NAMES)
-        return [*RIDER, *(lookup(name) for name in self.service.extra_channels if name not in parts)]
+        return hello(self.service)
 
     def publish(self, records: list[np.ndarray], now: float | None = None) -> None:
         """Send every one of ``records`` (new ticks, oldest first) that each client's decimation wants.
@@ -234,9 +153,9 @@ class Hub:
         ``now``: ``perf_counter`` seconds (None: the clock's), for the behind clients' timeout.
         """
         metrics = self.service.metrics
-        oldest = float(records[-1][L.OUT_ENGINE_T]) - CATCH_UP if records else 0.0
-        if records and float(records[0][L.OUT_ENGINE_T]) < oldest:
-            kept = [r for r in records if float(r[L.OUT_ENGINE_T]) >= oldest]
+        oldest = RecordLayout.engine_t.at(records[-1]) - CATCH_UP if records else 0.0
+        if records and RecordLayout.engine_t.at(records[0]) < oldest:
+            kept = [r for r in records if RecordLayout.engine_t.at(r) >= oldest]
             metrics.ticks_coalesced += len(records) - len(kept)
             records = kept
         clients = [c for c in self.clients.values() if not c.closed]
@@ -244,9 +163,9 @@ class Hub:
         now = time.perf_counter() if now is None else now
         timeout = self.service.config.publish.send_timeout
         for record in records:
-            seq = int(record[L.OUT_SEQ])
+            seq = RecordLayout.seq.count(record)
             # The newest input not yet in a frame sent: a tick may take one while no client is due.
-            unsent_rx = max(self._unsent_rx, float(record[L.OUT_INPUT_RX]))
+            unsent_rx = max(self._unsent_rx, RecordLayout.input_rx.at(record))
             encoded: dict[tuple[Any, ...], tuple[str | bytes, bytes]] = {}
             written = offered = False
             for client in clients:

@@ -18,10 +18,10 @@ from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDL
 from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import TerrainConfig
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import layout as L
 from riderlive.realtime.core import Mode, Timing
 from riderlive.realtime.latency import LatencySnapshot
 from riderlive.realtime.link import TickLink
+from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.setup import TickSetup
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
@@ -48,7 +48,7 @@ log = logging.getLogger(__name__)
 def make_setup(
     config: ServiceConfig,
     params: RuleParams,
-    extra_channels: tuple[str, ...] = RIDER_PART_NAMES,
+    layout: RecordLayout | None = None,
     devices: tuple[DeviceSpec, ...] = (),
 ) -> TickSetup:
     source = config.source
@@ -83,7 +83,7 @@ def make_setup(
         guardian=bool(devices) and config.guardian.enabled,
         tail=config.physics.tail,
         physics_file=config.physics.file,
-        extra_channels=extra_channels,
+        layout=RecordLayout() if layout is None else layout,
         rider_bounds=(tuple(low), tuple(high)),
         saddle_point=config.saddle,
         phase_lock=config.tick.phase_lock,
@@ -104,8 +104,9 @@ class Service:
             from riderlive.realtime.tail import physics_channels  # numba: imported only when on
 
             self.physics_channels = physics_channels(config.physics.file)
-        self.extra_channels: tuple[str, ...] = (*self.physics_channels, *RIDER_PART_NAMES)
-        """Channels of each tick record after the rider's: the tail and braid, then the rider parts."""
+        self.layout = RecordLayout(self.physics_channels, RIDER_PART_NAMES)
+        """The tick's output record (``realtime/record.py``): after the rider, the tail and braid, then the parts."""
+        self.extra_channels = self.layout.extra_channels
         self.devices = plan_devices(config)
         """The devices the tick drives (validated, rates fitted; the wire budget was printed)."""
         self.params: RuleParams
@@ -168,7 +169,7 @@ class Service:
     # -- lifecycle ------------------------------------------------------------
     async def start(self) -> None:
         self.recover_takes()
-        self.link = TickLink(make_setup(self.config, self.params, self.extra_channels, self.devices))
+        self.link = TickLink(make_setup(self.config, self.params, self.layout, self.devices))
         self.timecode = host_timecode(self.config.timecode, self.link.start, self.metrics.timecode)
         self.supervisor = TickSupervisor(
             self.link, self.config, self.on_tick, self.hub.publish_status, self._tick_fell_back
@@ -211,17 +212,15 @@ class Service:
         records = link.read_outputs()
         if self.recorder is not None:
             start = link.start
+            recorded = slice(
+                RecordLayout.rider.start, self.layout.physics.stop
+            )  # the rider and the physics, not the parts
             for record in records:
-                engine_t = float(record[L.OUT_ENGINE_T])
+                engine_t = RecordLayout.engine_t.at(record)
                 if self.recorder.rows == 0:  # the take's start timecode, in its sidecar from the first flush
                     self.recorder.meta.update(self.timecode.of_record(record).as_meta())
-                rider = np.concatenate(  # the rider and the physics (not the rider parts), then the saddle
-                    (
-                        record[L.OUT_RIDER : L.OUTPUT_WIDTH + len(self.physics_channels)],
-                        record[L.OUT_SADDLE : L.OUT_ESTIMATE],
-                    )
-                )
-                self.recorder.add(engine_t, record[L.OUT_HORSE : L.OUT_RIDER], rider, engine_t + start)
+                rider = np.concatenate((record[recorded], record[RecordLayout.saddle.slice]))  # then the saddle
+                self.recorder.add(engine_t, record[RecordLayout.horse.slice], rider, engine_t + start)
         if records:
             self.metrics.ticks_published += len(records)
             self.hub.publish(records)

@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from riderlive import timecode as tc
-from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver
+from riderlive.realtime.record import RecordLayout
 from riderlive.timecode import RATES, Anchor, Rate, TimecodeError
 
 if TYPE_CHECKING:
@@ -139,10 +139,10 @@ class ServiceTimecode:
 
     def of_record(self, record: np.ndarray) -> Stamp:
         return self.at(
-            float(record[L.OUT_ENGINE_T]),
-            float(record[L.OUT_SOURCE_T]),
-            int(record[L.OUT_DRIVER]),
-            int(record[L.OUT_PRODUCER]),
+            RecordLayout.engine_t.at(record),
+            RecordLayout.source_t.at(record),
+            RecordLayout.driver.count(record),
+            RecordLayout.producer.count(record),
         )
 
     def wall_ns(self, engine_t: float) -> int:

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
 from riderlive.skeleton import HORSE_RIG
@@ -100,15 +100,15 @@ class VmcSender:
 
     def publish(self, records: list[np.ndarray]) -> None:
         """Send the newest of ``records`` whose ``seq`` is a multiple of the decimation."""
-        record = next((r for r in reversed(records) if int(r[L.OUT_SEQ]) % self.decimation == 0), None)
+        record = next((r for r in reversed(records) if RecordLayout.seq.count(r) % self.decimation == 0), None)
         if record is None:
             return
-        seq = int(record[L.OUT_SEQ])
+        seq = RecordLayout.seq.count(record)
         if self.last_seq is not None and seq > self.last_seq:
             missed = (seq - self.last_seq) // self.decimation - 1
             self.counts["skipped"] += missed * (1 if self.horse is None else 2)
         self.last_seq = seq  # a restarted tick's seq starts again: counted from there
-        engine_t = float(record[L.OUT_ENGINE_T])
+        engine_t = RecordLayout.engine_t.at(record)
         if self._start is None:
             self._start = engine_t
         t = engine_t - self._start

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER_NAMES
 from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.codecs import (
     BINARY_HEADER,
     BadFrame,
@@ -37,24 +38,25 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
     horse=st.lists(st.sampled_from(range(L.N_HORSE)), max_size=5, unique=True),
 )
 def test_binary_and_json_carry_the_same_frame(seq, times, driver, values, rider, horse) -> None:
-    record = np.zeros(L.OUTPUT_WIDTH)
-    record[L.OUT_SEQ], (record[L.OUT_ENGINE_T], record[L.OUT_SOURCE_T]) = seq, times
-    record[L.OUT_DRIVER] = driver
-    record[L.OUT_HORSE :] = values
+    record = np.zeros(RecordLayout.rider.stop)
+    record[RecordLayout.seq.start] = seq
+    record[RecordLayout.engine_t.start], record[RecordLayout.source_t.start] = times
+    record[RecordLayout.driver.start] = driver
+    record[RecordLayout.horse.start :] = values
     for encoding in ("binary", "json"):
         sub = Subscription(tuple(rider), tuple(horse), 1, encoding)
         data = encode_frame(sub, record)
         frame = decode_binary_frame(data) if isinstance(data, bytes) else orjson.loads(data)
         assert frame["seq"] == seq and frame["t"] == times[0] and frame["source_t"] == times[1]
-        assert frame["values"] == [record[L.OUT_RIDER + i] for i in rider]
-        assert frame.get("horse", []) == [record[L.OUT_HORSE + i] for i in horse]
+        assert frame["values"] == [record[RecordLayout.rider.start + i] for i in rider]
+        assert frame.get("horse", []) == [record[RecordLayout.horse.start + i] for i in horse]
 
 
 def test_binary_header_layout_is_fixed() -> None:
     assert BINARY_HEADER.size == 40
-    record = np.zeros(L.OUTPUT_WIDTH)
-    record[L.OUT_SEQ] = 7
-    record[L.OUT_RIDER] = 1.5
+    record = np.zeros(RecordLayout.rider.stop)
+    record[RecordLayout.seq.start] = 7
+    record[RecordLayout.rider.start] = 1.5
     data = encode_frame(Subscription(rider=(0,), encoding="binary"), record)
     assert isinstance(data, bytes) and len(data) == 48
     assert data[:4] == b"RLF1" and struct.unpack_from("<H", data, 4) == (40,)

@@ -18,10 +18,10 @@ from riderlive.channels import HORSE_NAMES
 from riderlive.devices.board import GuardianReport
 from riderlive.devices.registry import DeviceSpec
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver
 from riderlive.realtime.down import down_status
 from riderlive.realtime.link import TickLink
+from riderlive.realtime.record import RecordLayout
 from riderlive.rules import load_preset
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.service.config import ServiceConfig
@@ -99,15 +99,17 @@ async def _kill_and_take_over() -> None:
         w.link.apply(cmd.SetGait("walk", None), gait="walk", speed=None)
         await w.until(lambda: w.link.status().get("preset") == "kept", 10.0, "the preset applied")
         await w.spare_warm()
-        await w.until(lambda: int(w.records[-1][1][L.OUT_DRIVER]) == Driver.INPUT, 10.0, "input drives")
+        await w.until(lambda: int(w.records[-1][1][RecordLayout.driver.start]) == Driver.INPUT, 10.0, "input drives")
         spare_pid = w.link.spare.process.pid if w.link.spare else None
         reported = w.link.status()
         before = len(w.records)
-        last_seq = float(w.records[-1][1][L.OUT_SEQ])
+        last_seq = float(w.records[-1][1][RecordLayout.seq.start])
         killed_at = time.perf_counter()
         os.kill(int(w.link.board["tick_pid"]), signal.SIGKILL)
         await w.until(lambda: w.link.generation == 2 and w.supervisor.up, 30.0, w.supervisor.snapshot())
-        await w.until(lambda: any(t > killed_at and r[L.OUT_SEQ] > last_seq for t, r in w.records[before:]), 10.0, "")
+        await w.until(
+            lambda: any(t > killed_at and r[RecordLayout.seq.start] > last_seq for t, r in w.records[before:]), 10.0, ""
+        )
         snapshot = w.supervisor.snapshot()
         assert (snapshot["deaths"], snapshot["hangs"], snapshot["restarts"], snapshot["takeovers"]) == (1, 0, 1, 1)
         assert int(w.link.board["tick_pid"]) == spare_pid, "the warm spare took over"
@@ -121,16 +123,16 @@ async def _kill_and_take_over() -> None:
         assert status["gait"] == reported["gait"], "the procedural horse handed over (its gait change queued)"
         assert w.link.setup.gait == "walk"
         new = [r for t, r in w.records[before:] if t > killed_at]
-        seqs = [r[L.OUT_SEQ] for r in new]
+        seqs = [r[RecordLayout.seq.start] for r in new]
         assert seqs[0] > last_seq and all(b > a for a, b in zip(seqs, seqs[1:])), "seq goes on, increasing"
         gap_ticks = seqs[0] - last_seq
-        took = new[0][L.OUT_ENGINE_T] - w.records[before - 1][1][L.OUT_ENGINE_T]
+        took = new[0][RecordLayout.engine_t.start] - w.records[before - 1][1][RecordLayout.engine_t.start]
         assert abs(gap_ticks / RATE - took) < 2.5 / RATE, "the same deadline grid"
-        assert int(new[0][L.OUT_DRIVER]) == Driver.INPUT, "the producer kept driving"
+        assert RecordLayout.driver.count(new[0]) == Driver.INPUT, "the producer kept driving"
         # No jump: the first new frames move no more than the tick moved per tick before the kill.
-        rider = np.array([r[L.OUT_RIDER : L.OUTPUT_WIDTH] for _, r in w.records[before - 100 : before]])
+        rider = np.array([r[RecordLayout.rider.slice] for _, r in w.records[before - 100 : before]])
         slew = np.abs(np.diff(rider, axis=0)).max(axis=0)
-        step = np.abs(np.asarray(new[0][L.OUT_RIDER : L.OUTPUT_WIDTH]) - rider[-1])
+        step = np.abs(np.asarray(new[0][RecordLayout.rider.slice]) - rider[-1])
         assert np.all(step <= slew * 1.05 + 1e-9), float((step - slew).max())
         # A new spare warms up in the background.
         await w.spare_warm()

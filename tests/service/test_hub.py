@@ -14,13 +14,13 @@ from starlette.websockets import WebSocket
 
 from riderlive.channels import RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.devices.latch import StopSource
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.codecs import Subscription, decode_binary_frame
 from riderlive.service.publish import CATCH_UP, Hub, Subscriber
 from riderlive.service.wsprotocol import wire_frame
 from tests.service.fakes import FakeService
 
-WIDTH = L.OUTPUT_WIDTH + len(RIDER_PART_NAMES)
+WIDTH = RecordLayout.rider.stop + len(RIDER_PART_NAMES)
 
 
 @dataclass
@@ -46,8 +46,12 @@ class FakeTransport:
 
 def record(seq: int, engine_t: float, input_rx: float = -1.0) -> np.ndarray:
     out = np.zeros(WIDTH)
-    out[L.OUT_SEQ], out[L.OUT_ENGINE_T], out[L.OUT_INPUT_RX] = seq, engine_t, input_rx
-    out[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)] = np.arange(len(RIDER_NAMES)) + seq / 1000.0
+    out[RecordLayout.seq.start], out[RecordLayout.engine_t.start], out[RecordLayout.input_rx.start] = (
+        seq,
+        engine_t,
+        input_rx,
+    )
+    out[RecordLayout.rider.slice] = np.arange(len(RIDER_NAMES)) + seq / 1000.0
     return out
 
 
@@ -137,7 +141,7 @@ def test_a_late_web_process_sends_only_the_last_catch_up_seconds() -> None:
     records = [record(s, s * 0.01) for s in range(1, 101)]  # a second of ticks at once
     hub.publish(records)
     kept = [m["seq"] for m in messages(c)]
-    newest = records[-1][L.OUT_ENGINE_T]
+    newest = records[-1][RecordLayout.engine_t.start]
     assert kept == [s for s in range(1, 101) if s * 0.01 >= newest - CATCH_UP]
     assert service.metrics.ticks_coalesced == 100 - len(kept)
 

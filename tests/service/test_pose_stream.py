@@ -9,7 +9,7 @@ import pytest
 from websockets.sync.client import connect
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.codecs import (
     BINARY_HEADER,
     BONES_HEADER,
@@ -20,7 +20,7 @@ from riderlive.service.codecs import (
     decode_subscription,
     encode_frame,
 )
-from riderlive.service.publish import pose_floats, units
+from riderlive.service.hello import pose_floats, units
 from riderlive.skeleton import HORSE_RIG, horse_pose, rider_pose, rider_rig
 from tests.service.live_server import LiveServer
 from tests.service.test_publish import frames
@@ -68,8 +68,8 @@ def test_pose_frames_carry_both_skeletons_as_the_solver_poses_them(server: LiveS
 
 
 def test_binary_pose_follows_the_bones_block_and_decodes_back() -> None:
-    record = np.arange(L.OUTPUT_WIDTH, dtype=np.float64)
-    record[L.OUT_DRIVER] = 1.0
+    record = np.arange(RecordLayout.rider.stop, dtype=np.float64)
+    record[RecordLayout.driver.start] = 1.0
     bones = np.linspace(-1.0, 1.0, 4 * N_RIDER)
     pose = {"rider": np.linspace(0.0, 1.0, 7 * N_RIDER), "horse": np.linspace(2.0, 3.0, 7 * N_HORSE)}
     for sub, extra in (
@@ -80,7 +80,7 @@ def test_binary_pose_follows_the_bones_block_and_decodes_back() -> None:
         assert isinstance(data, bytes)
         assert int.from_bytes(data[4:6], "little") == BINARY_HEADER.size + extra + POSE_HEADER.size
         decoded = decode_binary_frame(data)
-        assert decoded["values"] == record[L.OUT_RIDER :].tolist()
+        assert decoded["values"] == record[RecordLayout.rider.start :].tolist()
         assert decoded.get("bones") == (bones.tolist() if sub.bones else None)
         assert decoded["pose"] == {name: pose[name].tolist() for name in sub.pose}
         assert json.loads(encode_frame(Subscription(pose=sub.pose), record, None, pose))["pose"] == {

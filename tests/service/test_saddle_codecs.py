@@ -13,7 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from riderlive.channels import SADDLE_NAMES
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service.codecs import (
     BINARY_HEADER,
@@ -41,11 +41,11 @@ SPEC = SADDLE_INPUT
     pose=st.booleans(),
 )
 def test_binary_and_json_carry_the_same_saddle_and_estimate(saddle, lock, gait, numbers, bones, pose) -> None:
-    record = np.arange(L.OUTPUT_WIDTH, dtype=np.float64)
-    record[L.OUT_DRIVER] = 1
-    record[L.OUT_SADDLE : L.OUT_ESTIMATE] = saddle
+    record = np.arange(RecordLayout.rider.stop, dtype=np.float64)
+    record[RecordLayout.driver.start] = 1
+    record[RecordLayout.saddle.slice] = saddle
     estimate = [math.nan] * 5 if lock is None else [lock, math.nan if gait is None else gait, *numbers]
-    record[L.OUT_ESTIMATE : L.OUT_HORSE] = estimate
+    record[RecordLayout.estimate.slice] = estimate
     extra = {"pose": {"rider": np.arange(14.0)}} if pose else {}
     frames = []
     for encoding in ("json", "binary"):
@@ -56,7 +56,9 @@ def test_binary_and_json_carry_the_same_saddle_and_estimate(saddle, lock, gait, 
         frames.append(decode_binary_frame(data) if isinstance(data, bytes) else orjson.loads(data))
     for frame in frames:
         assert frame["saddle"] == saddle
-        assert frame["values"] == [record[L.OUT_RIDER], record[L.OUT_RIDER + 3]], "the blocks before are intact"
+        assert frame["values"] == [record[RecordLayout.rider.start], record[RecordLayout.rider.start + 3]], (
+            "the blocks before are intact"
+        )
         if lock is None:
             assert frame["estimate"] is None
         else:
@@ -67,9 +69,9 @@ def test_binary_and_json_carry_the_same_saddle_and_estimate(saddle, lock, gait, 
 
 
 def test_the_saddle_header_block_follows_the_fixed_header() -> None:
-    record = np.zeros(L.OUTPUT_WIDTH)
-    record[L.OUT_SADDLE : L.OUT_ESTIMATE] = np.arange(1.0, 7.0)
-    record[L.OUT_ESTIMATE : L.OUT_HORSE] = [3, 1, 1.4, 0.25, 0.004]
+    record = np.zeros(RecordLayout.rider.stop)
+    record[RecordLayout.saddle.slice] = np.arange(1.0, 7.0)
+    record[RecordLayout.estimate.slice] = [3, 1, 1.4, 0.25, 0.004]
     data = encode_frame(Subscription(rider=(0,), encoding="binary", saddle=True), record)
     assert isinstance(data, bytes)
     size = BINARY_HEADER.size + SADDLE_HEADER.size

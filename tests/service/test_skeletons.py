@@ -9,7 +9,7 @@ import pytest
 from websockets.sync.client import connect
 
 from riderlive.channels import RIDER_NAMES
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.service.codecs import (
     BINARY_HEADER,
     BONES_HEADER,
@@ -69,8 +69,8 @@ def test_bones_subscriber_gets_unit_quaternions_of_its_frames_others_unchanged(s
 
 
 def test_binary_bones_extend_the_header_only_when_asked() -> None:
-    record = np.arange(L.OUTPUT_WIDTH, dtype=np.float64)
-    record[L.OUT_DRIVER] = 1.0
+    record = np.arange(RecordLayout.rider.stop, dtype=np.float64)
+    record[RecordLayout.driver.start] = 1.0
     bones = np.linspace(-1.0, 1.0, 4 * N_BONES)
     plain = encode_frame(Subscription(encoding="binary"), record, bones)
     with_bones = encode_frame(Subscription(encoding="binary", bones=True, horse=(0, 2)), record, bones)
@@ -79,8 +79,8 @@ def test_binary_bones_extend_the_header_only_when_asked() -> None:
     assert int.from_bytes(with_bones[4:6], "little") == BINARY_HEADER.size + BONES_HEADER.size
     decoded = decode_binary_frame(with_bones)
     assert decoded["bones"] == bones.tolist()
-    assert decoded["horse"] == record[[L.OUT_HORSE, L.OUT_HORSE + 2]].tolist()
-    assert decoded["values"] == record[L.OUT_RIDER :].tolist()
+    assert decoded["horse"] == record[[RecordLayout.horse.start, RecordLayout.horse.start + 2]].tolist()
+    assert decoded["values"] == record[RecordLayout.rider.start :].tolist()
     assert "bones" not in decode_binary_frame(plain)
     assert json.loads(encode_frame(Subscription(bones=True), record, bones))["bones"] == bones.tolist()
 

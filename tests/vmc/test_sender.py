@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from riderlive.channels import HORSE_NAMES, RIDER_NAMES
+from riderlive.channels import HORSE_NAMES
 from riderlive.cli import main
 from riderlive.horse import DEFAULT_SCALE
-from riderlive.realtime import layout as L
+from riderlive.realtime.record import RecordLayout
 from riderlive.rules import RiderModel
 from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
@@ -63,11 +63,11 @@ def _records(frames: int, rate: float) -> list[np.ndarray]:
     rider = RiderModel(scale=DEFAULT_SCALE).evaluate_batch(horse)
     out = []
     for k in range(frames):
-        record = np.zeros(L.OUTPUT_WIDTH)
-        record[L.OUT_SEQ] = k
-        record[L.OUT_ENGINE_T] = k / rate
-        record[L.OUT_HORSE : L.OUT_RIDER] = horse[k]
-        record[L.OUT_RIDER : L.OUT_RIDER + len(RIDER_NAMES)] = rider[k]
+        record = np.zeros(RecordLayout.rider.stop)
+        record[RecordLayout.seq.start] = k
+        record[RecordLayout.engine_t.start] = k / rate
+        record[RecordLayout.horse.slice] = horse[k]
+        record[RecordLayout.rider.slice] = rider[k]
         out.append(record)
     return out
 
