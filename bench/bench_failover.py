@@ -17,7 +17,13 @@ tick's warm-up leniency). After each failover it checks the settings (preset, an
 offsets) and measures the largest rider step across the handover against the largest
 per-tick step of the second before (its slew; <= 1 is "no jump larger than one tick's").
 
+Each failover is split where its time goes (the supervisor's ``last_down_at`` and
+``promoted_at``, the first new frame's engine time, its arrival): kill -> found dead or hung,
+-> the spare told to take over, -> its first tick, -> at the client (the web process's
+forward and the client's own wake-up).
+
     python bench/bench_failover.py [--burners 2] [--kills 20] [--stops 20] [--stalls 10]
+        [--web-priority 10] [--client-priority 0]
 """
 
 from __future__ import annotations
@@ -116,6 +122,8 @@ class Bench:
         self.client.offset = min(offsets)[1]  # the quickest answer: within half its round trip
         self.lost = 0
         self.steps: list[float] = []
+        self.stages: list[tuple[float, float, float, float]] = []
+        """Per failover (s): signal -> found, -> spare told, -> its first tick, -> at the client."""
 
     def supervision(self) -> dict[str, Any]:
         result: dict[str, Any] = self.http.get("/api/devices").json()["supervision"]
@@ -169,7 +177,11 @@ class Bench:
             time.sleep(max(0.0, at + hold - time.perf_counter()))
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGCONT)
+        ticked = self.client.frames[after][1] + self.client.offset
         self.check_settings(s["generation"] + 1)
+        now = self.supervision()
+        found, promoted = now["last_down_at"], now["promoted_at"]
+        self.stages.append((found - at, promoted - found, ticked - promoted, arrival - ticked))
         self.steps.append(self.step_ratio(before, after))
         return arrival - at
 
@@ -196,6 +208,15 @@ def quantiles(values: list[float]) -> str:
     return f"p50 {np.percentile(a, 50):.1f}, p99 {np.percentile(a, 99):.1f}, max {a.max():.1f} ms (n={len(a)})"
 
 
+def stage_table(stages: list[tuple[float, float, float, float]]) -> str:
+    names = ("found", "spare told", "first tick", "at the client")
+    a = np.array(stages) * 1000
+    return "; ".join(
+        f"{name} p50 {np.percentile(a[:, i], 50):.1f} p99 {np.percentile(a[:, i], 99):.1f} max {a[:, i].max():.1f}"
+        for i, name in enumerate(names)
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--burners", type=int, default=0, help="busy processes at normal priority (2: both cores)")
@@ -203,14 +224,26 @@ def main() -> None:
     parser.add_argument("--stops", type=int, default=20)
     parser.add_argument("--stalls", type=int, default=10, help="per stall length")
     parser.add_argument("--spare-nice", type=int, default=10, help="tick.spare_nice (lower: the spare warms sooner)")
+    parser.add_argument(
+        "--web-priority", type=int, default=None, help="server.realtime_priority (unset: the default; 0: off)"
+    )
+    parser.add_argument(
+        "--client-priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO of the measuring client (0: normal, beside the burners)",
+    )
     args = parser.parse_args()
+    if args.client_priority:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.client_priority))
     context = multiprocessing.get_context("spawn")
     burners = [context.Process(target=burn, args=(time.perf_counter() + 7200,)) for _ in range(args.burners)]
     for burner in burners:
         burner.start()
     workdir = Path(tempfile.mkdtemp(prefix="bench-failover-"))
     config = workdir / "service.toml"
-    config.write_text(f"[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
+    server = "" if args.web_priority is None else f"[server]\nrealtime_priority = {args.web_priority}\n"
+    config.write_text(f"{server}[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
     proc, port = start_server(config)
     producer = context.Process(target=produce, args=(f"ws://127.0.0.1:{port}", time.perf_counter() + 7200))
     producer.start()
@@ -221,6 +254,7 @@ def main() -> None:
         threshold = bench.settle()["hang_threshold"]
         kills = [bench.failover(signal.SIGKILL, 0.0) for _ in range(args.kills)]
         kill_steps, bench.steps = bench.steps, []
+        kill_stages, bench.stages = bench.stages, []
         stops = [bench.failover(signal.SIGSTOP, 2.0) for _ in range(args.stops)]
         stop_steps = bench.steps
         stalls = {hold: [bench.stall(hold) for _ in range(args.stalls)] for hold in STALLS}
@@ -237,15 +271,18 @@ def main() -> None:
     load = "loaded: both cores busy with burners" if args.burners >= 2 else f"{args.burners} burner(s)"
     print(
         f"bench_failover: 120 Hz, a producer at 120 Hz, {load}; load average {os.getloadavg()[0]:.1f};"
-        f" spare warm-up at nice {args.spare_nice}"
+        f" spare warm-up at nice {args.spare_nice}; web process realtime_priority {final['web_priority']};"
+        f" client {'SCHED_FIFO ' + str(args.client_priority) if args.client_priority else 'normal priority'}"
     )
     print(f"hang threshold {threshold * 1000:.1f} ms")
     if kills:
         print(f"kill -9 -> first new frame at the client: {quantiles(kills)} (goal p99 <= 50 ms)")
         print(f"  largest rider step across the handover / one tick's slew: max {max(kill_steps):.2f}")
+        print(f"  stages (ms): {stage_table(kill_stages)}")
     if stops:
         print(f"SIGSTOP -> first new frame: {quantiles(stops)} (goal <= {threshold * 1000 + 50:.0f} ms)")
         print(f"  largest rider step across the handover / one tick's slew: max {max(stop_steps):.2f}")
+        print(f"  stages (ms): {stage_table(bench.stages)}")
     print(f"settings lost: {bench.lost} of {args.kills + args.stops} failovers")
     for hold, results in stalls.items():
         gaps = [g for g, _, _ in results]
