@@ -399,6 +399,7 @@ class TickLoop:
             self.phase.state,
             tuple(self.events),
             self.settings,
+            None if self.physics is None else self.physics.capture(),
         )
         self.handover_blob.write(handover.encode(snapshot))
 
