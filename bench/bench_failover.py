@@ -34,6 +34,7 @@ import json
 import math
 import multiprocessing
 import os
+import re
 import signal
 import tempfile
 import threading
@@ -263,9 +264,10 @@ def main() -> None:
         producer.kill()
         proc.send_signal(signal.SIGINT)
         try:
-            proc.wait(20)
+            _, log = proc.communicate(timeout=20)
         except Exception:
             proc.kill()
+            log = ""
         for burner in burners:
             burner.kill()
     load = "loaded: both cores busy with burners" if args.burners >= 2 else f"{args.burners} burner(s)"
@@ -284,7 +286,12 @@ def main() -> None:
         print(f"  largest rider step across the handover / one tick's slew: max {max(stop_steps):.2f}")
         print(f"  stages (ms): {stage_table(bench.stages)}")
     print(f"settings lost: {bench.lost} of {args.kills + args.stops} failovers")
+    took = [float(m) / 1000 for m in re.findall(r"took over in ([0-9.]+) ms", log)]
+    if took:
+        print(f"the spare's own takeover (TakeOver received -> loop about to run): {quantiles(took)}")
     for hold, results in stalls.items():
+        if not results:
+            continue
         gaps = [g for g, _, _ in results]
         ticked = [g for _, g, _ in results]
         failovers = [r for _, _, r in results]
