@@ -245,14 +245,14 @@ def main() -> None:
     if args.client_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.client_priority))
     context = multiprocessing.get_context("spawn")
-    burners = [context.Process(target=burn, args=(time.perf_counter() + 7200,)) for _ in range(args.burners)]
-    for burner in burners:
-        burner.start()
     workdir = Path(tempfile.mkdtemp(prefix="bench-failover-"))
     config = workdir / "service.toml"
     server = "" if args.web_priority is None else f"[server]\nrealtime_priority = {args.web_priority}\n"
     config.write_text(f"{server}[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
-    proc, port = start_server(config)
+    proc, port = start_server(config)  # then the burners: a start that fails leaves none behind
+    burners = [context.Process(target=burn, args=(time.perf_counter() + 7200,)) for _ in range(args.burners)]
+    for burner in burners:
+        burner.start()
     producer = context.Process(target=produce, args=(f"ws://127.0.0.1:{port}", time.perf_counter() + 7200))
     producer.start()
     try:
