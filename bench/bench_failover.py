@@ -17,7 +17,13 @@ tick's warm-up leniency). After each failover it checks the settings (preset, an
 offsets) and measures the largest rider step across the handover against the largest
 per-tick step of the second before (its slew; <= 1 is "no jump larger than one tick's").
 
+Each failover is split where its time goes (the supervisor's ``last_down_at`` and
+``promoted_at``, the first new frame's engine time, its arrival): kill -> found dead or hung,
+-> the spare told to take over, -> its first tick, -> at the client (the web process's
+forward and the client's own wake-up).
+
     python bench/bench_failover.py [--burners 2] [--kills 20] [--stops 20] [--stalls 10]
+        [--web-priority 10] [--client-priority 0]
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import json
 import math
 import multiprocessing
 import os
+import re
 import signal
 import tempfile
 import threading
@@ -116,6 +123,8 @@ class Bench:
         self.client.offset = min(offsets)[1]  # the quickest answer: within half its round trip
         self.lost = 0
         self.steps: list[float] = []
+        self.marks: list[tuple[float, float, float, int]] = []
+        """Per failover: the signal, found, spare told (perf_counter s) and the first new frame's index."""
 
     def supervision(self) -> dict[str, Any]:
         result: dict[str, Any] = self.http.get("/api/devices").json()["supervision"]
@@ -170,7 +179,10 @@ class Bench:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGCONT)
         self.check_settings(s["generation"] + 1)
+        now = self.supervision()
+        self.marks.append((at, now["last_down_at"], now["promoted_at"], after))
         self.steps.append(self.step_ratio(before, after))
+        print(f"{sig.name}: first new frame at the client after {(arrival - at) * 1000:.1f} ms", flush=True)
         return arrival - at
 
     def stall(self, hold: float) -> tuple[float, float, int]:
@@ -196,6 +208,23 @@ def quantiles(values: list[float]) -> str:
     return f"p50 {np.percentile(a, 50):.1f}, p99 {np.percentile(a, 99):.1f}, max {a.max():.1f} ms (n={len(a)})"
 
 
+def stage_table(marks: list[tuple[float, float, float, int]], frames: list[tuple[float, float, np.ndarray]]) -> str:
+    """Signal -> found, -> spare told, -> its first tick, -> at the client (ms). The tick's
+    clock against ours: the least ``arrival - engine time`` over every frame (a frame is
+    never received before it was ticked; the quickest came within ~0.1 ms)."""
+    offset = min(arrival - t for arrival, t, _ in frames)
+    stages = []
+    for at, found, promoted, after in marks:
+        arrival, t, _ = frames[after]
+        stages.append((found - at, promoted - found, t + offset - promoted, arrival - t - offset))
+    names = ("found", "spare told", "first tick", "at the client")
+    a = np.array(stages) * 1000
+    return "; ".join(
+        f"{name} p50 {np.percentile(a[:, i], 50):.1f} p99 {np.percentile(a[:, i], 99):.1f} max {a[:, i].max():.1f}"
+        for i, name in enumerate(names)
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--burners", type=int, default=0, help="busy processes at normal priority (2: both cores)")
@@ -203,15 +232,27 @@ def main() -> None:
     parser.add_argument("--stops", type=int, default=20)
     parser.add_argument("--stalls", type=int, default=10, help="per stall length")
     parser.add_argument("--spare-nice", type=int, default=10, help="tick.spare_nice (lower: the spare warms sooner)")
+    parser.add_argument(
+        "--web-priority", type=int, default=None, help="server.realtime_priority (unset: the default; 0: off)"
+    )
+    parser.add_argument(
+        "--client-priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO of the measuring client (0: normal, beside the burners)",
+    )
     args = parser.parse_args()
+    if args.client_priority:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.client_priority))
     context = multiprocessing.get_context("spawn")
+    workdir = Path(tempfile.mkdtemp(prefix="bench-failover-"))
+    config = workdir / "service.toml"
+    server = "" if args.web_priority is None else f"[server]\nrealtime_priority = {args.web_priority}\n"
+    config.write_text(f"{server}[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
+    proc, port = start_server(config)  # then the burners: a start that fails leaves none behind
     burners = [context.Process(target=burn, args=(time.perf_counter() + 7200,)) for _ in range(args.burners)]
     for burner in burners:
         burner.start()
-    workdir = Path(tempfile.mkdtemp(prefix="bench-failover-"))
-    config = workdir / "service.toml"
-    config.write_text(f"[tick]\nrate = {RATE}\nspare_nice = {args.spare_nice}\n")
-    proc, port = start_server(config)
     producer = context.Process(target=produce, args=(f"ws://127.0.0.1:{port}", time.perf_counter() + 7200))
     producer.start()
     try:
@@ -221,6 +262,7 @@ def main() -> None:
         threshold = bench.settle()["hang_threshold"]
         kills = [bench.failover(signal.SIGKILL, 0.0) for _ in range(args.kills)]
         kill_steps, bench.steps = bench.steps, []
+        kill_marks, bench.marks = bench.marks, []
         stops = [bench.failover(signal.SIGSTOP, 2.0) for _ in range(args.stops)]
         stop_steps = bench.steps
         stalls = {hold: [bench.stall(hold) for _ in range(args.stalls)] for hold in STALLS}
@@ -229,25 +271,34 @@ def main() -> None:
         producer.kill()
         proc.send_signal(signal.SIGINT)
         try:
-            proc.wait(20)
+            _, log = proc.communicate(timeout=20)
         except Exception:
             proc.kill()
+            log = ""
         for burner in burners:
             burner.kill()
     load = "loaded: both cores busy with burners" if args.burners >= 2 else f"{args.burners} burner(s)"
     print(
         f"bench_failover: 120 Hz, a producer at 120 Hz, {load}; load average {os.getloadavg()[0]:.1f};"
-        f" spare warm-up at nice {args.spare_nice}"
+        f" spare warm-up at nice {args.spare_nice}; web process realtime_priority {final['web_priority']};"
+        f" client {'SCHED_FIFO ' + str(args.client_priority) if args.client_priority else 'normal priority'}"
     )
     print(f"hang threshold {threshold * 1000:.1f} ms")
     if kills:
         print(f"kill -9 -> first new frame at the client: {quantiles(kills)} (goal p99 <= 50 ms)")
         print(f"  largest rider step across the handover / one tick's slew: max {max(kill_steps):.2f}")
+        print(f"  stages (ms): {stage_table(kill_marks, bench.client.frames)}")
     if stops:
         print(f"SIGSTOP -> first new frame: {quantiles(stops)} (goal <= {threshold * 1000 + 50:.0f} ms)")
         print(f"  largest rider step across the handover / one tick's slew: max {max(stop_steps):.2f}")
+        print(f"  stages (ms): {stage_table(bench.marks, bench.client.frames)}")
     print(f"settings lost: {bench.lost} of {args.kills + args.stops} failovers")
+    took = [float(m) / 1000 for m in re.findall(r"took over in ([0-9.]+) ms", log)]
+    if took:
+        print(f"the spare's own takeover (TakeOver received -> loop about to run): {quantiles(took)}")
     for hold, results in stalls.items():
+        if not results:
+            continue
         gaps = [g for g, _, _ in results]
         ticked = [g for _, g, _ in results]
         failovers = [r for _, _, r in results]

@@ -135,7 +135,7 @@ class TickCore:
         self.mode = mode
         self.resampler = Resampler(delay=timing.delay, hold=timing.hold)
         self.saddle_point = saddle_point or SaddlePoint()
-        self.saddle = make_saddle_input(model.scale, self.saddle_point)
+        self.saddle = make_saddle_input(model.scale, self.saddle_point, timing.delay)
         """The saddle producer's stream, while the producer is one (``input_kind``)."""
         self.input_kind = InputKind.HORSE
         self.producer = -1

@@ -18,9 +18,12 @@ the newest complete one at takeover (``realtime/spare.py``) and goes on from the
 - **what is rebuilt**: the settings (the rules' parameters, the animator layer, mode,
   gait, terrain) come from the setup the web process hands the spare
   (``TickLink.apply``), the rider parts and physics from their files;
+- **the tail physics** (``realtime/tail.py``, :class:`~riderlive.realtime.tail.TailState`):
+  the strands' state, the stepper's clock and the tick frames it interpolates between; the
+  new generation steps on from them across the gap (at most ``MAX_CATCH_UP`` steps), so
+  the tail goes on moving instead of restarting from rest;
 - **what is not handed over**: the devices (the guardian parked what was armed; the new
-  generation connects them disarmed), the tail physics (its strands restart from rest:
-  a hand-over of compiled-kernel state is not worth its cost).
+  generation connects them disarmed).
 
 At the first tick after the takeover the rider blends from the last frame the dead tick
 published to the new output over :data:`BLEND_S` (a smoothstep): the rider goes on
@@ -46,8 +49,9 @@ if TYPE_CHECKING:
     from riderlive.horse import ProceduralHorse, TerrainConfig
     from riderlive.realtime.core import TickCore
     from riderlive.realtime.shm import SharedRing
+    from riderlive.realtime.tail import TailState, TickPhysics
 
-VERSION = 1
+VERSION = 2
 """Bumped whenever a field of :class:`TickSnapshot` or :class:`CoreState` changes."""
 REPLAY = 512
 """Input records replayed at takeover: the resampler's capacity (``Resampler.capacity``)."""
@@ -151,6 +155,8 @@ class TickSnapshot:
     events: tuple[str, ...]
     settings: Settings
     """As applied by the dead tick: a setting changed while no tick ran wins over its state."""
+    tail: TailState | None = None
+    """The tail physics' state (None: no physics, or before its first tick)."""
 
 
 def capture_core(core: TickCore) -> CoreState:
@@ -183,6 +189,12 @@ def decode(data: bytes | None) -> TickSnapshot | None:
         if not all(hasattr(part, f.name) for f in dataclasses.fields(kind)):
             return None
     return snapshot
+
+
+def restore_tail(physics: TickPhysics | None, snapshot: TickSnapshot) -> bool:
+    """The tail physics goes on from the snapshot's strands (False: none to hand, or it does
+    not fit this generation's physics: the strands start from rest at its first tick)."""
+    return physics is not None and snapshot.tail is not None and physics.restore(snapshot.tail)
 
 
 def replay_inputs(core: TickCore, ring: SharedRing, until: int) -> int:

@@ -91,6 +91,16 @@ class DeadlineClock:
         return target, now - target
 
 
+def normal_priority_thread() -> None:
+    """The calling thread at normal scheduling (Linux: per thread), e.g. the worker threads of a
+    web process at SCHED_FIFO, so that a bake or an upload check never runs at real-time priority."""
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except OSError as exc:  # already normal, or not permitted to change: it stays as it is
+            log.debug("worker thread scheduling unchanged: %s", exc)
+
+
 def try_realtime_priority(priority: int = 50, reset_on_fork: bool = False, who: str = "the tick") -> str:
     """Ask for SCHED_FIFO at ``priority``; return ``"fifo"`` or why not (and warn about ``who``).
 

@@ -4,14 +4,22 @@ Pure (no clocks, no I/O); every time argument is seconds, engine or producer as 
 
 - :class:`SaddleInput`: the driving saddle producer's stream. Each received sample is
   stepped through the estimator (:func:`riderlive.saddle.step`) in source-time order,
-  so a 1000 Hz stream is seen sample by sample, not once per tick. At the tick's time
-  the rebuilt horse frame (:func:`riderlive.saddle.horse_frame`) is read at the
-  producer's time that corresponds to it (the clock mapping of the least-delayed
-  sample, as the resampler's, but without its ``input.delay``: the estimator
-  extrapolates the hooves itself and holds the measured pose). After the last sample
-  the estimator runs on for ``Model.hold`` (0.5 s) and eases to standing over
-  ``Model.ease`` (0.25 s); after that the stream is *stale* (counted) and the tick
-  eases the rider to neutral as for a horse stream that stops.
+  so a 1000 Hz stream is seen sample by sample, not once per tick. The tick reads the
+  stream at the producer's time that corresponds to its own (the clock mapping of the
+  least-delayed sample, as the resampler's) less a **delay**: ``input.delay``, raised
+  by the stream's recent lateness (the latest arrival against the least-delayed
+  sample's, over the last 256 samples) up to :data:`MAX_DELAY`, and changed
+  by at most :data:`DELAY_SLEW` seconds per second (the stream slowed or sped up by
+  that fraction, never stepped). Within the samples received the frame is the one an
+  offline bake of the same samples rebuilds (:func:`riderlive.saddle.rebuild`: the
+  estimator's state after each sample, :func:`riderlive.saddle.horse_frame` at that
+  sample's time), interpolated linearly between the two around the read time: samples
+  that arrive late in bursts (a busy host) give the bake's motion, not a pose held then
+  caught up in one tick. Past the newest sample the estimator extrapolates the hooves
+  and holds the measured pose; after the last sample it runs on for ``Model.hold``
+  (0.5 s) and eases to standing over ``Model.ease`` (0.25 s); after that the stream is
+  *stale* (counted) and the tick eases the rider to neutral as for a horse stream that
+  stops.
 - :func:`saddle_pose`: ``channels.SADDLE`` of any horse frame, in the service's units
   (what ``/ws/rider`` publishes and takes record, whatever drives).
 - :func:`estimate_row`: the estimate as the output record carries it (codes and numbers).
@@ -22,6 +30,7 @@ estimator speaks metres and degrees, so lengths are converted on the way in and 
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -44,6 +53,12 @@ COUNTERS: tuple[str, ...] = ("samples", "missing", "empty", "gaps", "glitches", 
 _HORSE_LENGTHS = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
 _OFFSETS = 256
 """Samples whose clock offset the mapping takes the least of (as the resampler's buffer)."""
+_HISTORY = 512
+"""Estimator states kept to read between samples (0.5 s at 1000 Hz: more than :data:`MAX_DELAY`)."""
+MAX_DELAY = 0.25
+"""The most the read time trails the stream (s): lateness beyond it is held, not waited for."""
+DELAY_SLEW = 0.1
+"""Seconds the delay changes per second of engine time, at most (the stream plays at 0.9-1.1x meanwhile)."""
 
 
 def saddle_pose(horse: Sequence[float], to_metres: float, point: SaddlePoint) -> list[float]:
@@ -70,11 +85,22 @@ class SaddleInput:
     model: Model
     to_metres: float = 1.0
     """Service length unit -> metres."""
+    base_delay: float = 0.0
+    """The least delay (s): ``input.delay``."""
 
     def __post_init__(self) -> None:
         self.state = State()
         self.offsets: deque[float] = deque(maxlen=_OFFSETS)
         self.offset: float | None = None
+        self.history: deque[State] = deque(maxlen=_HISTORY)
+        """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
+        self.times: deque[float] = deque(maxlen=_HISTORY)
+        self._frames: dict[float, list[float]] = {}
+        """Rebuilt frames of the two samples last read around (by sample time)."""
+        self.delay = self.base_delay
+        """The read time's delay now (s)."""
+        self._delay_at: float | None = None
+        """Engine time the delay was last moved at (None: a new stream, the delay starts at its target)."""
         self.stale = False
         self.finished = dict.fromkeys(COUNTERS, 0)
         """Counters of the streams before the current one."""
@@ -88,6 +114,10 @@ class SaddleInput:
         self.state = State()
         self.offsets.clear()
         self.offset = None
+        self.history.clear()
+        self.times.clear()
+        self._frames.clear()
+        self.delay, self._delay_at = self.base_delay, None
         self.stale = False
 
     def _current(self) -> dict[str, int]:
@@ -111,6 +141,9 @@ class SaddleInput:
         gain = self.to_metres
         sample = [v * gain for v in values[:3]] + [float(v) for v in values[3:6]] if gain != 1.0 else values[:6]
         self.state = step(self.model, self.state, t, sample)
+        if self.state.t == t:  # taken (an empty sample is counted and leaves the pose as it was)
+            self.history.append(self.state)
+            self.times.append(t)
         offset = received - t
         if len(self.offsets) == self.offsets.maxlen and self.offsets[0] == self.offset:
             self.offsets.append(offset)
@@ -122,16 +155,55 @@ class SaddleInput:
         return True
 
     def source_time(self, now: float) -> float | None:
-        """The producer time shown at engine time ``now`` (never before the last sample)."""
+        """The producer time shown at engine time ``now``: ``delay`` behind the clock mapping."""
         if self.offset is None:
             return None
-        return max(now - self.offset, self.state.t)
+        return now - self.offset - self.delay
+
+    def _move_delay(self, now: float) -> None:
+        """Toward the base delay plus the newest sample's lateness (see the module docstring)."""
+        if self.offset is None or not self.offsets:
+            return
+        target = min(max(self.base_delay, self.base_delay + max(self.offsets) - self.offset), MAX_DELAY)
+        if self._delay_at is None:
+            self.delay = target
+        else:
+            most = DELAY_SLEW * max(0.0, now - self._delay_at)
+            self.delay += min(max(target - self.delay, -most), most)
+        self._delay_at = now
+
+    def _frame(self, state: State) -> list[float]:
+        """The horse frame an offline bake rebuilds at this state's sample (cached for the next ticks)."""
+        frame = self._frames.get(state.t)
+        if frame is None:
+            if len(self._frames) >= 2:
+                self._frames.clear()
+            frame = self._frames[state.t] = horse_frame(self.model, state, state.t)
+        return frame
+
+    def _between(self, query: float) -> list[float]:
+        """The bake's frames at the samples around ``query`` (within the history), interpolated."""
+        times = self.times
+        if query <= times[0]:
+            return self._frame(self.history[0])
+        i = bisect.bisect_right(times, query)
+        t0, t1 = times[i - 1], times[i]
+        f0, f1 = self._frame(self.history[i - 1]), self._frame(self.history[i])
+        a = (query - t0) / (t1 - t0)
+        return [x + (y - x) * a for x, y in zip(f0, f1, strict=True)]
 
     def sample(self, now: float) -> tuple[float, list[float]] | None:
         """``(producer time, horse frame in service units)`` at engine time ``now``, or None when stale."""
+        self._move_delay(now)
         query = self.source_time(now)
         if query is None:
             return None
+        if query < self.state.t:
+            frame = list(self._between(query))
+            if self.to_metres != 1.0:
+                for i in _HORSE_LENGTHS:
+                    frame[i] /= self.to_metres
+            return query, frame
         if query - self.state.t > self.model.hold + self.model.ease:
             if not self.stale:
                 self.stale = True
@@ -145,9 +217,10 @@ class SaddleInput:
 
     def estimate_row(self, now: float) -> tuple[float, ...]:
         query = self.source_time(now)
-        return NO_ESTIMATE if query is None else estimate_row(self.state, query)
+        return NO_ESTIMATE if query is None else estimate_row(self.state, max(query, self.state.t))
 
 
-def make_saddle_input(length_scale: float, point: SaddlePoint) -> SaddleInput:
-    """The tick's saddle input for a service speaking ``length_scale`` rig units per its length unit."""
-    return SaddleInput(Model(point=point), length_scale / DEFAULT_SCALE)
+def make_saddle_input(length_scale: float, point: SaddlePoint, delay: float = 0.0) -> SaddleInput:
+    """The tick's saddle input for a service speaking ``length_scale`` rig units per its length unit,
+    reading the stream at least ``delay`` (s, ``input.delay``) behind its clock mapping."""
+    return SaddleInput(Model(point=point), length_scale / DEFAULT_SCALE, delay)

@@ -172,12 +172,14 @@ def take_over(loop: Any, setup: Any) -> None:
         loop.setup = setup
     snapshot = None if loop.handover_blob is None else handover.decode(loop.handover_blob.read())
     replayed = loop.take_over(snapshot)
+    tail = snapshot is not None and handover.restore_tail(loop.physics, snapshot)
     log.info(
-        "generation %d took over in %.1f ms (%s, %s, %d input records replayed)",
+        "generation %d took over in %.1f ms (%s, %s, %d input records replayed, tail %s)",
         setup.generation,
         (time.perf_counter() - began) * 1000,
         "settings changed: loop rebuilt" if rebuilt else "same settings",
         "no snapshot" if snapshot is None else f"state of generation {snapshot.generation}",
         replayed,
+        "handed over" if tail else "from rest",
     )
     tick.serve(loop, warmed=True)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,24 @@ class TickFrames:
         assert a.rider is not None and b.rider is not None
         with np.errstate(invalid="ignore", over="ignore"):  # a non-finite drive is the stepper's to hold
             return Drive(a.horse + f * (b.horse - a.horse), a.rider + f * (b.rider - a.rider))
+
+
+@dataclass(frozen=True)
+class TailState:
+    """What a tick's strands are now, for the generation that takes over (``realtime/handover.py``):
+    the stepper's state and clock (physics seconds since ``start``, engine seconds), the two
+    tick frames it interpolates between, and the counts."""
+
+    start: float
+    stepper_start: float
+    steps: int
+    state: SkinnedState
+    last_good: Drive | None
+    frames: tuple[float, float, Drive | None, Drive | None]
+    values: tuple[float, ...]
+    errors: int
+    skipped_steps: int
+    bad_inputs: int
 
 
 class TickPhysics:
@@ -149,6 +168,41 @@ class TickPhysics:
             self.restart(now, drive)
             self.values = self._publish(self.stepper.state)
         return self.values
+
+    def capture(self) -> TailState | None:
+        """The strands' state now (None before the first tick)."""
+        stepper, frames = self.stepper, self.frames
+        if stepper is None:
+            return None
+        return TailState(
+            self.start,
+            stepper.start,
+            stepper.steps,
+            stepper.state,
+            stepper._last_good,
+            (frames.t0, frames.t1, frames.a, frames.b),
+            tuple(self.values),
+            self.errors,
+            self.skipped_steps,
+            stepper.bad_inputs,
+        )
+
+    def restore(self, tail: TailState) -> bool:
+        """Go on from ``tail`` (a dead generation's, same physics config): the next :meth:`tick`
+        steps on from there, interpolating from its last tick frame to the new one. False (and
+        nothing changed) when the state does not fit this model (another physics file)."""
+        if len(tail.values) != len(self.names):
+            return False
+        stepper = FixedStepper(
+            self.model.step, tail.state, self.config.rate, start=tail.stepper_start, max_catch_up=MAX_CATCH_UP
+        )
+        stepper.steps, stepper.bad_inputs, stepper._last_good = tail.steps, tail.bad_inputs, tail.last_good
+        self.stepper, self.start = stepper, tail.start
+        self.frames = TickFrames()
+        self.frames.t0, self.frames.t1, self.frames.a, self.frames.b = tail.frames
+        self.values = list(tail.values)
+        self.errors, self._skipped_before = tail.errors, tail.skipped_steps
+        return True
 
     @property
     def skipped_steps(self) -> int:

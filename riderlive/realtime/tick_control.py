@@ -187,6 +187,7 @@ class TickControl:
             self.phase.state,
             tuple(self.events),
             self.settings,
+            None if self.physics is None else self.physics.capture(),
         )
         self.handover_blob.write(handover.encode(snapshot))
 

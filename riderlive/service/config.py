@@ -30,10 +30,13 @@ class ServerSection(StrictModel):
     shutdown_timeout: float = pydantic.Field(default=5.0, gt=0.0, le=60.0)
     nice: int = pydantic.Field(default=0, ge=-20, le=19)
     """Scheduling niceness of the web process (negative needs privileges; falls back with a warning)."""
-    realtime_priority: int = pydantic.Field(default=0, ge=0, le=49)
+    realtime_priority: int = pydantic.Field(default=10, ge=0, le=49)
     """SCHED_FIFO priority of the web process, below the tick's 50 (0: off, normal scheduling).
-    On a busy machine this is what keeps ingest-to-send within a tick + 1 ms (docs/performance.md);
-    needs privileges (falls back with a warning); its children (the tick, the guardian) do not inherit it."""
+    On a busy machine this is what keeps ingest-to-send within a tick + 1 ms and a failover's
+    first frame within 50 ms (docs/performance.md). Where the host does not permit it (no root,
+    no rtprio limit) the web process runs at normal priority with a warning at start; its
+    children (the tick, the spare, the guardian) and its worker threads (bakes, uploads) do not
+    inherit it."""
     loop: Literal["auto", "asyncio", "uvloop"] = "auto"
     """The web process's event loop: ``auto`` is uvloop when installed (it is a dependency), else asyncio."""
 

@@ -8,6 +8,8 @@ unattended installations, at the risk that it moves with nobody watching.
 from __future__ import annotations
 
 import argparse
+import asyncio
+import concurrent.futures
 import math
 import os
 import socket
@@ -19,7 +21,7 @@ import uvicorn
 from riderlive.configfile import ConfigError, validate
 from riderlive.devices.latch import StopSource
 from riderlive.devices.registry import DeviceSpec
-from riderlive.realtime.pacing import try_realtime_priority
+from riderlive.realtime.pacing import normal_priority_thread, try_realtime_priority
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.hostcheck import Advice, advise, device_ports, gather
 from riderlive.service.runtime import Service
@@ -49,6 +51,15 @@ class RiderServer(uvicorn.Server):
     def __init__(self, config: uvicorn.Config, service: Service) -> None:
         super().__init__(config)
         self.service = service
+
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        """``asyncio.to_thread`` work (bakes, upload checks, recovering a take) at normal priority,
+        whatever the event loop's thread runs at (``server.realtime_priority``)."""
+        executor = concurrent.futures.ThreadPoolExecutor(
+            thread_name_prefix="riderlive-worker", initializer=normal_priority_thread
+        )
+        asyncio.get_running_loop().set_default_executor(executor)
+        await super().startup(sockets)
 
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
         await self.service.hub.goodbye("shutdown")

@@ -37,32 +37,29 @@ first heartbeat; from a failure until then the status says the tick is down and 
 device as the guardian reports it (``realtime/down.py``). ``/api/state`` (``supervision``)
 and ``/healthz`` say the rest.
 
-The supervisor also launches the guardian, restarts it if it dies, and answers the
-web side of e-stops (latch + wake) and of requests that want a reply (arm, disarm,
-reset, reload, tune).
+The supervisor also keeps the guardian and its standby (``service/guardians.py``) and
+answers the web side of e-stops and of requests that want a reply (``service/requests.py``).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import itertools
 import logging
 import multiprocessing
-import subprocess
+import os
 import time
 from collections.abc import Callable
 from typing import Any
 
-from riderlive.devices.board import guardian_watching
-from riderlive.devices.guardian import POLL_S, launch
 from riderlive.devices.latch import StopSource
-from riderlive.devices.lifecycle import Refusal
-from riderlive.devices.stall import HostClock
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink, exit_reason
 from riderlive.service import stall
 from riderlive.service.config import ServiceConfig
+from riderlive.service.guardians import Guardians
+from riderlive.service.requests import TickRequests
+from riderlive.service.spares import SpareKeeper
+from riderlive.service.watch import BeatWatch
 
 log = logging.getLogger(__name__)
 STABLE_S = 5.0
@@ -73,17 +70,15 @@ UNHEALTHY_AFTER_S = 60.0
 WARMUP_S, WARMUP_HANG_S = 3.0, 1.0
 """For its first seconds of ticking a tick may stall up to ``WARMUP_HANG_S`` (first calls
 of compiled kernels, page faults) without being taken for hung, unless a device moves."""
-GUARDIAN_START_S = 5.0
-"""Allowance for a guardian relaunched during a stop to start and finish it (its imports
-on a loaded host), on top of the park timeout."""
-STEAL_BASE_S = 0.02
-"""The steal baseline is taken at a new beat at most this often (it may then count up to this
-much steal from before the beat: lenient by that, at ~50 us a read)."""
-SPARE_RETRY_S = 2.0
-"""After a spare failed, the next is started this long later (doubling per failure in a row, up to 60 s)."""
 OWN_FAILURES = ("exit", "SIGSEGV", "SIGABRT", "SIGBUS", "SIGFPE", "SIGILL")
 """Exit reasons that are the tick's own failure (not a kill from outside): at start they drop the applied settings."""
-_ids = itertools.count(1)
+
+
+def web_priority() -> int:
+    """This (the web) process's SCHED_FIFO priority now; 0: normal scheduling."""
+    if not hasattr(os, "sched_getscheduler") or os.sched_getscheduler(0) & 0xFF != os.SCHED_FIFO:
+        return 0
+    return int(os.sched_getparam(0).sched_priority)
 
 
 class TickSupervisor:
@@ -104,8 +99,6 @@ class TickSupervisor:
         self.on_setup_dropped = on_setup_dropped
         """Called when a restart falls back to the configured settings (the service resets what it reports)."""
         self.setups_dropped = 0
-        self.beats_unread = 0
-        """Heartbeat reads of 0 after the generation's first beat (should stay 0; see ``_watch``)."""
         self.period = 1.0 / config.tick.rate
         self.hang_s = (config.tick.hang_ticks - 1.0) * self.period
         self.device_wait_s = max((d.longest_wait_s for d in link.setup.devices), default=0.0)
@@ -125,31 +118,19 @@ class TickSupervisor:
         """Seconds from the last failure to the next generation's first heartbeat."""
         self.started_at = time.perf_counter()
         self._first_beat: float | None = None
-        self._last_beat = 0.0
-        """When the last heartbeat seen was written (perf_counter s)."""
-        self._beat_value = 0.0
-        self._at_beat: stall.Sched | None = None
-        self._progress: tuple[float, float, float] = (0.0, -1.0, -1.0)
-        """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
-        self._stalled = False
-        self._host = HostClock()
-        self._steal_base: tuple[float, tuple[float, ...]] = (0.0, ())
-        """When and what the CPUs' steal was, taken at most every ``STEAL_BASE_S`` at a new beat."""
+        self.watch = BeatWatch(self.period, self.started_at)
         self.down_since: float | None = None
+        self.promoted_at: float | None = None
+        """When the next generation was last told to take over (perf_counter s)."""
         self.last_down_at: float | None = None
         """When the tick was last found dead or hung (perf_counter s; kept after the restart)."""
         self._streak = 0
         self._recovery: asyncio.Task[None] | None = None
         self._watch_task: asyncio.Task[None] | None = None
         self._bound: list[int] = []
-        self._pending: dict[int, asyncio.Future[cmd.Reply]] = {}
-        self.guardian: subprocess.Popen[bytes] | None = None
-        self.standby: subprocess.Popen[bytes] | None = None
-        """A standby guardian: becomes the guardian the moment it is gone (guardian.py)."""
-        self.guardian_restarts = 0
-        self._guardian_launched_at = 0.0
-        self._spare_failures = 0
-        self._spare_next_at = 0.0
+        self.tick_requests = TickRequests(link, lambda: self._recovery is not None, lambda: self.last_exit)
+        self.guardians = Guardians(link.board, link.latch.name, link.setup, config)
+        self.spares = SpareKeeper(link)
 
     @property
     def supervised(self) -> bool:
@@ -164,7 +145,7 @@ class TickSupervisor:
     async def start(self) -> None:
         self._bind()
         if self.guardian_wanted:
-            self._start_guardians()
+            self.guardians.start()
         self._watch_task = asyncio.get_running_loop().create_task(self._watch())
 
     async def stop(self) -> None:
@@ -175,21 +156,10 @@ class TickSupervisor:
                 task.cancel()
         self._unbind()
 
-    def stop_guardian(self) -> None:
-        """After the tick has stopped (its devices are closed): the guardian may go."""
-        self.link.board["shutdown"] = 1.0
-        for guardian in (self.guardian, self.standby):
-            if guardian is not None:
-                try:
-                    guardian.wait(2.0)
-                except subprocess.TimeoutExpired:
-                    guardian.kill()
-                    guardian.wait(2.0)
-
     def _bind(self) -> None:
         loop = asyncio.get_running_loop()
         loop.add_reader(self.link.notify_fd, self.on_tick)
-        loop.add_reader(self.link.commands_fd, self._on_replies)
+        loop.add_reader(self.link.commands_fd, self.tick_requests.on_replies)
         self._bound = [self.link.notify_fd, self.link.commands_fd]
         sentinel = self.link.sentinel
         if sentinel is not None:
@@ -244,60 +214,25 @@ class TickSupervisor:
                 self._check_tick(now, woke_late)
             if self._first_beat is not None and now - self._first_beat > STABLE_S:
                 self._streak = 0
-            self._check_spare(now)
-            self._check_guardian(now)
+            self.spares.check(now, self.up and self._recovery is None)
+            if not self.stopping:
+                self.guardians.check(now)
 
     def _check_tick(self, now: float, woke_late: float) -> None:
-        """One look at the tick: its first heartbeat, a hang, a stall (``service/stall.py``)."""
-        link = self.link
-        beat = link.board["tick_beat"]
-        pid = int(link.board["tick_pid"])
-        sched = stall.read_sched(pid) if pid else None
-        age: float | None = None
-        if beat:
-            age = max(0.0, now - beat)
-            if beat != self._beat_value:
-                self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
-                self._stalled = False
-                if now - self._steal_base[0] > STEAL_BASE_S:
-                    self._steal_base = (now, self._host.steal_s())
-            if self._first_beat is None:
-                self._on_first_beat(now)
-        elif self._first_beat is not None:
-            # A generation that has beaten never reads "no beat" again (only a promotion clears
-            # it), yet one CI run restarted a ticking tick as "never started": counted, and the
-            # age is taken from the last beat seen (a hang still shows).
-            self.beats_unread += 1
-            age = now - self._last_beat
-        if age is None and sched is not None:
-            _, cpu, wait = self._progress
-            if sched.process_cpu > cpu or sched.wait > wait:
-                self._progress = (now, sched.process_cpu, sched.wait)
-        stolen = 0.0
-        if age is not None and age > self.period * 2:  # only a late beat pays the read (~50 us)
-            base = self._steal_base[1]
-            stolen = max((b - a for a, b in zip(base, self._host.steal_s(), strict=False)), default=0.0)
-        guardian_beat = link.board["guardian_beat"] if self.guardian is not None else 0.0
-        others = max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0
-        observation = stall.Observation(
-            now=now,
-            woke_late=woke_late,
-            beat_age=age,
-            since_start=now - self.started_at,
-            at_beat=self._at_beat,
-            sched=sched,
-            others_stall=others,
-            stolen=max(0.0, stolen),
-            progress_age=now - self._progress[0],
-        )
+        """One look at the tick (``service/watch.py``): its first heartbeat, a hang, a stall (``service/stall.py``)."""
+        link, watch = self.link, self.watch
+        guardian_beat = link.board["guardian_beat"] if self.guardians.guardian is not None else 0.0
+        observation = watch.observe(now, woke_late, link.board["tick_beat"], int(link.board["tick_pid"]), guardian_beat)
+        if watch.beaten and self._first_beat is None:
+            self._on_first_beat(now)
         finding = stall.classify(stall.Model(self.hang_threshold()), observation)
         if finding.verdict is stall.Verdict.DYING or not link.alive():
             self._on_exit()  # killed or exiting, its sentinel not readable yet: a death, not a hang
         elif finding.verdict in (stall.Verdict.HUNG, stall.Verdict.NEVER_STARTED):
             self.hangs += 1
             self._begin_recovery(finding.why)
-        elif finding.verdict is stall.Verdict.STALLED and not self._stalled:
-            self._stalled = True  # one count per gap
+        elif finding.verdict is stall.Verdict.STALLED and not watch.stalled:
+            watch.stalled = True  # one count per gap
             self.stalls += 1
             self.stall_excused_max = max(self.stall_excused_max, finding.excused)
             log.info("the tick is late, not hung: %s", finding.why)
@@ -314,28 +249,7 @@ class TickSupervisor:
             )
         self.down_since = None
         self.publish_status({**self.link.status(), "tick_up": True, "restarting": False})
-        self._spare_next_at = now
-
-    def _check_spare(self, now: float) -> None:
-        """Keep a spare beside a serving tick (none while starting: it would take its CPU)."""
-        link = self.link
-        if not self.up or not link.spares_wanted or now < self._spare_next_at or self._recovery is not None:
-            return
-        spare = link.spare
-        if spare is not None:
-            spare.poll()
-            if spare.failed is None and spare.process.is_alive():
-                if spare.warm is not None:
-                    self._spare_failures = 0
-                return
-            log.error("the spare tick %s: starting another", spare.failed or f"exited ({spare.process.exitcode})")
-            self._spare_failures += 1
-            link.spares_failed += 1
-            spare.discard()
-            link.spare = None
-            self._spare_next_at = now + min(SPARE_RETRY_S * 2 ** (self._spare_failures - 1), 60.0)
-            return
-        link.start_spare()
+        self.spares.next_at = now
 
     def hang_threshold(self) -> float:
         """Seconds without a heartbeat that make a tick hung (see the module docstring)."""
@@ -343,8 +257,7 @@ class TickSupervisor:
         realtime = self.link.counters.values[self.link.counters.index["realtime"]] == 1.0
         floor = tick.hang_floor_realtime if realtime else tick.hang_floor
         threshold = max(self.hang_s + self.device_wait_s, floor)
-        spare = self.link.spare
-        if self.link.spares_wanted and (spare is None or spare.warm is None):
+        if not self.spares.warm():
             # No warm spare: a failover would be a cold start (seconds on a busy host), dearer
             # than most stalls; a moving device is the guardian's (``guardian.tick_timeout``).
             threshold = max(threshold, tick.hang_floor)
@@ -370,9 +283,7 @@ class TickSupervisor:
         log.critical("the tick %s: its devices are being stopped; failing over", why)
         self.link.mark_down(why)
         self.publish_status({**self.link.status(), "restarting": True})
-        for future in self._pending.values():
-            if not future.done():
-                future.set_result(cmd.Reply(0, False, {}, Refusal.TICK_DOWN.value, f"the tick {why}"))
+        self.tick_requests.fail_all(f"the tick {why}")
         self._recovery = asyncio.get_running_loop().create_task(self._recover(died))
 
     async def _recover(self, died: bool) -> None:
@@ -382,7 +293,7 @@ class TickSupervisor:
             link.kill()  # SIGKILL: it runs none of its code once that returns (reaped later)
         if died:
             await self._drop_settings_if_they_killed_it()
-        await self._wait_for_guardian(link.generation)
+        await self.guardians.wait_for_stop(link.generation)
         if self._streak:  # failures in a row: back off (a first failure costs none)
             await asyncio.sleep(min(self.config.tick.restart_backoff * 2 ** (self._streak - 1), MAX_BACKOFF_S))
         self._streak += 1
@@ -390,13 +301,12 @@ class TickSupervisor:
             return
         dead = link.process
         warm = link.promote()
+        self.promoted_at = time.perf_counter()
         self._bind()
         self.restarts += 1
         self.started_at = time.perf_counter()
         self._first_beat = None
-        self._beat_value = 0.0
-        self._at_beat = None
-        self._progress = (self.started_at, -1.0, -1.0)
+        self.watch.reset(self.started_at)
         self._recovery = None
         log.warning(
             "tick generation %d started from %s: devices connect and stay disarmed",
@@ -413,98 +323,19 @@ class TickSupervisor:
             if dead.exitcode is not None:
                 self.last_exit = f"died ({exit_reason(dead.exitcode)})"
 
-    async def _wait_for_guardian(self, generation: int) -> None:
-        """Until the guardian has stopped that generation's devices (bounded)."""
-        if self.guardian is None:
-            return
-        board = self.link.board
-        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0 + GUARDIAN_START_S
-        while time.perf_counter() < deadline:  # a guardian that dies meanwhile is relaunched and goes on
-            if board["guardian_done"] >= generation:
-                return
-            await asyncio.sleep(0.01)
-        log.error("the guardian did not report the stop of generation %d in time", generation)
-
-    # -- the guardian --------------------------------------------------------------------
-
-    def _launch_guardian(self, standby_after: int = 0) -> subprocess.Popen[bytes]:
-        link, guardian = self.link, self.config.guardian
-        return launch(
-            link.board.name,
-            link.latch.name,
-            link.setup.devices,
-            guardian.tick_timeout,
-            guardian.web_timeout,
-            give_up_s=guardian.give_up,
-            standby_after=standby_after,
-        )
-
-    def _start_guardians(self) -> None:
-        """The guardian, and a standby (imports paid, plugs built) that becomes the guardian
-        within a few ms of its death: a relaunch would take a Python start and the imports."""
-        self.guardian = self._launch_guardian()
-        self._guardian_launched_at = time.perf_counter()
-        self.standby = self._launch_guardian(standby_after=self.guardian.pid)
-
-    def _check_guardian(self, now: float) -> None:
-        """The guardian gone: its standby has taken over (or it is relaunched); a new standby
-        follows (at most one launch a second)."""
-        if self.guardian is None or self.stopping:
-            return
-        if self.guardian.poll() is not None:
-            code = self.guardian.returncode
-            if self.standby is not None and self.standby.poll() is None:
-                log.critical("the guardian exited (%s): its standby %d takes over", code, self.standby.pid)
-                self.guardian, self.standby = self.standby, None
-            elif now - self._guardian_launched_at >= 1.0:
-                log.critical("the guardian exited (%s), no standby: relaunching it; arming is refused", code)
-                self.link.board["guardian_ready"] = 0.0
-                self.guardian, self.standby = self._launch_guardian(), None
-                self._guardian_launched_at = now
-            else:
-                return
-            self.guardian_restarts += 1
-        if (self.standby is None or self.standby.poll() is not None) and now - self._guardian_launched_at >= 1.0:
-            self.standby = self._launch_guardian(standby_after=self.guardian.pid)
-            self._guardian_launched_at = now
-
-    def guardian_alive(self) -> bool:
-        """Ready, its process alive, its heartbeat fresh (the tick's own test: board.guardian_watching)."""
-        return guardian_watching(self.link.board, time.perf_counter()) is None
-
-    # -- e-stop and requests -------------------------------------------------------------
+    # -- e-stop and requests (``service/requests.py``) ------------------------------------
 
     def estop(self, source: StopSource) -> float:
         """Latch an e-stop (shared memory, at once) and wake the tick; the request time."""
-        at = self.link.latch.request(source)
-        with contextlib.suppress(OSError, ValueError):  # a tick that is down: the latch holds,
-            self.link.send(cmd.EStop())  # and the next one starts in estop
-        return at
+        return self.tick_requests.estop(source)
 
     async def ask(self, build: Callable[[int], cmd.Request], timeout: float = 2.0) -> cmd.Reply:
-        """Send a request to the tick and wait for its reply."""
-        if self._recovery is not None or self.link.down_reason is not None:
-            return cmd.Reply(0, False, {}, Refusal.TICK_DOWN.value, f"the tick is restarting ({self.last_exit})")
-        request = next(_ids)
-        future: asyncio.Future[cmd.Reply] = asyncio.get_running_loop().create_future()
-        self._pending[request] = future
-        try:
-            command = build(request)
-            self.link.send(command)
-            reply = await asyncio.wait_for(future, timeout)
-            if reply.ok and isinstance(command, cmd.Tune):  # a run-time setting: the next generation keeps it
-                self.link.keep_tune(command.device, command.changes)
-            return reply
-        except (TimeoutError, OSError, ValueError):
-            return cmd.Reply(request, False, {}, Refusal.TICK_DOWN.value, f"the tick did not answer in {timeout:g} s")
-        finally:
-            self._pending.pop(request, None)
+        """Send a request to the tick and wait for its reply (a ``tick_down`` refusal if it cannot)."""
+        return await self.tick_requests.ask(build, timeout)
 
-    def _on_replies(self) -> None:
-        for reply in self.link.replies():
-            future = self._pending.get(reply.request)
-            if future is not None and not future.done():
-                future.set_result(reply)
+    def stop_guardian(self) -> None:
+        """After the tick has stopped (its devices are closed): the guardian may go."""
+        self.guardians.stop()
 
     # -- reporting -----------------------------------------------------------------------
 
@@ -516,16 +347,6 @@ class TickSupervisor:
     def live(self) -> bool:
         """Not stuck: the tick is up, or has been down for less than ``UNHEALTHY_AFTER_S``."""
         return self.down_since is None or time.perf_counter() - self.down_since < UNHEALTHY_AFTER_S
-
-    def _spare_snapshot(self) -> dict[str, Any]:
-        link, spare = self.link, self.link.spare
-        return {
-            "state": "none" if spare is None else "warm" if spare.warm is not None else "warming",
-            "pid": None if spare is None else spare.process.pid,
-            "warm_up_s": None if spare is None or spare.warm is None else spare.warm.wall_s,
-            "started": link.spares_started,
-            "failed": link.spares_failed,
-        }
 
     def snapshot(self) -> dict[str, Any]:
         board = self.link.board
@@ -541,20 +362,14 @@ class TickSupervisor:
             "takeovers": self.link.takeovers,
             "last_outage": self.last_outage,
             "hang_threshold": self.hang_threshold(),
-            "spare": self._spare_snapshot(),
+            "spare": self.spares.snapshot(),
             "setups_dropped": self.setups_dropped,
-            "beats_unread": self.beats_unread,
+            "beats_unread": self.watch.beats_unread,
             "last_exit": self.last_exit,
             "down_for": None if self.down_since is None else time.perf_counter() - self.down_since,
             "down_since": self.down_since,
             "last_down_at": self.last_down_at,
-            "guardian": {
-                "enabled": self.guardian_wanted,
-                "alive": self.guardian_alive() if self.guardian is not None else False,
-                "pid": None if self.guardian is None else self.guardian.pid,
-                "standby_pid": None if self.standby is None or self.standby.poll() is not None else self.standby.pid,
-                "standby_ready": self.standby is not None and board["guardian_standby"] == self.standby.pid,
-                "restarts": self.guardian_restarts,
-                "takeovers": int(board["guardian_takeovers"]),
-            },
+            "promoted_at": self.promoted_at,
+            "web_priority": web_priority(),
+            "guardian": self.guardians.snapshot(self.guardian_wanted),
         }

@@ -1,0 +1,82 @@
+"""What the supervisor sees of the serving tick at each look: an :class:`~riderlive.service.stall.Observation`.
+
+The heartbeat on the safety board, the tick's scheduling from ``/proc`` (CPU time, run-queue
+wait, being torn down), the CPUs' steal since the last beat and the guardian's heartbeat;
+``service/stall.py`` classifies it (pure), the supervisor acts on the verdict.
+"""
+
+from __future__ import annotations
+
+from riderlive.devices.guardian import POLL_S
+from riderlive.devices.stall import HostClock
+from riderlive.service import stall
+
+STEAL_BASE_S = 0.02
+"""The steal baseline is taken at a new beat at most this often (it may then count up to this
+much steal from before the beat: lenient by that, at ~50 us a read)."""
+
+
+class BeatWatch:
+    """One generation's heartbeat as seen by the supervisor (:meth:`reset` at each new generation)."""
+
+    def __init__(self, period: float, started_at: float) -> None:
+        self.period = period
+        """The tick's period (s): only a beat older than two of them pays for reading the steal."""
+        self.beats_unread = 0
+        """Heartbeat reads of 0 after the generation's first beat (should stay 0; see :meth:`observe`)."""
+        self._host = HostClock()
+        self._steal_base: tuple[float, tuple[float, ...]] = (0.0, ())
+        """When and what the CPUs' steal was, taken at most every ``STEAL_BASE_S`` at a new beat."""
+        self.reset(started_at)
+
+    def reset(self, started_at: float) -> None:
+        """A new generation, started at ``started_at`` (perf_counter s)."""
+        self.started_at = started_at
+        self.beaten = False
+        self._last_beat = 0.0
+        """When the last heartbeat seen was written (perf_counter s)."""
+        self._beat_value = 0.0
+        self._at_beat: stall.Sched | None = None
+        self._progress: tuple[float, float, float] = (started_at, -1.0, -1.0)
+        """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
+        self.stalled = False
+        """The present gap has been counted as a stall (one count per gap)."""
+
+    def observe(self, now: float, woke_late: float, beat: float, pid: int, guardian_beat: float) -> stall.Observation:
+        """One look at ``now``: ``beat`` the board's heartbeat (0: none yet), ``pid`` the tick's,
+        ``guardian_beat`` the guardian's (0: no guardian). Sets :attr:`beaten` at the first beat."""
+        sched = stall.read_sched(pid) if pid else None
+        age: float | None = None
+        if beat:
+            age = max(0.0, now - beat)
+            if beat != self._beat_value:
+                self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
+                self.stalled = False
+                if now - self._steal_base[0] > STEAL_BASE_S:
+                    self._steal_base = (now, self._host.steal_s())
+            self.beaten = True
+        elif self.beaten:
+            # A generation that has beaten never reads "no beat" again (only a promotion clears
+            # it), yet one CI run restarted a ticking tick as "never started": counted, and the
+            # age is taken from the last beat seen (a hang still shows).
+            self.beats_unread += 1
+            age = now - self._last_beat
+        if age is None and sched is not None:
+            _, cpu, wait = self._progress
+            if sched.process_cpu > cpu or sched.wait > wait:
+                self._progress = (now, sched.process_cpu, sched.wait)
+        stolen = 0.0
+        if age is not None and age > self.period * 2:  # only a late beat pays the read (~50 us)
+            base = self._steal_base[1]
+            stolen = max((b - a for a, b in zip(base, self._host.steal_s(), strict=False)), default=0.0)
+        return stall.Observation(
+            now=now,
+            woke_late=woke_late,
+            beat_age=age,
+            since_start=now - self.started_at,
+            at_beat=self._at_beat,
+            sched=sched,
+            others_stall=max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0,
+            stolen=max(0.0, stolen),
+            progress_age=now - self._progress[0],
+        )
