@@ -26,7 +26,8 @@ import logging
 import sys
 import time
 from collections import Counter
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 import pydantic
 from fastapi import FastAPI, HTTPException, Request
@@ -43,7 +44,9 @@ from riderlive.service.estop_first import EStopFirst, stamps
 from riderlive.tickframe import computed_parts
 
 if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
+    from riderlive.realtime.link import TickLink
+    from riderlive.service.metrics import ServiceMetrics
+    from riderlive.service.supervisor import TickSupervisor
 
 log = logging.getLogger(__name__)
 NAME = pydantic.Field(pattern=NAME_PATTERN)
@@ -101,7 +104,31 @@ class DeviceMetrics:
         """E-stop requests by (source label, authorized: with the token or where none is needed)."""
 
 
-def add_device_routes(app: FastAPI, service: Service) -> None:
+class DevicesPort(Protocol):
+    """What the device routes and their metrics use of the service (``runtime.Service``)."""
+
+    device_metrics: DeviceMetrics
+    """Set by :func:`add_device_routes`."""
+
+    @property
+    def config(self) -> ServiceConfig: ...
+
+    @property
+    def metrics(self) -> ServiceMetrics: ...
+
+    @property
+    def link(self) -> TickLink: ...
+
+    @property
+    def supervisor(self) -> TickSupervisor: ...
+
+    @property
+    def arm_checks(self) -> list[Callable[[], str | None]]:
+        """Each may refuse an arm with a reason (e.g. no stage heartbeat: ``bus.rig``)."""
+        ...
+
+
+def add_device_routes(app: FastAPI, service: DevicesPort) -> None:
     config = service.config
     counts = DeviceMetrics()
     service.device_metrics = counts
@@ -201,7 +228,7 @@ def _escape(value: str) -> str:
     return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
 
 
-def render_device_metrics(service: Service) -> str:
+def render_device_metrics(service: DevicesPort) -> str:
     """Prometheus text: supervision, guardian, each device's state and counters, refusals."""
     sup = service.supervisor.snapshot()
     out: list[str] = []

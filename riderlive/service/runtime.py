@@ -118,7 +118,8 @@ class Service:
         """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
         self.vmc = None
         if config.vmc.target is not None:
-            from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
+            # raises VmcError: a host that does not resolve, a port in use
+            from riderlive.service.vmc_out import VmcSender
 
             self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
             self.vmc.timecode = lambda record: self.timecode.of_record(record).label

@@ -13,10 +13,10 @@ import pytest
 from riderlive.horse import DEFAULT_SCALE
 from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
-from riderlive.vmc.sender import OUTCOMES, VmcSender
+from riderlive.service.vmc_out import OUTCOMES, VmcSender
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
-from tests.vmc.test_sender import _records
+from tests.service.test_vmc_out import _records
 
 pytest.importorskip("pythonosc")
 from tests.vmc.receiver import VmcReceiver

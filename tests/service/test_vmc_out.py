@@ -16,8 +16,8 @@ from riderlive.realtime import layout as L
 from riderlive.rules import RiderModel
 from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
+from riderlive.service.vmc_out import VmcError, VmcSender
 from riderlive.skeleton import HORSE_RIG, HUMANOID
-from riderlive.vmc.sender import VmcError, VmcSender
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 
