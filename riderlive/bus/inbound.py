@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import orjson
 import pydantic
@@ -42,12 +42,7 @@ from riderlive.service import auth
 from riderlive.service.codecs import BadFrame, parse_message
 from riderlive.service.devices_api import AnyDeviceRequest, DeviceRequest
 from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
-
-if TYPE_CHECKING:
-    from riderlive.realtime.link import TickLink
-    from riderlive.service.config import ServiceConfig
-    from riderlive.service.metrics import ServiceMetrics
-    from riderlive.service.supervisor import TickSupervisor
+from riderlive.service.ports import ControlPort
 
 log = logging.getLogger(__name__)
 ARMING = frozenset({"arm", "reset", "reload"})
@@ -72,20 +67,8 @@ def parse_payload(data: bytes, max_bytes: int) -> dict[str, Any]:
     return parse_message(data, max_bytes)
 
 
-class InboundPort(Protocol):
+class InboundPort(ControlPort, Protocol):
     """What NATS producers and control use of the service (``runtime.Service``)."""
-
-    @property
-    def config(self) -> ServiceConfig: ...
-
-    @property
-    def metrics(self) -> ServiceMetrics: ...
-
-    @property
-    def link(self) -> TickLink: ...
-
-    @property
-    def supervisor(self) -> TickSupervisor: ...
 
     @property
     def arbiter(self) -> Arbiter: ...

@@ -73,9 +73,6 @@ class RigPort(InboundPort, Protocol):
         """Called with each batch of tick records."""
         ...
 
-    @property
-    def arm_checks(self) -> list[Callable[[], str | None]]: ...
-
 log = logging.getLogger(__name__)
 QUEUE_SECONDS = 0.25
 """Records waiting for the broker beyond this age are dropped (as ``hub.CATCH_UP``)."""

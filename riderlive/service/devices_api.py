@@ -26,8 +26,7 @@ import logging
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import pydantic
 from fastapi import FastAPI, HTTPException, Request
@@ -41,12 +40,8 @@ from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.estop_first import EStopFirst, stamps
+from riderlive.service.ports import ControlPort
 from riderlive.tickframe import computed_parts
-
-if TYPE_CHECKING:
-    from riderlive.realtime.link import TickLink
-    from riderlive.service.metrics import ServiceMetrics
-    from riderlive.service.supervisor import TickSupervisor
 
 log = logging.getLogger(__name__)
 NAME = pydantic.Field(pattern=NAME_PATTERN)
@@ -104,28 +99,11 @@ class DeviceMetrics:
         """E-stop requests by (source label, authorized: with the token or where none is needed)."""
 
 
-class DevicesPort(Protocol):
+class DevicesPort(ControlPort, Protocol):
     """What the device routes and their metrics use of the service (``runtime.Service``)."""
 
     device_metrics: DeviceMetrics
     """Set by :func:`add_device_routes`."""
-
-    @property
-    def config(self) -> ServiceConfig: ...
-
-    @property
-    def metrics(self) -> ServiceMetrics: ...
-
-    @property
-    def link(self) -> TickLink: ...
-
-    @property
-    def supervisor(self) -> TickSupervisor: ...
-
-    @property
-    def arm_checks(self) -> list[Callable[[], str | None]]:
-        """Each may refuse an arm with a reason (e.g. no stage heartbeat: ``bus.rig``)."""
-        ...
 
 
 def add_device_routes(app: FastAPI, service: DevicesPort) -> None:
