@@ -4,6 +4,7 @@ no import from a lower layer to a higher one (the layers of docs/architecture.md
 from __future__ import annotations
 
 import ast
+from functools import cache
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "riderlive"
@@ -46,8 +47,10 @@ def modules() -> dict[str, Path]:
     return out
 
 
+@cache
 def graph() -> dict[str, set[str]]:
-    """Module -> the riderlive modules it imports (``from pkg import sub`` is an import of ``pkg.sub``)."""
+    """Module -> the riderlive modules it imports (``from pkg import sub`` is an import of ``pkg.sub``);
+    parsed once per run (the tests only read it)."""
     mods = modules()
 
     def resolve(name: str) -> str | None:
