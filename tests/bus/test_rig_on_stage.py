@@ -31,6 +31,7 @@ from tests.bus.harness import AUTH, RIG_TICK, TOKEN, NatsProbe, start_rig, wait_
 from tests.bus.harness import TOKEN_CONFIG as CONFIG
 from tests.service.live_server import ROOT, LiveServer
 from tests.service.producers import Producer
+from tests.waiting import Pacer
 
 STAGE = Stage("A")
 RIG = STAGE.rig("r1")
@@ -113,12 +114,12 @@ def test_nats_and_websocket_producers_share_one_arbiter(rig: LiveServer, probe: 
 
     def feed() -> None:
         probe.call(probe.transport.publish(subject, orjson.dumps({"type": "hello", "token": TOKEN}), inbox))
-        n = 0
+        n, pacer = 0, Pacer(0.01)
         while not stop.is_set():
             n += 1
             body = {"t": time.time(), **horse(0.25)}
             probe.call(probe.transport.publish(subject, msgpack.packb(body), inbox))
-            time.sleep(0.01)
+            pacer.wait()
 
     thread = threading.Thread(target=feed, daemon=True)
     thread.start()
