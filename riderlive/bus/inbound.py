@@ -39,9 +39,10 @@ from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
+from riderlive.service.arbiter import Arbiter, Producer, next_producer_id
 from riderlive.service.codecs import BadFrame, parse_message
 from riderlive.service.devices_api import AnyDeviceRequest, DeviceRequest
-from riderlive.service.ingest import Arbiter, IngestEndpoint, Producer, next_producer_id
+from riderlive.service.ingest import IngestEndpoint
 from riderlive.service.ports import ControlPort
 
 log = logging.getLogger(__name__)

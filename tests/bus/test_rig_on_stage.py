@@ -261,7 +261,7 @@ def _metric_in(live: LiveServer, name: str) -> float:
 def test_the_python_client_follows_a_rig_over_nats(rig: LiveServer, broker: Broker) -> None:
     import asyncio
 
-    from riderlive.client import NatsRiderSubscriber
+    from riderlive.bus.subscriber import NatsRiderSubscriber
 
     async def take(n: int) -> list:
         subscriber = NatsRiderSubscriber(broker.url, stage="A", rig="r1")
