@@ -10,10 +10,7 @@ Stream horse frames in::
     async with HorseProducer("ws://127.0.0.1:8000", name="mocap") as horse:
         await horse.send(t, {"rearPivot.rz": 2.0})
 
-Or follow a rig on a stage over NATS (``pip install riderlive[nats]``; docs/deployment.md)::
-
-    async for frame in NatsRiderSubscriber("nats://stage-host:4222", stage="A", rig="r1").frames():
-        print(frame.seq, frame.values["head.rz"], frame.horse["root.ty"])
+Or follow a rig on a stage over NATS: :class:`riderlive.bus.subscriber.NatsRiderSubscriber`.
 
 Both reconnect with a capped exponential backoff when the service goes away;
 ``RiderSubscriber.restarted`` tells a reconnect to the same server (same session)
@@ -37,7 +34,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 _DECODE: list[Callable[[bytes], dict[str, Any]]] = []
 
 
-def _load_codecs() -> Callable[[bytes], dict[str, Any]]:
+def load_codecs() -> Callable[[bytes], dict[str, Any]]:
     """:func:`riderlive.service.codecs.decode_binary_frame`, imported when a subscriber is made, not
     with this module (the codecs pull in NumPy, pydantic and the horse model: seconds on a busy host):
     a tool that only probes or sends says a service is unreachable without waiting for them, and a
@@ -66,7 +63,7 @@ def time_left(timeout: float, least: float = 0.5) -> float:
 
 def decode_binary_frame(message: bytes) -> dict[str, Any]:
     """One binary ``/ws/rider`` frame (:func:`riderlive.service.codecs.decode_binary_frame`)."""
-    return _load_codecs()(message)
+    return load_codecs()(message)
 
 
 log = logging.getLogger(__name__)
@@ -175,7 +172,7 @@ class RiderSubscriber:
         self._horse_names: list[str] = []
         self._subscribed = False
         self._closed = False
-        _load_codecs()
+        load_codecs()
 
     def close(self) -> None:
         self._closed = True
@@ -330,92 +327,3 @@ class HorseProducer:
             self._ws = None
         if self._reader is not None:
             self._reader.cancel()
-
-
-class NatsRiderSubscriber:
-    """Follows one rig's ``riderlive.v1.<stage>.<rig>.frame`` subject over NATS.
-
-    Every frame carries all rider and horse channels. Channel names come from the rig's
-    status (``state`` request, retried until the rig answers). Latest-only: when the
-    caller is slower than the rig, older frames are dropped (counted in ``dropped``). The
-    NATS connection reconnects by itself; ``restarted`` is set when the rig's session changed.
-    """
-
-    def __init__(
-        self,
-        url: str,
-        *,
-        stage: str,
-        rig: str,
-        user: str | None = None,
-        password: str | None = None,
-        creds: str | None = None,
-        queue: int = 4,
-    ) -> None:
-        from riderlive.bus.subjects import Stage
-
-        _load_codecs()
-        self.url = url
-        self.subjects = Stage(stage).rig(rig)
-        self.credentials = (user, password, creds)
-        self.queue_size = queue
-        self.status: dict[str, Any] = {}
-        self.dropped = 0
-        self.restarted = False
-        self._closed = False
-
-    def close(self) -> None:
-        self._closed = True
-
-    async def frames(self) -> AsyncIterator[RiderFrame]:
-        """Rider frames until :meth:`close`."""
-        import orjson
-
-        from riderlive.bus.nats import Credentials, connect
-        from riderlive.bus.subjects import Kind
-        from riderlive.bus.transport import Message, NoResponders
-        from riderlive.channels import HORSE_NAMES
-
-        user, password, creds = self.credentials
-        transport = await connect(self.url, Credentials(user=user, password=password, creds=creds), "riderlive client")
-        queue: asyncio.Queue[bytes] = asyncio.Queue(self.queue_size)
-
-        async def on_frame(msg: Message) -> None:
-            if queue.full():
-                queue.get_nowait()
-                self.dropped += 1
-            queue.put_nowait(msg.data)
-
-        async def on_status(msg: Message) -> None:
-            status = orjson.loads(msg.data)
-            self.restarted = self.restarted or (
-                bool(self.status) and status.get("session") != self.status.get("session")
-            )
-            self.status = status
-
-        try:
-            while not self.status and not self._closed:
-                try:
-                    state = await transport.request(self.subjects.subject(Kind.CONTROL), b'{"action":"state"}', 2.0)
-                    self.status = orjson.loads(state)
-                except (NoResponders, TimeoutError):
-                    await asyncio.sleep(0.5)
-            await transport.subscribe(self.subjects.subject(Kind.STATUS), on_status, 16)
-            await transport.subscribe(self.subjects.subject(Kind.FRAME), on_frame, 1024)
-            while not self._closed:
-                try:
-                    data = await asyncio.wait_for(queue.get(), 0.5)
-                except TimeoutError:
-                    continue
-                obj = decode_binary_frame(data) if data[:4] == b"RLF1" else json.loads(data)
-                names = self.status.get("channels", [])
-                yield RiderFrame(
-                    seq=obj["seq"],
-                    t=obj["t"],
-                    source_t=obj["source_t"],
-                    driver=obj["driver"],
-                    values=dict(zip(names, obj["values"], strict=False)),
-                    horse=dict(zip(HORSE_NAMES, obj.get("horse", []), strict=False)),
-                )
-        finally:
-            await transport.close()

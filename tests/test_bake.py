@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import subprocess
 import sys
@@ -17,9 +19,24 @@ from riderlive.rules.params import load_preset
 
 
 def run_cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess[str]:
+    """``riderlive ARGS`` as a process (the stdin/stdout and file-mode tests: the real wiring)."""
     return subprocess.run(
         [sys.executable, "-m", "riderlive", *args], input=stdin, capture_output=True, text=True, timeout=120
     )
+
+
+def run_main(*args: str) -> subprocess.CompletedProcess[str]:
+    """``riderlive ARGS`` in this process: the same ``cli.main`` without a Python start and its
+    imports per call (~2 s quiet, 15 s loaded); the exit code argparse raises is returned."""
+    from riderlive.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def horse_take(n: int = 50, seed: int = 0) -> np.ndarray:
@@ -45,7 +62,7 @@ def test_csv_bake_equals_the_engine(tmp_path: Path) -> None:
     horse = horse_take()
     src, out = tmp_path / "horse.csv", tmp_path / "rider.csv"
     write_csv(src, horse)
-    result = run_cli("bake", str(src), "-o", str(out))
+    result = run_main("bake", str(src), "-o", str(out))
     assert result.returncode == 0, result.stderr
     header, data = read_csv(out)
     assert header == ["t", *RIDER_NAMES]
@@ -61,7 +78,7 @@ def test_jsonl_in_and_out_with_options(tmp_path: Path) -> None:
         "".join(json.dumps({"t": i / 60, **dict(zip(HORSE_NAMES, row))}) + "\n" for i, row in enumerate(horse.tolist()))
     )
     keys.write_text('[offsets]\n"head.rz" = 1.5\n')
-    result = run_cli(
+    result = run_main(
         "bake",
         str(src),
         "-o",
@@ -141,7 +158,7 @@ def test_bad_input_exits_2_naming_line_and_column(tmp_path: Path, mutate, expect
     write_csv(src, horse_take(10))
     src.write_text("\n".join(mutate(src.read_text().splitlines())) + "\n")
     out.write_text("previous take\n")
-    result = run_cli("bake", str(src), "-o", str(out))
+    result = run_main("bake", str(src), "-o", str(out))
     assert result.returncode == 2
     assert str(src) in result.stderr and expected in result.stderr, result.stderr
     assert out.read_text() == "previous take\n"  # nothing partial under the output's name
@@ -152,10 +169,10 @@ def test_bad_jsonl_names_line(tmp_path: Path) -> None:
     src, out = tmp_path / "bad.jsonl", tmp_path / "rider.jsonl"
     good = json.dumps(dict.fromkeys(HORSE_NAMES, 0.0))
     src.write_text(good + "\n" + good.replace("0.0", '"x"', 1) + "\n")
-    result = run_cli("bake", str(src), "-o", str(out))
+    result = run_main("bake", str(src), "-o", str(out))
     assert result.returncode == 2 and ":2: column 'lfHoof.tx': not a number" in result.stderr
     src.write_text(good + "\n{not json\n")
-    result = run_cli("bake", str(src), "-o", str(out))
+    result = run_main("bake", str(src), "-o", str(out))
     assert result.returncode == 2 and ":2: not JSON" in result.stderr
     assert not out.exists()
 
@@ -164,10 +181,10 @@ def test_bad_options_exit_2(tmp_path: Path) -> None:
     src = tmp_path / "horse.csv"
     write_csv(src, horse_take(3))
     out = str(tmp_path / "r.csv")
-    assert "unknown rider channel 'head.rq'" in run_cli("bake", str(src), "-o", out, "--channels", "head.rq").stderr
-    assert run_cli("bake", str(src), "-o", out, "--scale", "0").returncode == 2
-    assert run_cli("bake", str(src), "-o", out, "--preset", "nope").returncode == 2
-    assert "file not found" in run_cli("bake", str(tmp_path / "none.csv"), "-o", out).stderr
+    assert "unknown rider channel 'head.rq'" in run_main("bake", str(src), "-o", out, "--channels", "head.rq").stderr
+    assert run_main("bake", str(src), "-o", out, "--scale", "0").returncode == 2
+    assert run_main("bake", str(src), "-o", out, "--preset", "nope").returncode == 2
+    assert "file not found" in run_main("bake", str(tmp_path / "none.csv"), "-o", out).stderr
 
 
 def test_output_gets_the_usual_file_mode(tmp_path: Path) -> None:
@@ -207,7 +224,7 @@ def test_the_saddle_columns_are_at_the_services_saddle_point_in_metres(tmp_path:
     write_csv(src, in_rig_units)
     service = tmp_path / "service.toml"
     service.write_text("[saddle]\nforward = 0.9\nup = 0.3\n")
-    done = run_cli("bake", str(src), "-o", str(out), "--scale", "1", "--saddle", "--config", str(service))
+    done = run_main("bake", str(src), "-o", str(out), "--scale", "1", "--saddle", "--config", str(service))
     assert done.returncode == 0, done.stderr
     header, values = read_csv(out)
     assert header[-6:] == ["saddle.tx", "saddle.ty", "saddle.tz", "saddle.rx", "saddle.ry", "saddle.rz"]

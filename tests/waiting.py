@@ -2,12 +2,16 @@
 
 - :class:`Inbox`: a list that threads append to and tests wait on (a condition variable:
   the waiter wakes on each append, no polling).
-- :func:`wait_until`: poll a condition, for what has no event to wait on (a server's
-  REST state, another process's files). The only sleep of the helpers.
+- :func:`wait_until` (and :func:`await_until` in a coroutine): poll a condition, for what
+  has no event to wait on (a server's REST state, another process's files, shared memory).
+- :class:`Pacer`: a loop's rate on deadlines (a producer, a tick), not a wait.
+
+The sleeps here are the only waiting or pacing sleeps of the tests (``tests/test_sleeps.py``).
 """
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 from collections.abc import Callable
@@ -27,6 +31,40 @@ def wait_until(
             said = what() if callable(what) else what
             raise AssertionError(f"timed out after {timeout} s: {said}")
         time.sleep(poll)
+
+
+async def await_until(
+    condition: Callable[[], object], timeout: float, what: Callable[[], object] | str = "", poll: float = POLL_S
+) -> None:
+    """:func:`wait_until` in a coroutine (the loop runs meanwhile)."""
+    deadline = time.perf_counter() + timeout
+    while not condition():
+        if time.perf_counter() > deadline:
+            said = what() if callable(what) else what
+            raise AssertionError(f"timed out after {timeout} s: {said}")
+        await asyncio.sleep(poll)
+
+
+class Pacer:
+    """One pass every ``period`` s on deadlines from the first :meth:`wait`: a late pass is not
+    made up (the next deadline is a period after it), so the rate never bursts."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.next: float | None = None
+
+    def _delay(self) -> float:
+        now = time.perf_counter()
+        self.next = (now if self.next is None else max(self.next, now - self.period)) + self.period
+        return max(0.0, self.next - now)
+
+    def wait(self) -> None:
+        """Sleep until the next deadline."""
+        time.sleep(self._delay())
+
+    async def await_next(self) -> None:
+        """:meth:`wait` in a coroutine."""
+        await asyncio.sleep(self._delay())
 
 
 class Inbox(Generic[T]):

@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import orjson
 import pydantic
@@ -39,12 +39,11 @@ from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import Refusal
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
+from riderlive.service.arbiter import Arbiter, Producer, next_producer_id
 from riderlive.service.codecs import BadFrame, parse_message
 from riderlive.service.devices_api import AnyDeviceRequest, DeviceRequest
-from riderlive.service.ingest import IngestEndpoint, Producer, next_producer_id
-
-if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
+from riderlive.service.ingest import IngestEndpoint
+from riderlive.service.ports import ControlPort
 
 log = logging.getLogger(__name__)
 ARMING = frozenset({"arm", "reset", "reload"})
@@ -69,6 +68,21 @@ def parse_payload(data: bytes, max_bytes: int) -> dict[str, Any]:
     return parse_message(data, max_bytes)
 
 
+class InboundPort(ControlPort, Protocol):
+    """What NATS producers and control use of the service (``runtime.Service``)."""
+
+    @property
+    def arbiter(self) -> Arbiter: ...
+
+    @property
+    def ingest(self) -> IngestEndpoint:
+        """``/ws/horse``'s validation (a NATS horse producer is validated as one)."""
+        ...
+
+    @property
+    def saddle_ingest(self) -> IngestEndpoint: ...
+
+
 ProducerKey = tuple[str, str]
 """(kind, producer name): ``("horse", "mocap")``, ``("saddle", "imu")``."""
 
@@ -76,7 +90,7 @@ ProducerKey = tuple[str, str]
 class ProducerInput:
     """NATS producers (horse and saddle) feeding the service's arbiter (see the module docstring)."""
 
-    def __init__(self, service: Service, transport: Transport, trust_broker: bool, forget: float) -> None:
+    def __init__(self, service: InboundPort, transport: Transport, trust_broker: bool, forget: float) -> None:
         self.service = service
         self.transport = transport
         self.trust_broker = trust_broker
@@ -175,7 +189,7 @@ class Control:
 
     def __init__(
         self,
-        service: Service,
+        service: InboundPort,
         transport: Transport,
         trust_broker: bool,
         arm_refusal: Callable[[], str | None],

@@ -31,13 +31,13 @@ import os
 import socket
 import time
 from collections import Counter, deque
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import orjson
 
 from riderlive.bus.config import NatsSection
-from riderlive.bus.inbound import Control, ProducerInput, dumps
+from riderlive.bus.inbound import Control, InboundPort, ProducerInput, dumps
 from riderlive.bus.subjects import Kind, Stage, parse
 from riderlive.bus.transport import Message, NoResponders, Subscription, Transport, TransportError
 from riderlive.channels import HORSE_NAMES
@@ -49,7 +49,29 @@ from riderlive.service.codecs import PROTOCOL_VERSION, encode_frame
 from riderlive.timecode import TimecodeError
 
 if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
+    from collections.abc import Callable
+
+    from riderlive.service.publish import Hub
+    from riderlive.service.timecodes import ServiceTimecode
+
+
+class RigPort(InboundPort, Protocol):
+    """What a rig node uses of the service (``runtime.Service``): the inbound side's port,
+    the hub's default subscription, and the lists it registers itself in while on stage."""
+
+    @property
+    def session(self) -> str: ...
+
+    @property
+    def hub(self) -> Hub: ...
+
+    @property
+    def timecode(self) -> ServiceTimecode: ...
+
+    @property
+    def sinks(self) -> list[Callable[[list[np.ndarray]], None]]:
+        """Called with each batch of tick records."""
+        ...
 
 log = logging.getLogger(__name__)
 QUEUE_SECONDS = 0.25
@@ -92,7 +114,7 @@ async def check_name_free(transport: Transport, stage: Stage, rig: str, session:
 class RigNode:
     """See the module docstring. ``start`` joins the stage, ``stop`` leaves it."""
 
-    def __init__(self, service: Service, transport: Transport, config: NatsSection) -> None:
+    def __init__(self, service: RigPort, transport: Transport, config: NatsSection) -> None:
         assert config.rig is not None
         self.service = service
         self.transport = transport
@@ -333,7 +355,7 @@ class RigNode:
             self.service.supervisor.estop(StopSource.NATS)
 
 
-async def join_stage(service: Service) -> RigNode:
+async def join_stage(service: RigPort) -> RigNode:
     """Connect to the broker of ``service.config.nats`` and join its stage as a rig."""
     from riderlive.bus.nats import connect, credentials_of
 

@@ -28,6 +28,7 @@ from riderlive.skeleton.rig import PoseArrays, Rig, solve_frames
 from riderlive.takes import take_path
 from riderlive.takes.stamp import TakeTimecode, take_timecode
 from riderlive.timecode import TimecodeError
+from riderlive.units import metres_per_unit
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -157,7 +158,10 @@ def load_take(path: Path, length_scale: float | None = None, rate: float | None 
             rate = float(tick_rate)
         else:
             rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 120.0
-    to_metres = scale / DEFAULT_SCALE
+    try:
+        to_metres = metres_per_unit(scale)  # the one conversion, here at the file's edge
+    except ValueError as exc:
+        raise ExportError(f"{path}: {exc} (the take's length_scale)") from None
     grid = t[0] + np.arange(int(np.floor((t[-1] - t[0]) * rate + 1e-6)) + 1) / rate
     uniform = len(grid) == len(t) and np.allclose(grid, t, rtol=0.0, atol=1e-6 / rate)
 

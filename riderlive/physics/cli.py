@@ -34,6 +34,7 @@ from riderlive.physics.reference import ReferenceModel, mean_tip
 from riderlive.physics.skinned import SkinnedModel
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import load_preset
+from riderlive.units import metres_per_unit
 
 REFERENCE_CHANNELS = ("tail_ref.tx", "tail_ref.ty", "tail_ref.tz")
 """The reference tail's mean tip position, world metres (with ``--reference``)."""
@@ -114,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         rules = None if args.no_rider else RiderModel(params=load_preset(args.preset), scale=DEFAULT_SCALE)
         table = read_frames(args.input, fmt=args.format)
         recorded = recorded_scale(args.input)  # the physics works in metres
-        table = rescale_lengths(table, recorded / DEFAULT_SCALE) if recorded else table
+        table = rescale_lengths(table, metres_per_unit(recorded)) if recorded else table
         say = None if args.quiet else (lambda line: print(f"riderlive tail: {line}", file=sys.stderr, flush=True))
         result, vertices = run_take(table, config, rules, args.rate, args.reference, say=say)
         write_frames(args.output, result, args.format)

@@ -30,10 +30,10 @@ from riderlive.realtime import commands as cmd
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
+from riderlive.service.arbiter import SADDLE_INPUT
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
 from riderlive.service.fit_api import REFERENCE_LIMIT, REFERENCE_PATH, add_fit_routes, with_references
-from riderlive.service.ingest import SADDLE_INPUT
 from riderlive.service.latency_api import add_latency_routes
 from riderlive.service.metrics import render
 from riderlive.service.platform_api import add_platform_routes, render_platform_metrics

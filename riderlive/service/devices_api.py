@@ -26,7 +26,7 @@ import logging
 import sys
 import time
 from collections import Counter
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import pydantic
 from fastapi import FastAPI, HTTPException, Request
@@ -40,10 +40,8 @@ from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
 from riderlive.service.estop_first import EStopFirst, stamps
+from riderlive.service.ports import ControlPort
 from riderlive.tickframe import computed_parts
-
-if TYPE_CHECKING:
-    from riderlive.service.runtime import Service
 
 log = logging.getLogger(__name__)
 NAME = pydantic.Field(pattern=NAME_PATTERN)
@@ -101,7 +99,14 @@ class DeviceMetrics:
         """E-stop requests by (source label, authorized: with the token or where none is needed)."""
 
 
-def add_device_routes(app: FastAPI, service: Service) -> None:
+class DevicesPort(ControlPort, Protocol):
+    """What the device routes and their metrics use of the service (``runtime.Service``)."""
+
+    device_metrics: DeviceMetrics
+    """Set by :func:`add_device_routes`."""
+
+
+def add_device_routes(app: FastAPI, service: DevicesPort) -> None:
     config = service.config
     counts = DeviceMetrics()
     service.device_metrics = counts
@@ -201,7 +206,7 @@ def _escape(value: str) -> str:
     return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
 
 
-def render_device_metrics(service: Service) -> str:
+def render_device_metrics(service: DevicesPort) -> str:
     """Prometheus text: supervision, guardian, each device's state and counters, refusals."""
     sup = service.supervisor.snapshot()
     out: list[str] = []

@@ -7,6 +7,8 @@ what it is told and a clock they set (``tests/service/fakes.py``).
 - :class:`TickPort`: the tick as the web side reaches it (input, commands, time, status);
   :class:`~riderlive.realtime.link.TickLink` is the real one.
 - :class:`StopPort`: who latches an e-stop (the supervisor).
+- :class:`ControlPort`: the arming and e-stop paths; ``devices_api.DevicesPort``,
+  ``bus.inbound.InboundPort`` and ``bus.rig.RigPort`` add to it.
 - :class:`ServicePort`: what every endpoint reads of the service; :class:`PublishPort`
   (``/ws/rider``) adds to it, and so does ``service.ingest.IngestPort`` (``/ws/horse``,
   ``/ws/saddle``: the arbiter), defined beside the arbiter.
@@ -18,14 +20,18 @@ from collections import Counter
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import numpy as np
 
     from riderlive.devices.latch import StopSource
     from riderlive.realtime import commands as cmd
     from riderlive.realtime.layout import InputKind
+    from riderlive.realtime.link import TickLink
     from riderlive.realtime.shm import SharedBlob
     from riderlive.service.config import ServiceConfig
     from riderlive.service.metrics import ServiceMetrics
+    from riderlive.service.supervisor import TickSupervisor
     from riderlive.service.timecodes import ServiceTimecode
     from riderlive.skeleton.rig import Pose
 
@@ -108,3 +114,25 @@ class PublishPort(ServicePort, Protocol):
 
     @property
     def supervisor(self) -> StopPort: ...
+
+
+class ControlPort(Protocol):
+    """What the arming and e-stop paths (REST's device routes, NATS control and producers)
+    use of the service: the real link and supervisor, and the arm checks."""
+
+    @property
+    def config(self) -> ServiceConfig: ...
+
+    @property
+    def metrics(self) -> ServiceMetrics: ...
+
+    @property
+    def link(self) -> TickLink: ...
+
+    @property
+    def supervisor(self) -> TickSupervisor: ...
+
+    @property
+    def arm_checks(self) -> list[Callable[[], str | None]]:
+        """Each may refuse an arm with a reason (e.g. no stage heartbeat: ``bus.rig``)."""
+        ...

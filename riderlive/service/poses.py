@@ -3,42 +3,34 @@
 ``/ws/rider`` (``bones``, ``pose``) and VMC out both need the skeletons posed from the
 same records; :class:`RecordPoses` solves each (record, skeleton) at most once and
 keeps the last few. Records carry lengths in the service unit; the skeletons are in
-metres (``length_scale / DEFAULT_SCALE`` converts).
+metres: converted here, at this edge, by :mod:`riderlive.units`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from riderlive.channels import HORSE, RIDER, Kind
-from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime.record import RecordLayout
 from riderlive.skeleton import horse_pose, rider_pose
 from riderlive.skeleton.rig import Pose
+from riderlive.units import horse_lengths, metres_per_unit, rider_lengths
 
-_RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
-_HORSE_LENGTHS = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
 KEEP = 8
 """Records remembered per skeleton (a publish pass looks at the newest few)."""
 
 
 class RecordPoses:
     def __init__(self, length_scale: float) -> None:
-        self.to_metres = length_scale / DEFAULT_SCALE
+        factor = metres_per_unit(length_scale)
+        self._rider_lengths, self._horse_lengths = rider_lengths(factor), horse_lengths(factor)
         self._rider: dict[int, Pose] = {}
         self._horse: dict[int, Pose] = {}
-
-    def _values(self, values: np.ndarray, lengths: list[int]) -> list[float]:
-        if self.to_metres != 1.0:
-            values = values.copy()
-            values[lengths] *= self.to_metres
-        return values.tolist()  # type: ignore[no-any-return]
 
     def rider(self, record: np.ndarray) -> Pose:
         seq = RecordLayout.seq.count(record)
         pose = self._rider.get(seq)
         if pose is None:
-            pose = rider_pose(self._values(RecordLayout.rider.of(record), _RIDER_LENGTHS))
+            pose = rider_pose(self._rider_lengths.to_metres(RecordLayout.rider.of(record).tolist()))
             self._remember(self._rider, seq, pose)
         return pose
 
@@ -46,7 +38,7 @@ class RecordPoses:
         seq = RecordLayout.seq.count(record)
         pose = self._horse.get(seq)
         if pose is None:
-            pose = horse_pose(self._values(RecordLayout.horse.of(record), _HORSE_LENGTHS))
+            pose = horse_pose(self._horse_lengths.to_metres(RecordLayout.horse.of(record).tolist()))
             self._remember(self._horse, seq, pose)
         return pose
 

@@ -26,9 +26,10 @@ from riderlive.realtime.setup import TickSetup
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
+from riderlive.service.arbiter import SADDLE_INPUT, Arbiter, Producer, next_producer_id
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import DeviceMetrics, plan_devices
-from riderlive.service.ingest import SADDLE_INPUT, Arbiter, IngestEndpoint, Producer, next_producer_id
+from riderlive.service.ingest import IngestEndpoint
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
@@ -119,7 +120,8 @@ class Service:
         """Skeleton poses of tick records, solved once for /ws/rider and VMC."""
         self.vmc = None
         if config.vmc.target is not None:
-            from riderlive.vmc.sender import VmcSender  # raises VmcError: a host that does not resolve, a port in use
+            # raises VmcError: a host that does not resolve, a port in use
+            from riderlive.service.vmc_out import VmcSender
 
             self.vmc = VmcSender.open(self.poses, config.vmc, config.tick.rate, self.metrics.vmc)
             self.vmc.timecode = lambda record: self.timecode.of_record(record).label

@@ -23,7 +23,7 @@ from __future__ import annotations
 import fcntl
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -144,14 +144,18 @@ class TakeRecorder:
         meta: dict[str, object] | None = None,
         extra: tuple[str, ...] = (),
         overwrite: bool = False,
+        *,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         """``extra``: channels after the rider's (the tail's); ``add`` takes them at the end of ``rider``.
+        ``clock``: seconds for ``flush_interval`` (``CLOCK_MONOTONIC``; a test's own clock).
 
         Raises :class:`TakeExists` when ``path`` exists and not ``overwrite``.
         """
         path.parent.mkdir(parents=True, exist_ok=True)
         self.path = path
         self.flush_interval = flush_interval
+        self._clock = clock
         self._file = path.with_name(f".{path.stem}.recording.csv") if overwrite else path
         flags = os.O_WRONLY | os.O_CREAT | (0 if overwrite else os.O_EXCL)
         try:
@@ -166,7 +170,7 @@ class TakeRecorder:
         os.ftruncate(self._fd, 0)  # only now: an overwrite that is refused truncates nothing
         os.write(self._fd, (",".join((*COLUMNS, *extra)) + "\n").encode())
         self._lines: list[str] = []
-        self._last_flush = time.monotonic()
+        self._last_flush = self._clock()
         self._t0: float | None = None
         self.rows = 0
         self.meta: dict[str, object] = {
@@ -194,7 +198,7 @@ class TakeRecorder:
         row = [engine_t - self._t0, *horse, *rider]
         self._lines.append(",".join(map(repr, map(float, row))))
         self.rows += 1
-        if time.monotonic() - self._last_flush >= self.flush_interval:
+        if self._clock() - self._last_flush >= self.flush_interval:
             self.flush()
 
     def flush(self) -> None:
@@ -207,7 +211,7 @@ class TakeRecorder:
                 written = os.write(self._fd, view)
                 view = view[written:]
             self._write_sidecar()
-        self._last_flush = time.monotonic()
+        self._last_flush = self._clock()
 
     def close(self) -> None:
         """Flush, mark complete, and (``overwrite``) put the new take in place of the old."""

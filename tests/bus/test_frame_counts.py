@@ -35,9 +35,10 @@ def test_out_dropped_skipped_and_queued_cover_every_tick(rig: LiveServer, broker
         frames = probe.collect(RIG.subject(Kind.FRAME))
         wait_for(lambda: len(frames) > 20, say=lambda: len(frames))
         os.kill(rig.proc.pid, signal.SIGSTOP)  # the tick goes on; the web process reads nothing
-        time.sleep(0.6)
+        time.sleep(0.6)  # the stimulus: a web process stopped for 0.6 s
         os.kill(rig.proc.pid, signal.SIGCONT)
-        time.sleep(0.3)
+        resumed = len(frames)
+        wait_for(lambda: len(frames) > resumed + 30, say=lambda: len(frames))  # publishing again
         status = orjson.loads(probe.request(RIG.subject(Kind.CONTROL), orjson.dumps({"action": "state"})))
     finally:
         probe.close()

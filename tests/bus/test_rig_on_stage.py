@@ -31,6 +31,7 @@ from tests.bus.harness import AUTH, RIG_TICK, TOKEN, NatsProbe, start_rig, wait_
 from tests.bus.harness import TOKEN_CONFIG as CONFIG
 from tests.service.live_server import ROOT, LiveServer
 from tests.service.producers import Producer
+from tests.waiting import Pacer
 
 STAGE = Stage("A")
 RIG = STAGE.rig("r1")
@@ -113,12 +114,12 @@ def test_nats_and_websocket_producers_share_one_arbiter(rig: LiveServer, probe: 
 
     def feed() -> None:
         probe.call(probe.transport.publish(subject, orjson.dumps({"type": "hello", "token": TOKEN}), inbox))
-        n = 0
+        n, pacer = 0, Pacer(0.01)
         while not stop.is_set():
             n += 1
             body = {"t": time.time(), **horse(0.25)}
             probe.call(probe.transport.publish(subject, msgpack.packb(body), inbox))
-            time.sleep(0.01)
+            pacer.wait()
 
     thread = threading.Thread(target=feed, daemon=True)
     thread.start()
@@ -260,7 +261,7 @@ def _metric_in(live: LiveServer, name: str) -> float:
 def test_the_python_client_follows_a_rig_over_nats(rig: LiveServer, broker: Broker) -> None:
     import asyncio
 
-    from riderlive.client import NatsRiderSubscriber
+    from riderlive.bus.subscriber import NatsRiderSubscriber
 
     async def take(n: int) -> list:
         subscriber = NatsRiderSubscriber(broker.url, stage="A", rig="r1")

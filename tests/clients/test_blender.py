@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,14 @@ TO_BLENDER = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 pytestmark = pytest.mark.skipif(
     not BLENDER_PYTHON.exists(), reason="Blender as a module (PyPI bpy) is not installed in .venv/blender (install.sh)"
 )
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """One service for both Blender runs: each only reads ``/ws/rider``."""
+    live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("blender"))
+    yield live
+    live.stop()
 
 
 def _matrix(q: np.ndarray) -> np.ndarray:
@@ -67,18 +76,14 @@ def _run_blender(args: list[str], out: Path) -> dict:
     return dict(json.loads(out.read_text()))
 
 
-def test_blender_drives_armatures_from_the_stream_and_imports_a_take(tmp_path: Path) -> None:
+def test_blender_drives_armatures_from_the_stream_and_imports_a_take(server: LiveServer, tmp_path: Path) -> None:
     take_file = write_take(tmp_path, "canter", seconds=0.5)
     take = load_take(take_file)
     glb = tmp_path / "canter.glb"
     with glb.open("wb") as fh:
         write_glb(fh, take)
-    server = LiveServer(BASE_CONFIG, tmp_path)
-    try:
-        out = tmp_path / "blender.json"
-        result = _run_blender([server.ws + "/ws/rider", "2.0", str(out), str(glb), "1", "31", "60"], out)
-    finally:
-        server.stop()
+    out = tmp_path / "blender.json"
+    result = _run_blender([server.ws + "/ws/rider", "2.0", str(out), str(glb), "1", "31", "60"], out)
     assert result["error"] is None
     samples, applied = result["samples"], result["applied"]
     # It drove for the whole 2 s of stream, newest frames only (how many depends on the machine's load).
@@ -116,7 +121,7 @@ def test_blender_drives_armatures_from_the_stream_and_imports_a_take(tmp_path: P
                 np.testing.assert_allclose(got[name]["head"], TO_BLENDER @ world, atol=1e-4, err_msg=name)
 
 
-def test_background_blender_drives_with_the_frames_step(tmp_path: Path) -> None:
+def test_background_blender_drives_with_the_frames_step(server: LiveServer, tmp_path: Path) -> None:
     """``blender -b`` never fires the live mode's timers: ``riderlive_blender.drive`` steps it (N new
     frames, keyed), as a script or a render farm would."""
     out = tmp_path / "drive.json"
@@ -130,17 +135,13 @@ def test_background_blender_drives_with_the_frames_step(tmp_path: Path) -> None:
         " for b in s.channelbags for c in b.fcurves])\n"
         "json.dump({'applied': n, 'keys': max(len(c.keyframe_points) for c in curves)}, open(sys.argv[2], 'w'))\n"
     )
-    server = LiveServer(BASE_CONFIG, tmp_path)
-    try:
-        env = dict(os.environ, PYTHONPATH=str(ROOT / "clients" / "blender"))
-        proc = subprocess.run(
-            [str(BLENDER_PYTHON), "-c", script, server.ws + "/ws/rider", str(out)],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-    finally:
-        server.stop()
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "clients" / "blender"))
+    proc = subprocess.run(
+        [str(BLENDER_PYTHON), "-c", script, server.ws + "/ws/rider", str(out)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads(out.read_text()) == {"applied": 30, "keys": 30}

@@ -33,6 +33,7 @@ from riderlive.dynamixel.tables import Instruction, Item
 from tests.dynamixel.conftest import bus_factory, fast_switching  # noqa: F401  (fixtures)
 from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
 from tests.service.live_server import ROOT
+from tests.waiting import wait_until
 
 GOAL_POSITION = 116
 START = [205.0, 165.0, 200.0]
@@ -47,6 +48,15 @@ def rig_file(tmp_path: Path, park_s: float) -> Path:
     path = tmp_path / "bench3.toml"
     path.write_text(text)
     return path
+
+
+def park_progress(emu: EmulatedBus, rig: RigConfig) -> float:
+    """How far the latest goal is from ``START`` toward the park pose (0..1, the least servo)."""
+    goals = goals_after(emu, 0.0)
+    if not goals:
+        return 0.0
+    park = [s.park for s in rig.servos.values()]
+    return min(1.0 - abs(g - p) / abs(s - p) for g, p, s in zip(goals[-1][1], park, START, strict=True))
 
 
 def goals_after(emu: EmulatedBus, t: float) -> list[tuple[float, list[float]]]:
@@ -85,10 +95,7 @@ class DeadTick:
         return launch(self.board.name, self.latch.name, [self.spec], tick_timeout_s=0.1, web_timeout_s=1.0)
 
     def wait_done(self, timeout: float = 30.0) -> None:
-        deadline = time.perf_counter() + timeout
-        while self.board["guardian_done"] < 1.0 and time.perf_counter() < deadline:
-            time.sleep(0.01)
-        assert self.board["guardian_done"] >= 1.0, "the guardian did not finish its stop"
+        wait_until(lambda: self.board["guardian_done"] >= 1.0, timeout, "the guardian did not finish its stop")
 
     def close(self, *guardians: subprocess.Popen[bytes]) -> None:
         if self._stop.is_set():
@@ -147,10 +154,7 @@ def test_a_guardian_killed_during_its_takeover_is_followed_from_where_the_park_h
 ) -> None:
     scene, emu, rig = dead_tick
     first = scene.guardian()
-    deadline = time.perf_counter() + 30.0
-    while not goals_after(emu, 0.0) and time.perf_counter() < deadline:
-        time.sleep(0.01)
-    time.sleep(0.5)  # a third of the way to park
+    wait_until(lambda: park_progress(emu, rig) >= 1 / 3, 30.0, "a third of the way to park")
     first.send_signal(signal.SIGKILL)
     first.wait(10)
     killed = time.perf_counter()
@@ -183,15 +187,18 @@ def test_the_guardian_beats_before_its_imports() -> None:
     launched = time.perf_counter()
     guardian = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0)
     try:
-        beat = ready = None
-        deadline = launched + 30.0
-        while ready is None and time.perf_counter() < deadline:
-            if beat is None and board["guardian_beat"]:
-                beat = board["guardian_beat"]
+        seen: dict[str, float] = {}
+
+        def ready_now() -> bool:
+            if "beat" not in seen and board["guardian_beat"]:
+                seen["beat"] = board["guardian_beat"]
             if board["guardian_ready"] == 1.0:
-                ready = time.perf_counter()
-            time.sleep(0.001)
-        assert beat is not None and ready is not None
+                seen["ready"] = time.perf_counter()
+            return "ready" in seen
+
+        wait_until(ready_now, 30.0, "the guardian ready", poll=0.001)
+        beat, ready = seen.get("beat"), seen["ready"]
+        assert beat is not None
         assert board["guardian_pid"] == guardian.pid
         assert launched < beat < ready
         took = (beat - launched) * 1000, (ready - launched) * 1000
@@ -209,12 +216,9 @@ def test_an_estop_during_a_takeover_cuts_the_park_short(
 ) -> None:
     """An e-stop while the guardian parks a dead tick's rig (a failover under way): torque
     off at once, no goal after it, the device latched in ``estop`` on the board."""
-    scene, emu, _ = dead_tick
+    scene, emu, rig = dead_tick
     guardian = scene.guardian()
-    deadline = time.perf_counter() + 30.0
-    while not goals_after(emu, 0.0) and time.perf_counter() < deadline:
-        time.sleep(0.01)
-    time.sleep(0.2)
+    wait_until(lambda: park_progress(emu, rig) >= 0.1, 30.0, "the park under way")
     pressed = scene.latch.request()
     scene.wait_done()
     published = scene.board.device(0)
@@ -239,18 +243,15 @@ def test_a_standby_guardian_takes_over_within_milliseconds_of_the_guardians_deat
     active = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0)
     standby = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0, standby_after=active.pid)
     try:
-        deadline = time.perf_counter() + 30.0
-        while (board["guardian_standby"] != standby.pid or board["guardian_ready"] != 1.0) and (
-            time.perf_counter() < deadline
-        ):
-            time.sleep(0.005)
+        wait_until(
+            lambda: board["guardian_standby"] == standby.pid and board["guardian_ready"] == 1.0, 30.0, "a standby"
+        )
         assert board["guardian_pid"] == active.pid and board["guardian_standby"] == standby.pid
         time.sleep(0.2)
         assert board["guardian_pid"] == active.pid and standby.poll() is None  # it stands by
         active.send_signal(signal.SIGKILL)
         killed = time.perf_counter()
-        while board["guardian_pid"] != standby.pid and time.perf_counter() < killed + 5.0:
-            time.sleep(0.0005)
+        wait_until(lambda: board["guardian_pid"] == standby.pid, 5.0, "the standby took over", poll=0.0005)
         took = time.perf_counter() - killed
         assert board["guardian_pid"] == standby.pid and board["guardian_beat"] >= killed
         assert took < 0.2, f"the standby took {took * 1000:.0f} ms"

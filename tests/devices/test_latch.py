@@ -15,6 +15,7 @@ import pytest
 from riderlive.devices import latch as latch_module
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.lifecycle import StopRequested
+from tests.waiting import wait_until
 
 
 @pytest.fixture
@@ -88,9 +89,7 @@ def test_a_write_that_has_not_begun_when_the_request_is_recorded_is_refused(latc
         try:
             with view.gate():
                 entered.set()
-                deadline = time.perf_counter() + 5
-                while latch.requested == 0 and time.perf_counter() < deadline:
-                    time.sleep(0.0001)
+                wait_until(lambda: latch.requested != 0, 5.0, "the request", poll=0.0001)
                 view.check_write()
                 outcome.append("written")
         except StopRequested:
@@ -141,9 +140,7 @@ def test_a_signal_inside_the_gate_is_recorded_at_once_and_stops_the_write(latch:
     try:
         with pytest.raises(StopRequested), view.gate():
             os.kill(os.getpid(), signal.SIGTERM)
-            deadline = time.perf_counter() + 5
-            while not handled and time.perf_counter() < deadline:
-                time.sleep(0.001)  # the handler runs here, inside the gate
+            wait_until(lambda: handled, 5.0, "the handler", poll=0.001)  # it runs here, inside the gate
             assert handled and view.pending and latch.source is StopSource.SIGNAL
             view.check_write()
             pytest.fail("the write went out after the request")

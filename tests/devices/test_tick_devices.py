@@ -22,6 +22,7 @@ from riderlive.dynamixel.rig import RIG_DIR
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import GUARDIAN_CHECK_S, TickDevices
 from tests.devices.memory_plug import rider_frame
+from tests.waiting import Pacer
 
 S = DeviceState
 
@@ -56,12 +57,12 @@ def tick_devices(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[TickDevices,
 
 def run(devices: TickDevices, ticks: int, start: int = 0, beat: bool = True) -> None:
     """Tick; ``beat``: the guardian on the board (if any) beats as its watch loop would."""
-    board = devices.board
+    board, pacer = devices.board, Pacer(0.001)
     for i in range(start, start + ticks):
         if beat and board is not None and board["guardian_pid"]:
             board["guardian_beat"] = time.perf_counter()
         devices.tick(rider_frame(1.0, tick=i, at=time.perf_counter()))
-        time.sleep(0.001)
+        pacer.wait()  # a 1 kHz tick
 
 
 def run_past(devices: TickDevices, until_s: float, start: int, beat: bool = True) -> int:

@@ -38,6 +38,7 @@ from tests.dynamixel.rig_harness import (
     start_running,
     torque,
 )
+from tests.waiting import Pacer
 
 S = DeviceState
 
@@ -196,15 +197,15 @@ def test_arming_soft_starts_from_where_a_hand_left_the_servo(bus_factory: Callab
 def test_bad_rider_frames_are_held_not_raised(bus_factory: Callable[..., EmulatedBus]) -> None:
     device, _ = bench_device(bus_factory)
     start_running(device)
-    rider = [1.0] * len(RIDER)
+    rider, pacer = [1.0] * len(RIDER), Pacer(0.01)  # ticks at 100 Hz
     before = goal_deg(device.tick(rider_frame(*rider), time.perf_counter()))
-    time.sleep(0.01)
+    pacer.wait()
     bad = list(rider)
     bad[0] = math.nan
     status = device.tick(rider_frame(*bad), time.perf_counter())
     assert goal_deg(status)[0] == before[0]  # lower_back.rz held
     held = goal_deg(status)
-    time.sleep(0.01)
+    pacer.wait()
     status = device.tick(rider_frame(*[1.0, 2.0]), time.perf_counter())  # wrong length: everything held
     assert goal_deg(status) == pytest.approx(held, abs=1e-9)
     assert status.state is S.RUNNING

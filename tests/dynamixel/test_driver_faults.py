@@ -402,7 +402,8 @@ def test_silent_servo_faults_after_budget_then_parks(timed_buses: Callable[..., 
     emu.settle()
     assert all(torque(emu, i) == 0 for i in range(1, 25) if i != 7)
     # servo 7 heard nothing since it vanished: its own Bus Watchdog has stopped it
-    time.sleep(bus.bus_watchdog_ms / 1000)
+    servo7 = next(s for s in emu.servos if s.id == 7)
+    wait_until(lambda: servo7.watchdog_tripped, 5.0 + bus.bus_watchdog_ms / 1000, "servo 7's Bus Watchdog")
     emu.apply(FaultSpec(EmuFault.REAPPEAR, 7))
     assert emu.read_item(7, Item.BUS_WATCHDOG) == -1
     device.close()

@@ -17,7 +17,7 @@ from riderlive.platform.config import (
     platform_problems,
     shipped_platforms,
 )
-from riderlive.platform.cueing import PRESETS
+from riderlive.platform.cueing_params import PRESETS
 from riderlive.platform.geometry import Kind
 
 

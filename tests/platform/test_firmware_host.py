@@ -14,15 +14,16 @@ from riderlive.platform import link
 from riderlive.platform.firmware_host import FirmwareHost
 from riderlive.platform.link import Fault, LinkState, Reason
 from riderlive.platform.serial_link import CommandRefused, SerialPlatformLink
+from tests.waiting import Pacer
 
 
 def stream(port: SerialPlatformLink, state: LinkState, positions: list[int], timeout_s: float) -> link.Telemetry:
-    deadline = time.monotonic() + timeout_s
+    deadline, pacer = time.monotonic() + timeout_s, Pacer(0.004)
     while port.telemetry is None or LinkState(port.telemetry.state) is not state:
         assert time.monotonic() < deadline, f"still {port.state.label}"
         port.send_targets(positions)
         port.service()
-        time.sleep(0.004)
+        pacer.wait()  # the host's target rate (250 Hz)
     return port.telemetry
 
 

@@ -69,3 +69,15 @@ def pytest_terminal_summary(terminalreporter: Any) -> None:
         terminalreporter.write_sep("-", f"riderlive serve behind {nodeid}")
         for line in tail:
             terminalreporter.write_line(line.rstrip())
+
+
+@pytest.fixture
+def receivers() -> Iterator[tuple[Any, Any]]:
+    """A rider and a horse VMC receiver (python-osc servers on loopback UDP), closed after."""
+    pytest.importorskip("pythonosc")
+    from tests.vmc.receiver import VmcReceiver
+
+    rider, horse = VmcReceiver(), VmcReceiver()
+    yield rider, horse
+    rider.close()
+    horse.close()

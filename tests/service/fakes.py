@@ -16,9 +16,9 @@ from riderlive.channels import RIDER_PART_NAMES
 from riderlive.devices.latch import StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
+from riderlive.service.arbiter import Arbiter
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import DeviceMetrics
-from riderlive.service.ingest import Arbiter
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.timecodes import host_timecode

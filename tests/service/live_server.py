@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import httpx
@@ -48,7 +47,8 @@ class LiveServer:
         self.log: list[str] = []
         self._ready = threading.Event()
         self.port = 0
-        threading.Thread(target=self._read, daemon=True).start()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
         if not self._ready.wait(30.0):
             self.stop()
             raise RuntimeError("server did not start:\n" + "".join(self.log))
@@ -109,5 +109,5 @@ class LiveServer:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5.0)
-        time.sleep(0.05)
+        self._reader.join(5.0)  # its last lines in ``log`` (the reader ends at the pipe's end)
         return self.proc.returncode

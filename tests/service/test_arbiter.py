@@ -12,9 +12,10 @@ from riderlive.channels import HORSE_NAMES, SADDLE_NAMES
 from riderlive.configfile import validate
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
+from riderlive.service.arbiter import HORSE_INPUT, SADDLE_INPUT, Producer, next_producer_id
 from riderlive.service.codecs import BadFrame
 from riderlive.service.config import ServiceConfig
-from riderlive.service.ingest import HORSE_INPUT, SADDLE_INPUT, IngestEndpoint, Producer, next_producer_id
+from riderlive.service.ingest import IngestEndpoint
 from tests.service.fakes import FakeService
 
 TIMEOUT = 0.5  # input.producer_timeout's default

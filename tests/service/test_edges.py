@@ -13,7 +13,7 @@ from websockets.sync.client import ClientConnection, connect
 from riderlive.channels import HORSE_INDEX, RIDER_INDEX
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
-from tests.waiting import wait_until
+from tests.waiting import Pacer, wait_until
 
 RZ = HORSE_INDEX["rearPivot.rz"]
 
@@ -55,14 +55,14 @@ def test_a_huge_frame_with_smoothing_on_leaves_the_rider_moving(server: LiveServ
     try:
         ws.recv(timeout=5)
         assert server.request("PATCH", "/api/params", json={"smoothing.time_constant": 0.05}).status_code == 200
-        t0 = time.perf_counter()
+        t0, pacer = time.perf_counter(), Pacer(0.005)
         for i in range(240):
             t = time.perf_counter() - t0
             values = {"rearPivot.rz": 4.0 * math.sin(5.0 * t), "lfHoof.tx": 0.3}
             if i == 60:
                 values["lfHoof.tx"] = 1e308
             ws.send(json.dumps({"t": t, "values": values}))
-            time.sleep(0.005)
+            pacer.wait()
         follower.wait_for(lambda f: f["at"] > time.perf_counter() - 0.01)
         late = [f for f in follower.frames if f["at"] > t0 + 0.6 and f["driver"] == "input"]
         assert len(late) > 50
@@ -88,10 +88,10 @@ def test_a_clock_that_jumps_starts_a_new_segment_and_says_so(server: LiveServer)
             start = time.perf_counter()
 
             def stream(origin: float, seconds: float, rz: float) -> None:
-                t_begin = time.perf_counter()
+                t_begin, pacer = time.perf_counter(), Pacer(0.01)
                 while (elapsed := time.perf_counter() - t_begin) < seconds:
                     ws.send(json.dumps({"t": origin + elapsed, "values": {"rearPivot.rz": rz}}))
-                    time.sleep(0.01)
+                    pacer.wait()
 
             stream(100.0, 0.4, 1.0)
             follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][RZ] == 1.0)

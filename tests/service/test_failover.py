@@ -27,6 +27,7 @@ from riderlive.rules.animator import AnimatorLayer
 from riderlive.service.config import ServiceConfig
 from riderlive.service.runtime import make_setup
 from riderlive.service.supervisor import TickSupervisor
+from tests.waiting import Pacer
 
 RATE = 100.0
 CONFIG = ServiceConfig.model_validate({"tick": {"rate": RATE, "realtime_priority": False, "spare_nice": 0}})
@@ -83,10 +84,11 @@ async def _kill_and_take_over() -> None:
     feeding = True
 
     async def producer() -> None:  # a live producer at 100 Hz, its clock 500 s ahead
+        pacer = Pacer(0.01)
         while feeding:
             now = w.link.engine_time()
             w.link.push_input(5, 500.0 + now, now, horse(now))
-            await asyncio.sleep(0.01)
+            await pacer.await_next()
 
     feeder = asyncio.get_running_loop().create_task(producer())
     try:

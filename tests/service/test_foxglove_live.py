@@ -8,7 +8,7 @@ import os
 import re
 import socket
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -20,6 +20,7 @@ from tests.service.conftest import BASE_CONFIG
 from tests.service.foxglove_client import FoxgloveClient
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
+from tests.waiting import wait_until
 
 
 @pytest.fixture(scope="module")
@@ -34,13 +35,8 @@ def foxglove_port(live: LiveServer) -> int:
     return int(next(m.group(1) for m in found if m))
 
 
-def _wait(predicate: object, timeout: float = 5.0) -> None:
-    deadline = time.perf_counter() + timeout
-    while time.perf_counter() < deadline:
-        if predicate():  # type: ignore[operator]
-            return
-        time.sleep(0.02)
-    raise AssertionError("timed out")
+def _wait(predicate: Callable[[], object], timeout: float = 5.0) -> None:
+    wait_until(predicate, timeout, poll=0.02)
 
 
 def test_channels_are_advertised_with_their_schemas(server: LiveServer) -> None:
@@ -115,10 +111,11 @@ def test_a_client_that_stops_reading_stalls_nobody(server: LiveServer) -> None:
     silent = _silent_client(port, ids)
     try:
         good.subscribe("/rider/joints")
-        time.sleep(2.0)  # the silent client's socket and SDK queue fill meanwhile
+        time.sleep(2.0)  # the stimulus: the silent client's socket and SDK queue fill meanwhile
         before = server.get("/api/state").json()
         got_before, frames_before = len(good.received["/rider/joints"]), len(follower.frames)
-        time.sleep(3.0)
+        ticks = lambda: server.get("/api/state").json()["counters"]["ticks"]  # noqa: E731
+        wait_until(lambda: ticks() >= before["counters"]["ticks"] + 400, 30.0, ticks)  # 2 s of ticks at 200 Hz
         after = server.get("/api/state").json()
         published = after["foxglove"]["rider_messages"] - before["foxglove"]["rider_messages"]
         got = len(good.received["/rider/joints"]) - got_before

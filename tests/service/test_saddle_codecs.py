@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from riderlive.channels import SADDLE_NAMES
 from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.saddle_input import GAITS, LOCKS
+from riderlive.service.arbiter import HORSE_INPUT, SADDLE_INPUT, Producer
 from riderlive.service.codecs import (
     BINARY_HEADER,
     SADDLE_HEADER,
@@ -26,7 +27,6 @@ from riderlive.service.codecs import (
     decode_subscription,
     encode_frame,
 )
-from riderlive.service.ingest import HORSE_INPUT, SADDLE_INPUT, Producer
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 SPEC = SADDLE_INPUT

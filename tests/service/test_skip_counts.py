@@ -13,6 +13,7 @@ import time
 from websockets.sync.client import connect
 
 from tests.service.live_server import LiveServer
+from tests.waiting import wait_until
 
 
 def test_sent_dropped_and_skipped_cover_every_wanted_tick(server: LiveServer) -> None:
@@ -34,11 +35,12 @@ def test_sent_dropped_and_skipped_cover_every_wanted_tick(server: LiveServer) ->
 
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
-        time.sleep(0.3)
+        wait_until(lambda: len(seqs) >= 30, 10.0, lambda: len(seqs))  # streaming at 100 Hz
         os.kill(server.proc.pid, signal.SIGSTOP)
-        time.sleep(0.5)  # 100 ticks at 200 Hz: those older than publish.CATCH_UP (0.25 s) are skipped
+        time.sleep(0.5)  # the stimulus, 100 ticks at 200 Hz: those older than publish.CATCH_UP (0.25 s) are skipped
         os.kill(server.proc.pid, signal.SIGCONT)
-        time.sleep(0.3)
+        resumed = len(seqs)
+        wait_until(lambda: len(seqs) >= resumed + 30, 10.0, lambda: len(seqs))  # streaming again
         clients = server.get("/api/state").json()["clients"]
         done.set()
         reader.join(6)

@@ -19,15 +19,13 @@ from riderlive.rules import load_preset
 from riderlive.service.config import ServiceConfig
 from riderlive.service.runtime import make_setup
 from riderlive.service.supervisor import TickSupervisor
+from tests.waiting import await_until
 
 CONFIG = ServiceConfig.model_validate({"tick": {"rate": 100.0, "realtime_priority": False, "restart_backoff": 0.05}})
 
 
-async def _until(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    deadline = time.perf_counter() + timeout
-    while not condition():
-        assert time.perf_counter() < deadline, what
-        await asyncio.sleep(0.02)
+async def _until(condition: Callable[[], bool], timeout: float, what: object) -> None:
+    await await_until(condition, timeout, str(what), poll=0.02)
 
 
 async def _crash_then_start_as_configured() -> None:

@@ -20,6 +20,7 @@ from riderlive.timecode import RATES, Rate
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
+from tests.waiting import wait_until
 
 RATE = Rate.FPS_29_97_DF
 FPS = float(RATES[RATE].fps)
@@ -77,7 +78,8 @@ def test_producer_timecode_stamps_the_take(server: LiveServer) -> None:
         follower.wait_for(lambda f: f["driver"] == "input", timeout=5.0)  # after source.resume_after
         assert server.request("POST", "/api/record/start", json={"name": "tc-producer"}).status_code == 200
         first_t = producer.k / 120
-        time.sleep(0.3)  # a few rows into the take
+        rows = lambda: server.get("/api/state").json()["recording"]["rows"]  # noqa: E731
+        wait_until(lambda: rows() >= 30, 10.0, rows)  # a few rows into the take
         assert server.request("POST", "/api/record/stop").status_code == 200
         sender.join()
     finally:

@@ -35,15 +35,18 @@ def test_a_take_is_a_frame_file_with_t_horse_and_rider(tmp_path: Path) -> None:
 
 
 def test_rows_reach_the_file_within_the_flush_interval_in_whole_lines(tmp_path: Path) -> None:
-    rec = TakeRecorder(tmp_path / "b.csv", flush_interval=0.05)
+    now = [100.0]
+    rec = TakeRecorder(tmp_path / "b.csv", flush_interval=0.05, clock=lambda: now[0])
     zeros_h, zeros_r = [0.0] * len(HORSE_NAMES), [0.0] * len(RIDER_NAMES)
     rec.add(0.0, zeros_h, zeros_r)
+    now[0] += 0.04
+    rec.add(0.005, zeros_h, zeros_r)
     assert (tmp_path / "b.csv").read_text().count("\n") == 1, "only the header before the first flush"
-    time.sleep(0.06)
+    now[0] += 0.02  # past the flush interval since the recorder opened
     rec.add(0.01, zeros_h, zeros_r)
     text = (tmp_path / "b.csv").read_text()
-    assert text.count("\n") == 3 and text.endswith("\n"), "never a partial line on disk"
-    assert len(read_frames(str(tmp_path / "b.csv"))) == 2
+    assert text.count("\n") == 4 and text.endswith("\n"), "never a partial line on disk"
+    assert len(read_frames(str(tmp_path / "b.csv"))) == 3
     rec.close()
 
 

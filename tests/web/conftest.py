@@ -9,7 +9,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -20,6 +19,7 @@ import pytest
 
 import riderlive
 from riderlive.web import CHROMIUM, CHROMIUM_ARGS
+from tests.waiting import wait_until
 
 PACKAGE_ROOT = Path(riderlive.__file__).resolve().parents[1]
 """Where the tests import riderlive from: the server runs that same code."""
@@ -63,17 +63,22 @@ class Server:
                 env=env,
                 start_new_session=True,  # its own process group: stop() ends the tick process too
             )
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.process.poll() is not None:
-                self.stop()
-                raise RuntimeError(f"server exited: {log.read_text()[-2000:]}")
+        def answers() -> bool:
+            if self.process is None or self.process.poll() is not None:
+                return True
             with contextlib.suppress(OSError):
                 self.get("/api/state")
-                return
-            time.sleep(0.1)
-        self.stop()  # never leave a server that did not answer behind
-        raise RuntimeError(f"server did not answer within {timeout} s: {log.read_text()[-2000:]}")
+                return True
+            return False
+
+        try:
+            wait_until(answers, timeout, poll=0.05)
+        except AssertionError:
+            self.stop()  # never leave a server that did not answer behind
+            raise RuntimeError(f"server did not answer within {timeout} s: {log.read_text()[-2000:]}") from None
+        if self.process is None or self.process.poll() is not None:
+            self.stop()
+            raise RuntimeError(f"server exited: {log.read_text()[-2000:]}")
 
     def stop(self) -> None:
         """SIGTERM (the service parks and exits), then kill whatever is left of its process group."""

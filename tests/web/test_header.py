@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 
 from riderlive.horse import GAIT_TABLE, Gait
-from tests.waiting import wait_until
+from tests.waiting import Pacer, wait_until
 from tests.web.conftest import PageUnderTest, Server, open_page
 
 pytestmark = pytest.mark.browser
@@ -114,10 +114,10 @@ def test_streamed_input_left_unused_by_a_chosen_source_is_named_with_the_hand_ba
             # Stamped from the clock, as an engine does: counting 1/60 per send ran ~5 % slow
             # (sleep and send overhead), and a producer clock that slow falls out of the tick's
             # read window within about a second (it drove, then fell back: not a hand-back fault).
-            start = time.monotonic()
+            start, pacer = time.monotonic(), Pacer(1 / 60)
             while not stop.is_set():
                 await producer.send(time.monotonic() - start, dict.fromkeys(HORSE_NAMES, 0.0))
-                await asyncio.sleep(1 / 60)
+                await pacer.await_next()
 
     thread = threading.Thread(target=lambda: asyncio.run(stream()), daemon=True)
     server.request("PUT", "/api/source", {"kind": "procedural", "gait": "trot"})
@@ -165,12 +165,14 @@ def test_a_failed_reset_is_shown_and_the_latch_stays_truthful(page: PageUnderTes
         for pid in held:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGCONT)
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:  # the supervisor's restart: polled, as an operator would
+
+    def ready() -> bool:  # the supervisor's restart: polled, as an operator would
         with contextlib.suppress(OSError):
-            if server.get("/readyz").get("status") == "ready":
-                break
-        time.sleep(0.2)
+            return bool(server.get("/readyz").get("status") == "ready")
+        return False
+
+    with contextlib.suppress(AssertionError):  # not ready within 30 s: the page must say so below
+        wait_until(ready, 30.0, poll=0.2)
     p.locator("#reset").click()
     page.wait_for("document.getElementById('alert').hidden", timeout=30)  # a restarted tick on a busy host
     page.wait_for("document.getElementById('estop-state').hidden", timeout=30)

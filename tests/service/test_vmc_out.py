@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import socket
 import time
 from pathlib import Path
@@ -16,8 +17,8 @@ from riderlive.realtime.record import RecordLayout
 from riderlive.rules import RiderModel
 from riderlive.service.config import VmcSection
 from riderlive.service.poses import RecordPoses
+from riderlive.service.vmc_out import VmcError, VmcSender
 from riderlive.skeleton import HORSE_RIG, HUMANOID
-from riderlive.vmc.sender import VmcError, VmcSender
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import LiveServer
 
@@ -25,9 +26,11 @@ pytest.importorskip("pythonosc")
 from tests.vmc.receiver import VmcReceiver
 
 
-def test_the_service_sends_the_rider_and_the_horse_each_to_its_port(
+def test_the_service_sends_the_rider_and_the_horse_each_to_its_port_and_counts_every_bundle(
     receivers: tuple[VmcReceiver, VmcReceiver], tmp_path: Path
 ) -> None:
+    """One live server for both: the bundles' content, and every bundle the rate asked for
+    (per target) sent or counted (``sent + dropped + error + skipped``)."""
     rider, horse = receivers
     config = BASE_CONFIG + (
         f'\n[vmc]\ntarget = "127.0.0.1:{rider.port}"\nhorse_target = "localhost:{horse.port}"\nrate = 100.0\n'
@@ -40,6 +43,13 @@ def test_the_service_sends_the_rider_and_the_horse_each_to_its_port(
         assert server.metric("riderlive_vmc_bundles_total", 'outcome="sent"') >= 80
     finally:
         server.stop()
+    final = next(line for line in server.log if "VMC out:" in line)
+    status = ast.literal_eval(final.split("VMC out: ", 1)[1].strip())
+    assert rider.wait_for(status["sent"] // 2, timeout=2.0) and horse.wait_for(status["sent"] // 2, timeout=2.0)
+    period = status["decimation"] / 200.0  # tick.rate 200 in BASE_CONFIG
+    wanted = round(dict(rider.bundles[-1])["/VMC/Ext/T"][0] / period) + 1  # chosen ticks, first bundle to last
+    assert status["sent"] + status["dropped"] + status["error"] + status["skipped"] == 2 * wanted  # two targets
+    assert len(rider.bundles) + len(horse.bundles) == status["sent"] and status["dropped"] == status["error"] == 0
     bundles = rider.bundles[1:41]
     times = [dict(b)["/VMC/Ext/T"][0] for b in bundles]
     steps = np.diff(times)

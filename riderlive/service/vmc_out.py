@@ -1,4 +1,5 @@
-"""The VMC sender the service runs: one non-blocking UDP socket, one bundle per chosen tick.
+"""The VMC sender the service runs: one non-blocking UDP socket, one bundle per chosen tick
+(the protocol itself: ``riderlive.vmc``).
 
 Where it runs: in the web process, called from the tick callback right after the
 websocket fan-out (``Service.on_tick``), on the records that callback already read.
