@@ -73,6 +73,7 @@ def fixed_sleeps() -> list[str]:
                     and isinstance(node.func, ast.Attribute)
                     and node.func.attr == "sleep"
                     and node.args
+                    and not (isinstance(node.args[0], ast.Constant) and node.args[0].value == 0)  # a yield
                     and _is_fixed(node.args[0], func)
                     and _innermost(func, node)
                 ):
