@@ -158,7 +158,7 @@ class RigPlug(PlugBase):
         with self._gate():
             self.bus.sync_write(self._spec.spec(Item.GOAL_POSITION), pulses)
         self.goal_written_at = time.perf_counter()
-        self.goal_begun_at = self.bus.port.last_write  # set as the packet's write began (after the latch's check)
+        self.goal_begun_at = self.bus.port.last_write  # stamped as the packet's write began, before the latch's check
         self.goals, self.clamped = goals, clamped
         self.counters["goal_writes"] += 1
         self.counters["clamps"] += sum(clamped)

@@ -27,6 +27,7 @@ from typing import Any
 import pytest
 
 from riderlive.channels import RIDER
+from riderlive.devices import latch as latch_module
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import DeviceState, FaultKind, Refusal, Refused
@@ -238,6 +239,59 @@ def test_estop_recorded_while_a_goal_write_drains_the_line_stops_that_write(
     requester.join()
     emu.settle()
     assert status.state is S.ESTOP and device.plug.counters["goal_writes"] == writes
+    assert goal_writes_after(emu, pressed[0]) == 0
+    assert any(at > pressed[0] and is_torque_off_write(raw) for at, raw in list(emu.arrivals))
+    device.close()
+
+
+def test_estop_whose_time_is_read_just_before_a_goal_write_begins_stops_that_write(
+    timed_buses: Callable[..., TimedBus], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The worst instant (issue 25): a goal write begins right after the request's time
+    is read (the requester's clock read hands over to the writer and waits for its
+    write). The request's time is read after its store, so that write is refused at
+    its check and nothing on the wire began after the request. With the time read
+    before the store (the old order), the goal went out 'after the request'."""
+    device, emu = rig_on(timed_buses, tick_hz=100.0)
+    start_running(device)
+    port = device.plug.bus.port  # type: ignore[attr-defined]
+    stamped, checked = threading.Event(), threading.Event()
+    pressed: list[float] = []
+
+    class ClockThatHandsOver:  # the latch module's `time`: its first read on the requester's thread
+        sleep = staticmethod(time.sleep)
+
+        @staticmethod
+        def perf_counter() -> float:
+            now = time.perf_counter()
+            if threading.current_thread().name == "requester" and not stamped.is_set():
+                stamped.set()
+                checked.wait(5)
+            return now
+
+    requester = threading.Thread(target=lambda: pressed.append(device.latch.request(StopSource.REST)), name="requester")
+    write = port.writePort
+
+    def goal_write(packet: list[int]) -> int:  # inside the gate (the goal), the first write
+        if device.latch._gate_owner != threading.get_ident() or requester.is_alive() or pressed:
+            return int(write(packet))
+        requester.start()
+        assert stamped.wait(5), "the request never read its clock"
+        try:
+            return int(write(packet))  # stamps its beginning, then checks the latch
+        finally:
+            checked.set()
+
+    monkeypatch.setattr(latch_module, "time", ClockThatHandsOver)
+    port.writePort = goal_write
+    emu.settle()
+    writes = device.plug.counters["goal_writes"]
+    status = device.tick(rider_frame(*NEUTRAL), time.perf_counter())
+    requester.join(10)
+    emu.settle()
+    assert pressed and port.last_write is not None
+    assert status.state is S.ESTOP and device.plug.counters["goal_writes"] == writes
+    assert device.last_stop is not None and (device.last_stop.last_goal_at or 0.0) < pressed[0]
     assert goal_writes_after(emu, pressed[0]) == 0
     assert any(at > pressed[0] and is_torque_off_write(raw) for at, raw in list(emu.arrivals))
     device.close()
