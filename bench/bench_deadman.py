@@ -46,6 +46,9 @@ from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write,
 from riderlive.dynamixel.rig import DEG_PER_PULSE, RigConfig
 from tests.service.live_server import LiveServer
 
+START_TIMEOUT_S = 120.0
+"""A saturated host (load 20-30) can take over 30 s to import and start the service."""
+
 PARK_S = 0.5
 TWO_AT_ONCE = ("tick_guardian", "web_guardian", "tick_guardian_hang", "web_guardian_hang")
 """Cases without a target: what the rig does is measured and documented (docs/hardware.md)."""
@@ -70,7 +73,7 @@ class Rig:
             text += f'[tick]\nrate = 100.0\n[rig]\nfile = "{self.workdir / "bench3.toml"}"\nport = "{self.emu.port}"\n'
             for attempt in range(3):  # a saturated machine can take > 30 s to import the service
                 try:
-                    self.live = LiveServer(text, self.workdir)
+                    self.live = LiveServer(text, self.workdir, start_timeout_s=START_TIMEOUT_S)
                     break
                 except RuntimeError as exc:
                     if attempt == 2:

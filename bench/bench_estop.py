@@ -44,6 +44,9 @@ from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write,
 from riderlive.dynamixel.rig import deg_to_pulses
 from tests.service.live_server import LiveServer
 
+START_TIMEOUT_S = 120.0
+"""A saturated host (load 20-30) can take over 30 s to import and start the service."""
+
 TOKEN = "bench-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
@@ -119,7 +122,7 @@ def run(rate: float, trials: int, workdir: Path, web_priority: int) -> dict[str,
     )
     for attempt in range(3):  # a saturated machine can take > 30 s to import the service
         try:
-            live = LiveServer(config, workdir, token=TOKEN)
+            live = LiveServer(config, workdir, token=TOKEN, start_timeout_s=START_TIMEOUT_S)
             break
         except RuntimeError as exc:
             if attempt == 2:
