@@ -105,8 +105,9 @@ def running(client: httpx.Client, name: str, live: LiveServer, retries: list[str
         device = live.get("/api/devices", headers=AUTH).json()["devices"][0]
         retries.append(f"{now}: {device.get('detail')!r}")
         print(f"  (the rig went {now}, not running: {device.get('detail')!r}; arming again)", flush=True)
-        if now == "parking":
-            wait_state(live, "parked")
+        deadline = time.perf_counter() + 10.0
+        while state(live) == "parking" and time.perf_counter() < deadline:  # then parked or disarmed
+            time.sleep(0.01)
     raise SystemExit("the rig could not be kept running")
 
 
@@ -182,6 +183,12 @@ def run(rate: float, trials: int, workdir: Path, web_priority: int) -> dict[str,
             out["unmatched"].append(float(bool(before_off) and decode_goals(before_off[-1]) != last_goals(live)))
             assert client.post("/api/reset").status_code == 200
             wait_state(live, "disarmed")
+            if (n + 1) % 25 == 0:  # a partial figure, should a long run have to be stopped
+                print(
+                    f"  after {n + 1} trials: goal writes begun after the arrival {sum(out['began_after']):.0f}, "
+                    f"after the torque-off {sum(out['after_off']):.0f}; handler -> wire {summary(out['handler'])}",
+                    flush=True,
+                )
         supervision = live.get("/api/devices", headers=AUTH).json()["supervision"]
         out["restarts"] = [float(supervision["restarts"])]
         out["retries"] = [float(len(retries))]
