@@ -186,7 +186,11 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
                 os.kill(pid, signal.SIGKILL)
     if case in TWO_AT_ONCE and (not offs or not goals):  # reported: nobody parked within PARK_S + 10 s
         print(f"  ({case}: no park: {len(goals)} goals, {len(offs)} torque-offs after the signal)", flush=True)
-        return {"first_goal": float("inf"), "torque_off": float("inf"), "slew_ratio": 0.0, "after_off": 0.0}
+        nobody = {"first_goal": float("inf"), "torque_off": float("inf"), "slew_ratio": 0.0, "after_off": 0.0}
+        if case.startswith("tick_guardian"):
+            watcher.join()
+            nobody["guardian_back"] = back[0] if back else float("inf")
+        return nobody
     if not offs or not goals:
         raise SystemExit(f"{case}: no park ({len(goals)} goals) or no torque off ({len(offs)})")
     speed = {s.id: s.max_speed_dps for s in rig.config.servos.values()}
