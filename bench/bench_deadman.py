@@ -13,7 +13,10 @@ other core busy. Per trial the rig is armed and running, then:
 - ``guardian``: SIGKILL of the guardian (the tick itself parks the armed rig: the
   watched watchman; the supervisor relaunches the guardian);
 - ``tick_guardian``, ``web_guardian``: SIGKILL of two at once (reported, no target: the
-  first waits for a relaunched guardian, the second has the orphaned tick park).
+  first has the standby guardian take over, the second has the orphaned tick park);
+- ``tick_guardian_hang``, ``web_guardian_hang``: SIGSTOP of the same two at once (reported,
+  no target; the stopped processes are killed after the trial). A trial in which nobody
+  parks is reported as such (the servos' Bus Watchdog stops them, torque on), not an error.
 
 Measured from the signal, on the emulator's clock: the first goal write of the park
 (target <= 200 ms), the torque-off broadcast (target <= park_s + 200 ms; for
@@ -43,7 +46,12 @@ from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write,
 from riderlive.dynamixel.rig import DEG_PER_PULSE, RigConfig
 from tests.service.live_server import LiveServer
 
+START_TIMEOUT_S = 120.0
+"""A saturated host (load 20-30) can take over 30 s to import and start the service."""
+
 PARK_S = 0.5
+TWO_AT_ONCE = ("tick_guardian", "web_guardian", "tick_guardian_hang", "web_guardian_hang")
+"""Cases without a target: what the rig does is measured and documented (docs/hardware.md)."""
 
 
 class Rig:
@@ -65,7 +73,7 @@ class Rig:
             text += f'[tick]\nrate = 100.0\n[rig]\nfile = "{self.workdir / "bench3.toml"}"\nport = "{self.emu.port}"\n'
             for attempt in range(3):  # a saturated machine can take > 30 s to import the service
                 try:
-                    self.live = LiveServer(text, self.workdir)
+                    self.live = LiveServer(text, self.workdir, start_timeout_s=START_TIMEOUT_S)
                     break
                 except RuntimeError as exc:
                     if attempt == 2:
@@ -134,13 +142,15 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
         web, tick, guardian = rig.service().proc.pid, sup["tick_pid"], sup["guardian"]["pid"]
         rig.emu.ask("arrivals")
         hit = time.perf_counter()
+        hang = case == "stop" or case.endswith("_hang")
+        how = signal.SIGSTOP if hang else signal.SIGKILL
         try:
-            if case in ("tick", "both", "stop", "tick_guardian"):  # first: a tick restarted meanwhile is not ours
-                os.kill(tick, signal.SIGSTOP if case == "stop" else signal.SIGKILL)
-            if case in ("web", "both", "web_guardian"):
-                os.kill(web, signal.SIGKILL)
-            if case in ("guardian", "tick_guardian", "web_guardian"):
-                os.kill(guardian, signal.SIGKILL)
+            if case in ("tick", "both", "stop") or case.startswith("tick_guardian"):  # first: a tick restarted since
+                os.kill(tick, how)
+            if case in ("web", "both") or case.startswith("web_guardian"):
+                os.kill(web, how)
+            if case == "guardian" or case.startswith(("tick_guardian", "web_guardian")):
+                os.kill(guardian, how)
             break
         except ProcessLookupError:  # the supervisor restarted that tick (a loaded machine): again
             print("  (the tick was restarted before the kill; retrying)", flush=True)
@@ -148,7 +158,7 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
     else:
         raise SystemExit(f"{case}: the tick kept restarting")
     back: list[float] = []  # case guardian: when a guardian watched again (polled from the kill on)
-    if case in ("guardian", "tick_guardian"):
+    if case == "guardian" or case.startswith("tick_guardian"):
 
         def watch_back() -> None:
             while time.perf_counter() < hit + 30.0:
@@ -170,6 +180,21 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
             break
     offs = [t for t in torque_offs(packets) if t > hit]
     goals = [(t, decode_goals(raw)) for t, raw in packets if is_goal_write(raw) and t > hit]
+    if hang and case != "stop":  # the stopped processes go; the service restarts what it must
+        for pid in (guardian, tick if case.startswith("tick") else web):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    if case in TWO_AT_ONCE and (not offs or not goals):  # reported: nobody parked within PARK_S + 10 s
+        print(f"  ({case}: no park: {len(goals)} goals, {len(offs)} torque-offs after the signal)", flush=True)
+        nobody = {"first_goal": float("inf"), "torque_off": float("inf"), "slew_ratio": 0.0, "after_off": 0.0}
+        if case.startswith("tick_guardian"):
+            watcher.join()
+            nobody["guardian_back"] = back[0] if back else float("inf")
+        return nobody
+    if offs and not goals:  # a torque-off with no goal after the signal: the rig had stopped before it
+        print(f"  ({case}: the rig was stopping already at the signal (a loaded host): trial again)", flush=True)
+        rig.retries += 1
+        return trial(rig, case)
     if not offs or not goals:
         raise SystemExit(f"{case}: no park ({len(goals)} goals) or no torque off ({len(offs)})")
     speed = {s.id: s.max_speed_dps for s in rig.config.servos.values()}
@@ -184,7 +209,7 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
             os.kill(tick, signal.SIGKILL)  # the supervisor has killed it already; make sure
     after = sum(1 for t, _ in goals if t > offs[0])
     result = {"first_goal": goals[0][0] - hit, "torque_off": offs[0] - hit, "slew_ratio": ratio, "after_off": after}
-    if case in ("guardian", "tick_guardian"):
+    if case == "guardian" or case.startswith("tick_guardian"):
         watcher.join()
         result["guardian_back"] = back[0] if back else float("inf")
     return result
@@ -210,7 +235,7 @@ def main() -> int:
                 slew = max(r["slew_ratio"] for r in results)
                 after = sum(int(r["after_off"]) for r in results)
                 off_limit = (PARK_S + (0.3 if case == "guardian" else 0.2)) * 1000
-                if case not in ("tick_guardian", "web_guardian"):  # no target: reported
+                if case not in TWO_AT_ONCE:  # no target: reported
                     ok &= max(first) <= 200 and max(off) <= off_limit and slew <= 1.0
                 ok &= after == 0
                 print(
@@ -220,7 +245,7 @@ def main() -> int:
                     f"largest goal step / slew limit {slew:.2f}",
                     flush=True,
                 )
-                if "guardian" in case and case != "web_guardian":
+                if case == "guardian" or case.startswith("tick_guardian"):
                     back = [r["guardian_back"] * 1000 for r in results]
                     print(
                         f"      the relaunched guardian watching again: median {statistics.median(back):6.0f} "

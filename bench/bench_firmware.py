@@ -37,6 +37,7 @@ from riderlive.platform.link import (
     Arm,
     Config,
     ConfigKey,
+    Fault,
     Heartbeat,
     LinkState,
     Profile,
@@ -116,9 +117,10 @@ def slowest_park(profile: str, far: int) -> None:
         park = firmware.wait_event(lambda e: e["event"] == "park_step", 2.0, mark)
         off = firmware.wait_event(lambda e: e["event"] == "state" and e["to"] == "fault", 30.0, mark)
     seconds = (off["t_ns"] - park["t_ns"]) / 1e9
+    cut = "cut at the bound by PARK_TIMEOUT (a starved loop)" if off["faults"] & Fault.PARK_TIMEOUT else "parked"
     print(
         f"slowest park, {profile} at its CONFIG floors ({v} counts/s, {a} counts/s^2), host build on the pty, "
-        f"from {far} counts: first park step -> outputs off {seconds:.2f} s (bound {PARK_BOUND_S:g} s; "
+        f"from {far} counts: first park step -> outputs off {seconds:.2f} s, {cut} (bound {PARK_BOUND_S:g} s; "
         f"formula {firmware_park_s(abs(far - (500 if profile != 'servo8' else 0)), v, a):.2f} s from full speed)"
     )
 

@@ -202,9 +202,11 @@ void device_step(device_t *d, const device_inputs_t *in, uint32_t now_ms)
             goals[i] = (float)d->target[i];
         step_axes(d, goals, 0.0f, 1.0f);
         break;
-    case ST_PARKING:
+    case ST_PARKING: /* motion advances per step; the bound is in time (a loop starved of steps) */
         if (step_axes(d, 0, (float)p->actuator.park, p->park_scale))
             finish_park(d);
+        else if (now_ms - d->state_since_ms >= PARK_BOUND_MS)
+            fault_now(d, F_PARK_TIMEOUT);
         break;
     default:
         break;

@@ -49,7 +49,8 @@ typedef enum {
 
 enum { /* latched fault bits */
     F_ESTOP_INPUT = 0x0001, F_ESTOP_LINK = 0x0002, F_LINK_TIMEOUT = 0x0004,
-    F_FOLLOWING_ERROR = 0x0008, F_HOMING_TIMEOUT = 0x0010, F_LINK_ERRORS = 0x0020
+    F_FOLLOWING_ERROR = 0x0008, F_HOMING_TIMEOUT = 0x0010, F_LINK_ERRORS = 0x0020,
+    F_PARK_TIMEOUT = 0x0040 /* a park not over PARK_BOUND_MS after it began (a starved loop): outputs off */
 };
 enum { /* live telemetry flags */
     FL_HOMED = 0x01, FL_ESTOP_INPUT = 0x02, FL_OUTPUTS_ON = 0x04, FL_LINK_OK = 0x08, FL_LIMITED = 0x10

@@ -348,12 +348,37 @@ static void pulses_map_positions_to_the_profiles_outputs(void)
     CHECK_EQ(servo->pwm_hz, 50);
 }
 
+/* The park is bounded in time, not in steps: a loop starved of steps (here one every
+ * 250 ms instead of every period) still turns the outputs off PARK_BOUND_MS after the
+ * park began, with F_PARK_TIMEOUT latched beside the dead-man's fault. */
+static void a_starved_park_ends_in_outputs_off_within_the_bound(void)
+{
+    uint32_t began;
+    running_servo();
+    while (d.state == ST_RUNNING)
+        step(); /* no frames: the dead-man parks */
+    CHECK_EQ(d.state, ST_PARKING);
+    began = d.state_since_ms;
+    while (d.state == ST_PARKING && now - began < 60000u) {
+        CHECK_EQ(d.outputs_on, 1);
+        now += 250u - d.profile->period_ms; /* step() adds one period */
+        step();
+    }
+    CHECK_EQ(d.state, ST_FAULT);
+    CHECK_EQ(d.outputs_on, 0);
+    CHECK_EQ(now - began, PARK_BOUND_MS); /* the first step at or past the bound: 20 x 250 ms */
+    CHECK_EQ(d.faults, F_LINK_TIMEOUT | F_PARK_TIMEOUT);
+    CHECK(device_commanded(&d, 0) > 0); /* it had not got there: stopped where it was */
+    CHECK_EQ(named(LINK_ARM, "servo8"), REASON_LATCHED);
+}
+
 int main(void)
 {
     boots_disarmed_and_nothing_moves_without_arm();
     arm_soft_start_run_under_limits();
     platform_homes_before_the_first_arm();
     deadman_parks_then_faults();
+    a_starved_park_ends_in_outputs_off_within_the_bound();
     heartbeats_keep_it_running_and_config_sets_the_timeout();
     estop_from_link_and_input_is_latched();
     stale_and_replayed_frames_are_never_acted_on();

@@ -331,6 +331,8 @@ int main(int argc, char **argv)
     CHECK_EQ(num(item(item(root, "enums"), "reason"), "UNKNOWN_KEY"), REASON_UNKNOWN_KEY);
     CHECK_EQ(num(item(item(root, "enums"), "config_key"), "PWM_HZ"), K_PWM_HZ);
     CHECK_EQ(num(item(item(root, "enums"), "fault"), "HOMING_TIMEOUT"), F_HOMING_TIMEOUT);
+    CHECK_EQ(num(item(item(root, "enums"), "fault"), "PARK_TIMEOUT"), F_PARK_TIMEOUT);
+    CHECK_EQ(num(root, "park_bound_ms"), PARK_BOUND_MS); /* the device's park timeout, as riderlive knows it */
     CHECK_EQ(num(item(item(root, "enums"), "flag"), "LIMITED"), FL_LIMITED);
     CHECK_EQ(num(item(item(root, "enums"), "type"), "TELEMETRY"), LINK_TELEMETRY);
     frames(root);

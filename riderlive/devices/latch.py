@@ -6,8 +6,9 @@ process that owns the bus writes torque off). Between the two lives this latch: 
 slots in shared memory and a file lock on that segment.
 
 "No goal write begins after the request" is structural. A request is recorded at once
-(a few stores to shared memory, no lock, nothing to wait for: from a signal handler
-too), and every goal write happens inside :meth:`StopView.gate`, which refuses
+(its first act is the one store to shared memory that writers check, its time is read
+after that store; no lock, nothing to wait for: from a signal handler too), and every
+goal write happens inside :meth:`StopView.gate`, which refuses
 (:class:`StopRequested`) when a request is pending at its entry **and again at the
 write itself** (:meth:`StopView.check_write`, called by the transport immediately
 before the bytes go out, under the gate's lock): a request recorded while the writer
@@ -75,18 +76,25 @@ class StopLatch:
     # -- the requester's side ----------------------------------------------------------
 
     def request(self, source: StopSource = StopSource.API) -> float:
-        """Record an e-stop request at once; return its time (perf_counter s, when recorded).
+        """Record an e-stop request at once; return its time (perf_counter s, taken right
+        after the record: every goal write stamped later than it is refused).
+
+        The first act is the one store that every gate and every at-write check reads
+        (``requested``); the time is read after it. A writer stamps its write's beginning
+        before its check (:meth:`StopView.check_write`), so a write whose beginning is
+        later than the returned time checked after the store and was refused: there is no
+        instant at which the request has a time but is not yet visible to a writer.
 
         Then wait (up to ``LOCK_WAIT_S``) for a goal write under way to leave, unless the
         caller is a signal handler that interrupted this thread's own write (the write's
         check refuses it if it has not begun). Two requests at the same instant from two
         processes may count as one in ``requested`` (both latch, and both are pending)."""
-        now = time.perf_counter()
         slots = self._slots
+        slots["requested"] = slots["requested"] + 1.0  # first: pending from here, every gate and write refuses
+        now = time.perf_counter()  # after the store: nothing stamped later can pass a check
+        slots["latched"] = 1.0  # (a gate refuses on `requested`; `latched` is for reset and new devices)
         slots["requested_at"] = now
         slots["source"] = float(source)
-        slots["latched"] = 1.0
-        slots["requested"] = slots["requested"] + 1.0  # pending from here: every gate refuses
         if self._gate_owner == threading.get_ident():
             return now
         acquired = self._thread_lock.acquire(timeout=LOCK_WAIT_S)
@@ -176,7 +184,9 @@ class StopView:
     def check_write(self) -> None:
         """Immediately before a write's bytes go out: inside this thread's gate, raise
         StopRequested if a request was recorded since the gate's entry (outside a gate:
-        nothing to check, an outputs-off or a read)."""
+        nothing to check, an outputs-off or a read). The caller stamps the write's
+        beginning *before* calling this (see :meth:`StopLatch.request`: a write stamped
+        after a request's time is then always refused)."""
         if self.latch._gate_owner == threading.get_ident() and self.pending:
             raise StopRequested("e-stop requested before the write began")
 

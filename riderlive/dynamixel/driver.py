@@ -106,7 +106,7 @@ class RigPlug(PlugBase):
     @property
     def park_timeout_s(self) -> float:
         bus = self.config.bus
-        return bus.park_s + bus.park_settle_s + 2.0 * self.period_s
+        return bus.park_s + 2.0 * self.period_s  # the wait for arrival is inside park_s (rig.BusConfig)
 
     def setup(self, detail: Callable[[str], None]) -> Steps[None]:
         self.hardware_errors.clear()
@@ -148,7 +148,7 @@ class RigPlug(PlugBase):
         self._check_gap(now, motion)
         arrived = False
         if motion.move is Move.PARK:
-            targets, arrived = ramp(self._ramp_from, self.map.park, motion.elapsed, bus.park_s)
+            targets, arrived = ramp(self._ramp_from, self.map.park, motion.elapsed, bus.park_ramp_s)
         else:
             targets = self.map.targets(self._valid(() if frame is None else frame.rider), self.goals)
             if motion.move is Move.SOFT_START:
@@ -158,7 +158,7 @@ class RigPlug(PlugBase):
         with self._gate():
             self.bus.sync_write(self._spec.spec(Item.GOAL_POSITION), pulses)
         self.goal_written_at = time.perf_counter()
-        self.goal_begun_at = self.bus.port.last_write  # set as the packet's write began (after the latch's check)
+        self.goal_begun_at = self.bus.port.last_write  # stamped as the packet's write began, before the latch's check
         self.goals, self.clamped = goals, clamped
         self.counters["goal_writes"] += 1
         self.counters["clamps"] += sum(clamped)
@@ -296,12 +296,16 @@ class RigPlug(PlugBase):
 
     def _parked(self, goals: Sequence[float], now: float) -> bool:
         """The park goals are out and every servo has arrived (as read after that), or
-        ``park_settle_s`` has passed (a servo that cannot be read, or cannot get there)."""
+        the park's budget ``park_s`` is used up (a servo that cannot be read, or cannot
+        get there): the wait for arrival comes out of ``park_s``, never adds to it. A
+        ramp held back by the slew limit has less to wait; the lifecycle's
+        ``park_timeout_s`` (park_s + 2 ticks from the park's start) bounds it anyway."""
         if any(abs(g - p) > 1e-6 for g, p in zip(goals, self.map.park, strict=True)):
             return False
         if self._park_goals_at is None:
             self._park_goals_at = now
-        if now - self._park_goals_at >= self.config.bus.park_settle_s:
+        if now - self._park_goals_at >= self.config.bus.park_settle_budget_s:
+            self.counters["park_not_arrived"] += 1  # torque off where they are: counted, shown
             return True
         if self._last_read is None or self._last_read <= self._park_goals_at:
             return False

@@ -55,6 +55,10 @@ SDK_BAUDS += (1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000, 
 HardwareErrorName = Literal["input_voltage", "overheating", "motor_encoder", "electrical_shock", "overload"]
 
 
+PARK_SETTLE_SHARE = 0.25
+"""The most of ``park_s`` that waits for arrival (the ease keeps at least 3/4 of it)."""
+
+
 class BusConfig(StrictModel):
     """The serial bus and the timing of the lifecycle (times in seconds unless named)."""
 
@@ -91,8 +95,12 @@ class BusConfig(StrictModel):
     return_delay_us: int = Field(0, ge=0, le=508)
     soft_start_s: float = Field(2.0, ge=0.0, le=60.0)
     park_s: float = Field(2.0, ge=0.0, le=60.0)
-    park_settle_s: float = Field(1.0, ge=0.0, le=10.0)
-    """After the park ramp, wait at most this long for the servos to arrive, then torque off."""
+    """A park's whole budget: the ease to the park pose *and* the wait for the servos to
+    arrive; torque goes off at the latest ``park_s`` (+ 2 ticks) after the park began."""
+    park_settle_s: float = Field(0.3, ge=0.0, le=10.0)
+    """The end of ``park_s`` kept for the servos to arrive (read back within
+    ``park_tolerance_deg``), at most ``PARK_SETTLE_SHARE`` of it: it comes out of the
+    park's budget (the ease is that much shorter), it never adds to it."""
     park_tolerance_deg: float = Field(1.0, gt=0.0, le=10.0)
     """A servo has arrived at its park position within this."""
     close_timeout_s: float = Field(5.0, gt=0.0, le=120.0)
@@ -110,6 +118,16 @@ class BusConfig(StrictModel):
         if value != 2.0:
             raise ValueError("only Dynamixel Protocol 2.0 is supported")
         return value
+
+    @property
+    def park_settle_budget_s(self) -> float:
+        """The wait for arrival at the end of a park (s): ``park_settle_s``, at most a share of ``park_s``."""
+        return min(self.park_settle_s, PARK_SETTLE_SHARE * self.park_s)
+
+    @property
+    def park_ramp_s(self) -> float:
+        """The ease to the park pose (s): ``park_s`` less the wait for arrival."""
+        return self.park_s - self.park_settle_budget_s
 
     @property
     def tick_s(self) -> float:

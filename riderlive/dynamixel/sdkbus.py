@@ -119,9 +119,10 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         return bool(super().isPacketTimeout())
 
     def writePort(self, packet: list[int]) -> int:
+        begun = time.perf_counter()  # before the check: a write stamped after a request's time is refused
         if self.stops is not None:  # inside the latch's gate: a request recorded since its entry
             self.stops.check_write()  # stops this write before its first byte (the goal at the write)
-        self.last_write = time.perf_counter()
+        self.last_write = begun
         now = self.getCurrentTime()
         self.wire_free_at = max(now, self.wire_free_at) + len(packet) * self.tx_time_per_byte
         return int(super().writePort(packet))

@@ -111,6 +111,7 @@ class Fault(enum.IntFlag):
     FOLLOWING_ERROR = 0x0008
     HOMING_TIMEOUT = 0x0010
     LINK_ERRORS = 0x0020  # too many rejected packets while moving: parked
+    PARK_TIMEOUT = 0x0040  # a park not over PARK_BOUND_S after it began (a loop starved of steps): outputs off
 
 
 class Flag(enum.IntFlag):

@@ -219,6 +219,7 @@ def vectors() -> dict[str, Any]:
             "profile": {p.name: int(p) for p in Profile},
             "counters": list(COUNTERS),
         },
+        "park_bound_ms": round(link.PARK_BOUND_S * 1000),
         "config_ranges": {
             p.name: {k.name: list(r) for k, r in ranges.items()} for p, ranges in link.CONFIG_RANGES.items()
         },

@@ -151,7 +151,7 @@ def add_device_routes(app: FastAPI, service: DevicesPort) -> None:
     async def estop(request: Request) -> dict[str, Any]:
         first = stamps(request.scope)
         if first is None:  # not through the outer layer (never in the service): latch here
-            first = (time.perf_counter(), service.supervisor.estop(StopSource.REST))
+            first = (service.supervisor.estop(StopSource.REST), time.perf_counter())
         received, latched = first
         given = auth.bearer(request.headers.get("authorization"))
         authorized = auth.token_matches(config.security.token, given) or not config.token_required

@@ -1,10 +1,13 @@
 """``POST /api/estop`` before anything else: the latch is set by the outermost ASGI layer.
 
 Every other layer (the body limit, CORS, routing, the token check, validation, the
-access log) runs after the e-stop is latched in shared memory and the tick is woken:
-the request's arrival in this process (``received_at``, the first thing this layer
-does) and the latch (``latched_at``) are microseconds apart, and no goal write begins
-after the latch (:mod:`riderlive.devices.latch`: the gate refuses at the write itself).
+access log) runs after the e-stop is latched in shared memory and the tick is woken.
+This layer's first act is the latch's one store that every goal write checks
+(:meth:`riderlive.devices.latch.StopLatch.request`); the request's arrival
+(``received_at``) is the time read right after that store, so no goal write that
+begins after the arrival can pass its at-write check (a write stamps its beginning
+before its check). ``latched_at`` is when the latch returned: a goal write that was
+already on its way has left, and the tick has been woken.
 
 Decision (docs/hardware.md, "E-stop without the token"): an e-stop is **never locked**.
 Whoever can reach the service may stop the rig, token or not, loopback or not; the
@@ -25,7 +28,7 @@ from riderlive.devices.latch import StopSource
 
 ESTOP_PATH = "/api/estop"
 STATE_KEY = "riderlive.estop"
-"""Where ``(received_at, latched_at)`` (perf_counter s) wait for the route, in the scope's state."""
+"""Where ``(received_at, latched_at)`` (perf_counter s, see above) wait for the route, in the scope's state."""
 
 
 class EStopFirst:
@@ -37,8 +40,8 @@ class EStopFirst:
 
     async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
         if scope["type"] == "http" and scope["path"] == ESTOP_PATH and scope["method"] == "POST":
-            received = time.perf_counter()
-            latched = self.estop(StopSource.REST)
+            received = self.estop(StopSource.REST)  # the store first, then the time
+            latched = time.perf_counter()
             scope.setdefault("state", {})[STATE_KEY] = (received, latched)
         await self.app(scope, receive, send)
 

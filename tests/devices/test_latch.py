@@ -160,3 +160,52 @@ def test_a_killed_gate_holder_releases_the_lock(latch: StopLatch) -> None:
     child.wait(10)
     latch.request(StopSource.API)
     assert latch.lock_timeouts == 0
+
+
+class _ClockThatHandsOver:
+    """The latch module's ``time``: the requester's first clock read (its request's time)
+    lets a writer run its check right then and waits until the writer has gone through
+    it; every other read is the real clock. This is the worst instant for a request: a
+    write that begins just after the request's time."""
+
+    def __init__(self, requester: str, stamped: threading.Event, checked: threading.Event) -> None:
+        self.requester, self.stamped, self.checked = requester, stamped, checked
+        self.sleep = time.sleep
+
+    def perf_counter(self) -> float:
+        now = time.perf_counter()
+        if threading.current_thread().name == self.requester and not self.stamped.is_set():
+            self.stamped.set()
+            assert self.checked.wait(5), "the writer never reached its check"
+        return now
+
+
+def test_a_write_stamped_after_the_request_s_time_is_refused(
+    latch: StopLatch, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The request's time is read after its store (issue 25): a writer that stamps its
+    write just after that time, then checks, is refused. With the time read before the
+    store (the old order) the check ran before the store and the write went out."""
+    view = latch.view()
+    stamped, checked = threading.Event(), threading.Event()
+    outcome: list[tuple[str, float]] = []
+    requested: list[float] = []
+
+    def requester() -> None:
+        requested.append(latch.request(StopSource.REST))
+
+    thread = threading.Thread(target=requester, name="requester")
+    monkeypatch.setattr(latch_module, "time", _ClockThatHandsOver("requester", stamped, checked))
+    with view.gate():  # entered before the request: the gate's own check passes
+        thread.start()
+        assert stamped.wait(5)
+        begun = time.perf_counter()  # the write begins: stamped, then checked
+        try:
+            view.check_write()
+            outcome.append(("written", begun))
+        except StopRequested:
+            outcome.append(("refused", begun))
+        checked.set()
+    thread.join(10)
+    assert requested and outcome[0][1] > requested[0]  # began after the request's time
+    assert outcome[0][0] == "refused"

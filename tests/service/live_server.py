@@ -28,8 +28,13 @@ class LiveServer:
         port: int = 0,
         token: str | None = None,
         wait_for_ticks: bool = True,
+        start_timeout_s: float = 120.0,
     ) -> None:
-        """``wait_for_ticks`` False: return once the web process is up (call :meth:`wait_for_ticks`)."""
+        """``wait_for_ticks`` False: return once the web process is up (call :meth:`wait_for_ticks`).
+        ``start_timeout_s``: for the web process to listen, then for the first ticks (each).
+        No test here times the start, so the bound is wide: on the 2 shared cores at load ~20
+        the imports alone took 30-60 s, and a 30 s bound failed a session fixture and with it
+        every test of its module (146 errors in one run); a quick start returns at once."""
         self.token = token
         self.workdir = workdir
         self.host = host
@@ -49,13 +54,13 @@ class LiveServer:
         self.port = 0
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
-        if not self._ready.wait(30.0):
+        if not self._ready.wait(start_timeout_s):
             self.stop()
             raise RuntimeError("server did not start:\n" + "".join(self.log))
         self.base = f"http://{host}:{self.port}"
         self.ws = f"ws://{host}:{self.port}"
         if wait_for_ticks:
-            self.wait_for_ticks()
+            self.wait_for_ticks(start_timeout_s)
 
     def wait_for_ticks(self, timeout: float = 30.0) -> None:
         """The tick process is spawned at startup and needs a moment to import."""
