@@ -42,7 +42,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from riderlive.devices.board import GuardianReport, SafetyBoard
+from riderlive.devices.board import GUARDIAN_HANG_S, GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
@@ -62,6 +62,8 @@ power cut, a port now owned by someone else); the servos' Bus Watchdog and the h
 e-stop are all that is left, and an orphan guardian writing to a reused port forever
 would be a hazard of its own."""
 KILL_WAIT_S = 2.0
+LATE_S = 0.05
+"""A standby's look that wakes this much later than its poll period saw a host stall."""
 PORT_RELEASE_S = 5.0
 """How long a transport held by another process (the tick just killed, whose file the
 kernel has not released yet) is waited for before this stop gives up on it (logged with
@@ -161,7 +163,9 @@ class Guardian:
             for thread in threads:
                 thread.start()
             for thread in threads:
-                thread.join()
+                while thread.is_alive():  # beating meanwhile: a long park is not a hang
+                    board.guardian_beat = time.perf_counter()
+                    thread.join(POLL_S)
         finally:
             board.guardian_takeovers += 1
             board.guardian_done = generation
@@ -291,13 +295,31 @@ def launch(
 def stand_by(board: SafetyBoard, after: int, poll_s: float = POLL_S) -> bool:
     """A standby guardian, its imports paid and its plugs built: wait until the active
     guardian (the board's, or ``after`` until that one has written its pid) is gone (at
-    once through a pidfd), then become it (True), or until shutdown (False). Its heartbeat
-    comes before its pid, so nobody sees the new pid with the old guardian's stale beat."""
+    once through a pidfd) or hung, then become it (True), or until shutdown (False). Its
+    heartbeat comes before its pid, so nobody sees the new pid with the old guardian's
+    stale beat.
+
+    Hung: a ready guardian whose beat is older than ``GUARDIAN_HANG_S`` while this
+    standby itself ran on time (a look that woke later than ``poll_s`` + ``LATE_S`` is a
+    host stall that stopped the guardian too: it is given the next look to beat). A hung
+    guardian is killed (SIGKILL; it cannot be trusted to wake in the middle of a stop)
+    and the standby takes over: with the tick hung as well, nobody else would park."""
     pidfd: int | None = None
     watched = 0
+    last_look = time.perf_counter()
     try:
         while not board.shutdown:
             active = int(board.guardian_pid) or after
+            now = time.perf_counter()
+            on_time, last_look = now - last_look <= poll_s + LATE_S, now
+            age = now - board.guardian_beat
+            if on_time and board.guardian_pid == active and board.guardian_ready == 1.0 and age > GUARDIAN_HANG_S:
+                log.critical("the guardian %d has not beaten for %.0f ms: killed; taking over", active, age * 1e3)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(active, signal.SIGKILL)
+                deadline = now + KILL_WAIT_S
+                while pid_alive(active) and time.perf_counter() < deadline:
+                    time.sleep(0.0005)
             if not pid_alive(active):
                 board.guardian_beat = time.perf_counter()
                 board.guardian_pid = os.getpid()

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from riderlive.devices.board import SafetyBoard
+from riderlive.devices.board import GUARDIAN_HANG_S, SafetyBoard
 from riderlive.devices.guardian import HANDBACK_AFTER_S, launch
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState
@@ -175,6 +175,62 @@ def test_a_guardian_killed_during_its_takeover_is_followed_from_where_the_park_h
     assert after[-1][1] == pytest.approx(park, abs=0.1)
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
     assert "stopped, outputs off (read back)" in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("dead_tick", [12.0], indirect=True)
+def test_a_hung_guardian_is_replaced_by_the_standby_which_finishes_the_park(
+    dead_tick: tuple[DeadTick, EmulatedBus, RigConfig], capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Tick and guardian hung together (issue 25's bench found nobody parked: the standby
+    waited for a death only). A guardian in a long park beats meanwhile, so the standby
+    leaves it be; SIGSTOPped, it is killed by the standby, which eases on from where the
+    park had got and turns torque off."""
+    scene, emu, rig = dead_tick
+    active = scene.guardian()
+    standby = launch(
+        scene.board.name, scene.latch.name, [scene.spec], 0.1, 1.0, standby_after=active.pid
+    )
+    board = scene.board
+    try:
+        wait_until(lambda: board["guardian_standby"] == standby.pid, 30.0, "a standby")
+        wait_until(lambda: park_progress(emu, rig) > 0.01, 30.0, "the park under way")
+        assert park_progress(emu, rig) < 0.9, "the park must still be under way (raise park_s)"
+        ages: list[float] = []
+        watch_until = time.perf_counter() + 2 * GUARDIAN_HANG_S
+
+        def watched() -> bool:
+            ages.append(time.perf_counter() - board["guardian_beat"])
+            return time.perf_counter() > watch_until
+
+        wait_until(watched, 10.0, "the watch of a healthy park", poll=0.005)
+        assert max(ages) < GUARDIAN_HANG_S, f"a parking guardian's beat aged {max(ages) * 1e3:.0f} ms"
+        assert board["guardian_pid"] == active.pid and standby.poll() is None  # a long park is not a hang
+        active.send_signal(signal.SIGSTOP)
+        stopped = time.perf_counter()
+        wait_until(lambda: board["guardian_pid"] == standby.pid, 10.0, "the standby took over", poll=0.001)
+        took = time.perf_counter() - stopped
+        assert active.wait(10) == -signal.SIGKILL, "the hung guardian is killed"
+        assert GUARDIAN_HANG_S <= took < GUARDIAN_HANG_S + 0.5, f"took over {took * 1e3:.0f} ms after the stop"
+        reached = board.device(0)
+        assert reached is not None
+        park = [s.park for s in rig.servos.values()]
+        scene.wait_done(60.0)
+        scene.close(standby)
+        emu.settle()
+        after = goals_after(emu, stopped)
+        assert after, "the standby parked nothing"
+        for _, goals in after:  # on from where the park had got, never back toward the tick's pose
+            for g, r, p in zip(goals, reached[1], park, strict=True):
+                assert abs(g - p) <= abs(r - p) + 0.2
+        assert after[-1][1] == pytest.approx(park, abs=0.1)
+        assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+        err = capfd.readouterr().err
+        assert "has not beaten for" in err and "stopped, outputs off (read back)" in err, err
+    finally:
+        for guardian in (active, standby):
+            if guardian.poll() is None:
+                guardian.send_signal(signal.SIGCONT)
+        scene.close(active, standby)
 
 
 def test_the_guardian_beats_before_its_imports() -> None:
