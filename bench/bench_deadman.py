@@ -184,6 +184,8 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
         for pid in (guardian, tick if case.startswith("tick") else web):
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+        if not case.startswith("tick") and rig.live is not None:
+            rig.live.proc.wait(10)  # reaped: the next trial starts a new service instead of asking a dead one
     if case in TWO_AT_ONCE and (not offs or not goals):  # reported: nobody parked within PARK_S + 10 s
         print(f"  ({case}: no park: {len(goals)} goals, {len(offs)} torque-offs after the signal)", flush=True)
         nobody = {"first_goal": float("inf"), "torque_off": float("inf"), "slew_ratio": 0.0, "after_off": 0.0}
