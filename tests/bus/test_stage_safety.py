@@ -12,9 +12,6 @@ a pty, its own process) through the real SDK:
 from __future__ import annotations
 
 import asyncio
-import re
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -30,7 +27,8 @@ from riderlive.bus.stage import beat, stage_estop
 from riderlive.bus.subjects import Stage
 from riderlive.takes.recorder import read_sidecar
 from tests.bus.harness import TOKEN, NatsProbe, start_rig, wait_for
-from tests.service.live_server import ROOT, LiveServer
+from tests.dynamixel.rig_harness import servo_emulator
+from tests.service.live_server import LiveServer
 from tests.service.test_rig_hookup import relaxed_rig
 
 pytestmark = pytest.mark.slow
@@ -129,17 +127,8 @@ def stage3(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stage3]:
 
 
 def emulator(stack: ExitStack, rig_file: Path) -> str:
-    """``riderlive servo-emu --rig FILE`` in its own process; its pty."""
-    command = [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)]
-    emu = subprocess.Popen(command, stdout=subprocess.PIPE, text=True, env={"PYTHONPATH": str(ROOT)})
-
-    def stop() -> None:
-        emu.terminate()
-        emu.wait(10)
-
-    stack.callback(stop)
-    assert emu.stdout is not None
-    return next(m.group(1) for line in emu.stdout if (m := re.match(r"port: (\S+)", line)))
+    """``riderlive servo-emu --rig FILE`` in its own process, stopped with ``stack``; its pty."""
+    return stack.enter_context(servo_emulator(rig_file))
 
 
 def arm_all(stage: Stage3) -> None:

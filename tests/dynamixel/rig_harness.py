@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import re
+import subprocess
+import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from riderlive.channels import RIDER
@@ -139,3 +144,22 @@ def goal_deg(status: DeviceStatus) -> list[float]:
 
 def present_deg(status: DeviceStatus) -> list[float | None]:
     return [s["present_deg"] for s in status.extra["servos"]]
+
+
+@contextlib.contextmanager
+def servo_emulator(rig_file: Path) -> Iterator[str]:
+    """``riderlive servo-emu --rig FILE`` in its own process (as a user would start it); yields
+    its pty, stops it on the way out."""
+    root = Path(__file__).resolve().parents[2]
+    emu = subprocess.Popen(
+        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"},
+    )
+    try:
+        assert emu.stdout is not None
+        yield next(m.group(1) for line in emu.stdout if (m := re.match(r"port: (\S+)", line)))
+    finally:
+        emu.terminate()
+        emu.wait(10)

@@ -15,8 +15,6 @@ import json
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -25,6 +23,7 @@ import httpx
 import pytest
 from websockets.sync.client import connect
 
+from tests.dynamixel.rig_harness import servo_emulator
 from tests.service.live_server import ROOT, LiveServer
 from tests.waiting import wait_until
 
@@ -71,15 +70,7 @@ def relaxed_rig(tmp_path: Path) -> Path:
 @pytest.fixture
 def rig_server(tmp_path: Path) -> Iterator[LiveServer]:
     rig_file = relaxed_rig(tmp_path)
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
-        stdout=subprocess.PIPE,
-        text=True,
-        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-    )
-    try:
-        assert emu.stdout is not None
-        port = next(m.group(1) for line in emu.stdout if (m := re.match(r"port: (\S+)", line)))
+    with servo_emulator(rig_file) as port:
         config = (
             f'[tick]\nrate = 100.0\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
             f'[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
@@ -90,9 +81,6 @@ def rig_server(tmp_path: Path) -> Iterator[LiveServer]:
         finally:
             live.stop()
             assert "Traceback" not in "".join(live.log), "".join(live.log)
-    finally:
-        emu.terminate()
-        emu.wait(10)
 
 
 def post(live: LiveServer, path: str, body: dict | None = None, token: bool = True) -> httpx.Response:

@@ -14,10 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import re
 import signal
-import subprocess
-import sys
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
@@ -25,6 +22,7 @@ from typing import Any
 
 import pytest
 
+from tests.dynamixel.rig_harness import servo_emulator
 from tests.service.test_rig_hookup import relaxed_rig
 from tests.waiting import wait_until
 from tests.web.conftest import PageUnderTest, Server, free_port, open_page
@@ -49,15 +47,7 @@ RECORD = """() => {
 def rig_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     workdir = tmp_path_factory.mktemp("failover-page")
     rig_file = relaxed_rig(workdir)
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
-        stdout=subprocess.PIPE,
-        text=True,
-        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
-    )
-    try:
-        assert emu.stdout is not None
-        port = next(m.group(1) for line in emu.stdout if (m := re.match(r"port: (\S+)", line)))
+    with servo_emulator(rig_file) as port:
         extra = (
             f'[tick]\nrate = 100.0\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
             f'[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
@@ -68,9 +58,6 @@ def rig_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
             yield server
         finally:
             server.stop()
-    finally:
-        emu.terminate()
-        emu.wait(10)
 
 
 def call(server: Server, method: str, path: str, body: Any = None) -> Any:
