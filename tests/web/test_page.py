@@ -335,7 +335,13 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
         up = lambda: devices()["supervision"]["up"]  # noqa: E731
         wait_until(up, 30.0, lambda: f"the tick never came up: {devices()}", poll=0.1)
         p.page.locator("#reset").click()
-        wait_until(lambda: estop() is False, 10.0, "the reset with the token never reached the service", poll=0.05)
+        said = lambda: p.state("document.getElementById('message').textContent")  # noqa: E731
+        wait_until(
+            lambda: estop() is False,
+            10.0,
+            lambda: f"the reset never cleared the e-stop; the page: {said()!r}",
+            poll=0.05,
+        )
         p.page.close()
     finally:
         s.stop()
