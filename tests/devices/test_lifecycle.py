@@ -282,9 +282,9 @@ def test_a_port_held_for_good_ends_in_a_setup_timeout_fault_not_connecting_forev
     latch: StopLatch, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Issue 25: a generation stayed ``connecting`` for 100 s behind a held port."""
-    from riderlive.devices import device as device_module
+    from riderlive.devices import setup_run as setup_module
 
-    monkeypatch.setattr(device_module, "SETUP_TIMEOUT_S", 0.1)
+    monkeypatch.setattr(setup_module, "SETUP_TIMEOUT_S", 0.1)
     device, mem = make(latch)
 
     class Held(dict[str, BaseException]):
