@@ -25,7 +25,7 @@ from riderlive.bus.subjects import Kind, Stage
 from riderlive.bus.takes import export, list_takes, record, replay
 from riderlive.bus.transport import Refused
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
-from riderlive.service.codecs import decode_binary_frame
+from riderlive.service.rider_frames import decode_binary_frame
 from riderlive.takes.replay import load_replay
 from tests.bus.harness import AUTH, RIG_TICK, TOKEN, NatsProbe, start_rig, wait_for
 from tests.bus.harness import TOKEN_CONFIG as CONFIG
