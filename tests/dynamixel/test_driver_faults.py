@@ -611,7 +611,7 @@ def test_stalled_ticks_trip_the_watchdog_then_park(timed_buses: Callable[..., Ti
     with emu.lock:  # stopped and holding: no velocity, not moving, the goal where it stopped
         servo = emu.servo(2)
         servo.advance(emu.clock())
-        assert servo.get(Item.PRESENT_VELOCITY) == 0 and servo.get(Item.MOVING) == 0
+        assert servo.state.velocity == 0.0 and servo.get(Item.PRESENT_VELOCITY) == 0 and servo.get(Item.MOVING) == 0
         assert servo.get(Item.GOAL_POSITION) == servo.get(Item.PRESENT_POSITION)
     drive(device, 0.5, lambda t: rider, until=lambda s: s.state is not S.RUNNING)
     fault = device.fault
