@@ -41,8 +41,8 @@ from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.rig import READ_BYTES, RigConfig, load_rig, wire_bytes_per_tick
 from riderlive.dynamixel.sdkbus import RigPort
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
-from riderlive.realtime.pacing import try_realtime_priority
 from riderlive.rules import RiderModel
+from riderlive.sched import try_realtime_priority
 
 S = DeviceState
 

@@ -25,7 +25,7 @@ from bench.serving import busy_cores
 from riderlive.configfile import CONFIG_DIR
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import Instruction, Item
-from riderlive.realtime.pacing import try_realtime_priority
+from riderlive.sched import try_realtime_priority
 from tests.dynamixel.rig_harness import TimedBus, is_torque_off_write, servo_setups
 
 GOAL_POSITION = 116

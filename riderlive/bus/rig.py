@@ -11,11 +11,11 @@
 - **In**: horse and saddle input and control (:mod:`riderlive.bus.inbound`); the stage e-stop,
   which latches the e-stop exactly as ``POST /api/estop`` does (source ``nats``); the
   stage heartbeat; discovery requests of ``riderlive stage``.
-- **Stage dead-man**: without a stage heartbeat for ``nats.heartbeat_timeout`` s, an
-  armed rig is disarmed: its devices ease to park, then torque off (the lifecycle's
-  controlled stop, category 1), and arming is refused until the heartbeat is back.
-  Nothing re-arms when it returns. A broker that dies, a cut cable, a stopped heartbeat
-  source: all look the same, and all stop the stage rather than freezing it mid-move.
+- **Stage dead-man** (:mod:`riderlive.bus.stage_deadman`, a task of its own with no broker
+  I/O): without a stage heartbeat for ``nats.heartbeat_timeout`` s, an armed rig is
+  disarmed (ease to park, then torque off), and arming is refused until the heartbeat is
+  back. Nothing re-arms when it returns. A broker that dies, a cut cable, a stopped
+  heartbeat source: all look the same, and all stop the stage rather than freezing it mid-move.
 - **Names**: a rig name already answering on the stage is refused at start
   (:class:`RigNameTaken`); two rigs that raced to the same name see each other's status
   and count ``collisions`` (and say so in their status).
@@ -38,6 +38,7 @@ import orjson
 
 from riderlive.bus.config import NatsSection
 from riderlive.bus.inbound import Control, InboundPort, ProducerInput, dumps
+from riderlive.bus.stage_deadman import StageDeadMan
 from riderlive.bus.subjects import Kind, Stage, parse
 from riderlive.bus.transport import Message, NoResponders, Subscription, Transport, TransportError
 from riderlive.channels import HORSE_NAMES
@@ -79,6 +80,10 @@ log = logging.getLogger(__name__)
 QUEUE_SECONDS = 0.25
 """Records waiting for the broker beyond this age are dropped (as ``hub.CATCH_UP``)."""
 NAME_CHECK_TIMEOUT = 0.5
+STATUS_INTERVAL_MIN = 0.05
+"""Seconds between looks for a changed tick status (producer sweeps ride along)."""
+STATUS_PUBLISH_TIMEOUT = 1.0
+"""A status publish waiting longer (a broker that does not take it) is dropped and counted."""
 
 
 class RigNameTaken(TransportError):
@@ -126,21 +131,26 @@ class RigNode:
         self.frame_subject = self.subjects.subject(Kind.FRAME)
         self.status_subject = self.subjects.subject(Kind.STATUS)
         trust = config.control_auth == "credentials"
+        self.counts: Counter[str] = Counter()
         self.inputs = ProducerInput(service, transport, trust, config.producer_forget)
-        self.control = Control(service, transport, trust, self.arm_refusal, self.describe)
+        self.dead_man = StageDeadMan(
+            config.heartbeat_timeout,
+            self.stage.name,
+            armed=lambda: armed(service.link.status()),
+            disarm=self._disarm_all,
+            estop=lambda: service.supervisor.estop(StopSource.NATS),
+            counts=self.counts,
+        )
+        self.control = Control(service, transport, trust, self.dead_man.arm_refusal, self.describe)
         self.subscription = dataclasses.replace(
             service.hub.default, horse=tuple(range(len(HORSE_NAMES))), encoding=config.encoding, saddle=True
         )
         self.queue: deque[np.ndarray] = deque()
         self.wake = asyncio.Event()
-        self.counts: Counter[str] = Counter()
         self.first_seq: int | None = None
         """The first tick offered (since the tick last restarted)."""
         self.last_seq: int | None = None
         """The last tick offered (a restarted tick's seq starts again: counted from there)."""
-        self.last_heartbeat: float | None = None
-        self.heartbeat_lost = False
-        self.started = time.perf_counter()
         self._subs: list[Subscription] = []
         self._tasks: list[asyncio.Task[None]] = []
         self._rates: dict[str, float] = {}
@@ -162,17 +172,21 @@ class RigNode:
             await t.subscribe(self.status_subject, self.on_status, 256),
         ]
         await t.flush()
-        self.service.arm_checks.append(self.arm_refusal)
+        self.service.arm_checks.append(self.dead_man.arm_refusal)
         self.service.sinks.append(self.offer)
         loop = asyncio.get_running_loop()
-        self._tasks = [loop.create_task(self._publisher()), loop.create_task(self._watch())]
+        self._tasks = [
+            loop.create_task(self.dead_man.run()),
+            loop.create_task(self._publisher()),
+            loop.create_task(self._status()),
+        ]
         log.warning("joined stage %r as rig %r", stage.name, self.subjects.rig)
 
     async def stop(self) -> None:
         with contextlib.suppress(ValueError):
             self.service.sinks.remove(self.offer)
         with contextlib.suppress(ValueError):
-            self.service.arm_checks.remove(self.arm_refusal)
+            self.service.arm_checks.remove(self.dead_man.arm_refusal)
         for task in self._tasks:
             task.cancel()
         for sub in self._subs:
@@ -219,7 +233,8 @@ class RigNode:
         service = self.service
         status = service.link.status()
         now = time.perf_counter()
-        age = None if self.last_heartbeat is None else now - self.last_heartbeat
+        beat = self.dead_man.last_heartbeat
+        age = None if beat is None else now - beat
         devices = [{"name": d.get("name"), "state": d.get("state")} for d in status.get("devices", [])]
         return {
             "type": "status",
@@ -235,7 +250,7 @@ class RigNode:
             "estop": service.link.latch.latched,
             "devices": devices,
             "rates": dict(self._rates),
-            "heartbeat": {"timeout": self.config.heartbeat_timeout, "age": age, "ok": not self.heartbeat_lost},
+            "heartbeat": {"timeout": self.config.heartbeat_timeout, "age": age, "ok": not self.dead_man.lost},
             "perf_origin": service.link.start,
             "channels": list(service.hub.names),
             "counts": dict(self.counts),
@@ -274,7 +289,7 @@ class RigNode:
         if parsed is None or not parsed.known_version:
             self.service.metrics.bad_frames["unknown_version"] += 1
             return
-        self.last_heartbeat = time.perf_counter()
+        self.dead_man.beat()
         self.counts["heartbeats"] += 1
         self.stage_timecode(msg.data)
 
@@ -303,58 +318,38 @@ class RigNode:
             if self.counts["collisions"] == 1:
                 log.critical("another rig publishes as %r on stage %r: rename one", self.subjects.rig, self.stage.name)
 
-    # -- the stage dead-man -------------------------------------------------------------------
+    # -- the stage dead-man's disarm, the status ---------------------------------------------
 
-    def heartbeat_age(self, now: float) -> float:
-        """Seconds since the last heartbeat (since joining when none was heard yet)."""
-        return now - (self.started if self.last_heartbeat is None else self.last_heartbeat)
+    async def _disarm_all(self, by: str) -> str | None:
+        reply = await self.service.supervisor.ask(lambda r: cmd.Disarm(None, by, r))
+        return None if reply.ok else reply.message
 
-    def arm_refusal(self) -> str | None:
-        """Why arming must wait (no stage heartbeat), or None."""
-        timeout = self.config.heartbeat_timeout
-        if timeout > 0.0 and (self.last_heartbeat is None or self.heartbeat_age(time.perf_counter()) > timeout):
-            return (
-                f"no stage heartbeat within {timeout:g} s on stage {self.stage.name!r} "
-                "(run `riderlive stage heartbeat`): arming refused"
-            )
-        return None
-
-    async def _watch(self) -> None:
-        """The dead-man, producer sweeps, status on change and every ``status_interval``."""
-        timeout = self.config.heartbeat_timeout
-        interval = min(0.05, timeout / 5.0) if timeout > 0.0 else 0.05
+    async def _status(self) -> None:
+        """Producer sweeps; the status on change and every ``status_interval`` s. A publish
+        that waits longer than ``STATUS_PUBLISH_TIMEOUT`` is dropped and counted, and a pass
+        that raises is logged and counted: the loop goes on (the dead-man is not in it)."""
         next_status = 0.0
         status_version = -1
         while True:
-            await asyncio.sleep(interval)
+            await asyncio.sleep(STATUS_INTERVAL_MIN)
             now = time.perf_counter()
-            if timeout > 0.0:
-                await self._dead_man(now, timeout)
-            self.inputs.sweep(now)
-            version = self.service.link.status_blob.version
-            if now >= next_status or version != status_version:
-                if now >= next_status:
-                    self._update_rates(now)
-                    next_status = now + self.config.status_interval
-                status_version = version
-                await self.transport.publish(self.status_subject, dumps(self.describe()))
-
-    async def _dead_man(self, now: float, timeout: float) -> None:
-        lost = self.heartbeat_age(now) > timeout
-        if lost != self.heartbeat_lost:
-            self.heartbeat_lost = lost
-            self.counts["heartbeat_lost" if lost else "heartbeat_back"] += 1
-            log.warning(
-                "stage heartbeat %s", "lost: armed devices park, arming refused" if lost else "back (nothing re-arms)"
-            )
-        if not lost or not armed(self.service.link.status()):
-            return
-        self.counts["heartbeat_stops"] += 1
-        by = f"stage heartbeat lost ({self.heartbeat_age(now):.2f} s)"
-        reply = await self.service.supervisor.ask(lambda r: cmd.Disarm(None, by, r))
-        if not reply.ok and armed(self.service.link.status()):
-            log.critical("the heartbeat stop was refused (%s): e-stop", reply.message)
-            self.service.supervisor.estop(StopSource.NATS)
+            try:
+                self.inputs.sweep(now)
+                version = self.service.link.status_blob.version
+                if now >= next_status or version != status_version:
+                    if now >= next_status:
+                        self._update_rates(now)
+                        next_status = now + self.config.status_interval
+                    status_version = version
+                    status = dumps(self.describe())
+                    publish = self.transport.publish(self.status_subject, status)
+                    try:
+                        await asyncio.wait_for(publish, STATUS_PUBLISH_TIMEOUT)
+                    except TimeoutError:
+                        self.counts["status_timeouts"] += 1
+            except Exception:
+                self.counts["status_errors"] += 1
+                log.exception("the rig status pass failed (counted; it goes on)")
 
 
 async def join_stage(service: RigPort) -> RigNode:

@@ -32,8 +32,9 @@ from riderlive.devices.shared import Slot, SlotBlock, Slots, pid_alive
 GUARDIAN_HANG_S = 0.5
 """A guardian whose heartbeat (written every 5 ms by its watch loop) is older than this is
 hung: armed devices get a category 1 stop from the tick, arming is refused. Generous
-because the guardian runs at normal priority on a host that may be loaded (a stall of
-tens of ms is normal there, 0.5 s is not); a dead guardian is seen at once (its pid)."""
+because the guardian may run at normal priority where the host does not permit SCHED_FIFO
+(``guardian.priority``; a stall of tens of ms is normal there, 0.5 s is not); a dead
+guardian is seen at once (its pid)."""
 MAX_DEVICES = 4
 MAX_UNITS = 64
 STATES: tuple[DeviceState, ...] = tuple(DeviceState)

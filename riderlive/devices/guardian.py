@@ -48,6 +48,7 @@ from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
 from riderlive.devices.registry import DeviceSpec, make_plug
 from riderlive.devices.shared import pid_alive
+from riderlive.sched import try_realtime_priority
 
 log = logging.getLogger("riderlive.guardian")
 POLL_S = 0.005
@@ -280,13 +281,16 @@ def launch(
     *,
     give_up_s: float = GIVE_UP_AFTER_S,
     standby_after: int = 0,
+    priority: int = 0,
 ) -> subprocess.Popen[bytes]:
     """Start the guardian in its own session (signals to the terminal's group skip it);
     ``standby_after``: a standby that waits, imports paid and plugs built, to become the
-    guardian when guardian ``standby_after`` (or the one that follows it) is gone."""
+    guardian when guardian ``standby_after`` (or the one that follows it) is gone;
+    ``priority``: SCHED_FIFO priority once its imports are paid (0: normal scheduling)."""
     args = [sys.executable, "-m", "riderlive.devices.guardian", "--board", board, "--latch", latch]
     args += ["--tick-timeout", repr(tick_timeout_s), "--web-timeout", repr(web_timeout_s)]
     args += ["--give-up", repr(give_up_s)] + (["--standby-after", str(standby_after)] if standby_after else [])
+    args += ["--priority", str(priority)] if priority else []
     for spec in specs:
         args += ["--device", spec.to_json()]
     return subprocess.Popen(args, start_new_session=True, stdin=subprocess.DEVNULL)
@@ -349,6 +353,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--web-timeout", type=float, default=1.0)
     parser.add_argument("--give-up", type=float, default=GIVE_UP_AFTER_S, help="see GIVE_UP_AFTER_S")
     parser.add_argument("--standby-after", type=int, default=0, metavar="PID", help="stand by for guardian PID")
+    parser.add_argument("--priority", type=int, default=0, help="SCHED_FIFO priority once ready (0: normal)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s guardian: %(message)s")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -369,6 +374,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         guardian.exit = True  # after any stop in progress
 
     signal.signal(signal.SIGTERM, on_term)
+    if args.priority:  # after the imports and the plugs: a start at SCHED_FIFO would starve the web process
+        try_realtime_priority(args.priority, who="the standby guardian" if args.standby_after else "the guardian")
     if args.standby_after:
         board.guardian_standby = os.getpid()  # ready to take over from here
     try:

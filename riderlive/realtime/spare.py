@@ -143,7 +143,7 @@ def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connecti
         if box["loop"].setup.realtime_priority:
             # Blocked, a real-time thread costs nothing; woken, it runs at once (a busy host would
             # make a normal one wait for its turn before the takeover has even begun).
-            from riderlive.realtime.pacing import try_realtime_priority
+            from riderlive.sched import try_realtime_priority
 
             box["loop"].realtime = try_realtime_priority(who="the spare tick")
         commands.send(Warm(os.getpid(), time.process_time() - cpu0, time.perf_counter() - started))

@@ -19,9 +19,9 @@ from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import TickDevices
-from riderlive.realtime.pacing import try_realtime_priority
 from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.tick import TickLoop
+from riderlive.sched import try_realtime_priority
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:

@@ -246,6 +246,12 @@ class GuardianSection(StrictModel):
     give_up: float = pydantic.Field(default=10.0, ge=1.0, le=600.0)
     """With the web process gone, seconds the guardian repeats an unconfirmed outputs-off
     (a silent bus) before it exits, leaving the servos to their Bus Watchdog."""
+    priority: int = pydantic.Field(default=20, ge=0, le=49)
+    """SCHED_FIFO priority of the guardian and its standby once their imports are paid (0:
+    normal scheduling): above the web process's 10, below the tick's 50, so that neither a
+    busy web process nor the host's other work starves the dead-man's heartbeat (the tick
+    takes a guardian silent for ``GUARDIAN_HANG_S`` for hung and parks). Where the host
+    does not permit SCHED_FIFO it runs at normal priority with a warning."""
 
 
 class PhysicsSection(StrictModel):

@@ -53,6 +53,7 @@ class Guardians:
             guardian.web_timeout,
             give_up_s=guardian.give_up,
             standby_after=standby_after,
+            priority=guardian.priority,
         )
 
     def start(self) -> None:

@@ -21,7 +21,7 @@ import uvicorn
 from riderlive.configfile import ConfigError, validate
 from riderlive.devices.latch import StopSource
 from riderlive.devices.registry import DeviceSpec
-from riderlive.realtime.pacing import normal_priority_thread, try_realtime_priority
+from riderlive.sched import normal_priority_thread, try_realtime_priority
 from riderlive.service.config import ServiceConfig, load_config
 from riderlive.service.hostcheck import Advice, advise, device_ports, gather
 from riderlive.service.runtime import Service

@@ -76,7 +76,9 @@ class Stage3:
 
     def wait_all(self, wanted: str, timeout: float = 15.0) -> None:
         for rig in self.rigs:
-            wait_for(lambda r=rig: r.state() == wanted, timeout, lambda r=rig: (r.name, wanted, r.status()))
+            wait_for(
+                lambda r=rig: r.state() == wanted, timeout, lambda r=rig: (r.name, wanted, r.status(), r.live.log[-15:])
+            )
 
 
 @pytest.fixture(scope="module")
@@ -134,7 +136,11 @@ def emulator(stack: ExitStack, rig_file: Path) -> str:
 def arm_all(stage: Stage3) -> None:
     stage.wait_all("disarmed")
     for rig in stage.rigs:  # the heartbeat may need a moment to be heard
-        wait_for(lambda r=rig: r.post("/api/arm", {"device": "bench3"}).status_code == 200, 5.0)
+        wait_for(
+            lambda r=rig: r.post("/api/arm", {"device": "bench3"}).status_code == 200,
+            5.0,
+            lambda r=rig: r.post("/api/arm", {"device": "bench3"}).text,
+        )
     stage.wait_all("running")
     for rig in stage.rigs:
         assert not rig.torque_off(), rig.name
@@ -174,7 +180,18 @@ def test_a_dead_broker_parks_every_rig_keeps_the_take_and_nothing_rearms(stage3:
             seen[rig.name].add(rig.state())
         return all(rig.state() == "parked" for rig in stage3.rigs)
 
-    wait_for(parked, 15.0, lambda: {r.name: r.state() for r in stage3.rigs})
+    def why() -> dict[str, object]:  # each rig still not parked: its stage link and its last log lines
+        return {
+            r.name: (
+                r.state(),
+                [m for m in r.live.get("/metrics", headers=AUTH).text.splitlines() if m.startswith("riderlive_nats")],
+                r.live.log[-15:],
+            )
+            for r in stage3.rigs
+            if r.state() != "parked"
+        }
+
+    wait_for(parked, 15.0, why)
     took = time.perf_counter() - killed
     assert took > HEARTBEAT_TIMEOUT  # not before the heartbeat was really missed
     for rig in stage3.rigs:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import re
+import resource
 import signal
 import subprocess
 import threading
@@ -287,6 +288,39 @@ def test_an_estop_during_a_takeover_cuts_the_park_short(
     assert published is not None and published[0] is DeviceState.ESTOP
     assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
     assert "stopped, outputs off (read back)" in capfd.readouterr().err
+
+
+def fifo_permitted(priority: int) -> bool:
+    """May a process of this user use SCHED_FIFO at ``priority`` (root, or an rtprio limit)?"""
+    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
+
+
+@pytest.mark.parametrize("priority", [0, 20])
+def test_the_guardian_and_its_standby_run_at_their_priority_once_ready(priority: int) -> None:
+    """A web process at SCHED_FIFO 10 (or the host's other work) must not starve the dead-man
+    (the tick takes a guardian silent for 0.5 s for hung and parks the rig: a stress run
+    saw exactly that, "has not beaten for 523 ms"): with ``guardian.priority`` the guardian
+    and its standby run at SCHED_FIFO once their imports are paid; 0 leaves them normal."""
+    latch, board = StopLatch(), SafetyBoard()
+    file = ROOT / "config" / "rigs" / "bench3.toml"
+    rig = load_rig(file)
+    spec = DeviceSpec("dynamixel", str(file), "/dev/null-port", rig.name, 1, rig.bus.tick_s)
+    active = launch(board.name, latch.name, [spec], 0.1, 1.0, priority=priority)
+    standby = launch(board.name, latch.name, [spec], 0.1, 1.0, standby_after=active.pid, priority=priority)
+    try:
+        wait_until(
+            lambda: board["guardian_standby"] == standby.pid and board["guardian_ready"] == 1.0, 30.0, "both ready"
+        )
+        fifo = priority > 0 and fifo_permitted(priority)
+        for pid in (active.pid, standby.pid):
+            assert (os.sched_getscheduler(pid) == os.SCHED_FIFO) == fifo
+            assert os.sched_getparam(pid).sched_priority == (priority if fifo else 0)
+    finally:
+        board["shutdown"] = 1.0
+        for guardian in (active, standby):
+            guardian.wait(10)
+        board.close()
+        latch.close()
 
 
 def test_a_standby_guardian_takes_over_within_milliseconds_of_the_guardians_death() -> None:
