@@ -31,18 +31,14 @@ import sys
 import time
 
 from riderlive.platform.firmware_host import FIRMWARE_DIR, FirmwareHost
-from riderlive.platform.link import (
+from riderlive.platform.link import Arm, Config, Heartbeat, Reset, Target
+from riderlive.platform.link_vocab import (
     CONFIG_RANGES,
     PARK_BOUND_S,
-    Arm,
-    Config,
     ConfigKey,
     Fault,
-    Heartbeat,
     LinkState,
     Profile,
-    Reset,
-    Target,
     firmware_park_s,
 )
 from riderlive.platform.serial_link import SerialPlatformLink
@@ -89,7 +85,7 @@ def deadman(trials: int) -> None:
 
 def slowest_park(profile: str, far: int) -> None:
     """The host build (real time, simulated actuators) at its CONFIG floors: the dead-man park
-    from the far limit, first park step -> outputs off (fault), against link.PARK_BOUND_S."""
+    from the far limit, first park step -> outputs off (fault), against link_vocab.PARK_BOUND_S."""
     ranges = CONFIG_RANGES[Profile[profile.upper()]]
     v, a = ranges[ConfigKey.VELOCITY_LIMIT][0], ranges[ConfigKey.ACCELERATION_LIMIT][0]
     with FirmwareHost(profile) as firmware, SerialPlatformLink(firmware.port, heartbeat_s=10.0) as port:

@@ -46,7 +46,7 @@ from riderlive.bus.broker import Broker
 from riderlive.bus.stage import beat, discover, stage_estop
 from riderlive.bus.subjects import Kind, Stage
 from riderlive.channels import HORSE_NAMES
-from riderlive.service.codecs import decode_binary_frame
+from riderlive.service.rider_frames import decode_binary_frame
 from tests.bus.harness import NatsProbe, start_rig
 from tests.service.live_server import LiveServer
 

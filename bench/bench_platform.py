@@ -10,8 +10,8 @@ with NumPy arrays: the usual first implementation) measured in the same run. The
 bake's throughput for N frames of saddle poses (compiled cueing and limits, chunked
 array IK), warm (best of 3) and cold (the first call in the process, numba's disk
 cache loaded). Pinned to one core. Then the device's whole tick without I/O
-(``riderlive.platform.device``: cueing + IK + safety follower + the TARGET frame encoded
-for the link, COBS and CRC), against the same NumPy IK baseline.
+(``riderlive.platform.device``: ``pipeline.step``, cueing + IK + safety follower, and the
+TARGET frame of ``plug_link.target_counts`` encoded for the link, COBS and CRC), against the same NumPy IK baseline.
 Targets (issue 13): tick <= 50 us median (with the encode); bake >= 1 M frames/s at N = 1e6.
 """
 
@@ -30,9 +30,9 @@ import numpy as np
 from riderlive.horse import generate, load_script
 from riderlive.horse.script import gait_script
 from riderlive.platform import PlatformModel, bake, initial, shipped_platforms, step
-from riderlive.platform.device import commands, position_units, target_counts
 from riderlive.platform.geometry import Geometry
 from riderlive.platform.link import Target, encode
+from riderlive.platform.plug_link import position_units, target_counts
 from riderlive.platform.saddle_input import saddle_pose
 
 RATE = 120.0
@@ -97,8 +97,8 @@ def device_tick_us(model: PlatformModel, saddle: np.ndarray, repeats: int = 5) -
         state = initial(model)
         start = time.perf_counter()
         for seq, frame in enumerate(frames):
-            state, _, out = commands(model, state, frame, 1.0 / RATE)
-            encode(Target(target_counts(out, units)), seq & 0xFFFF)
+            state, out = step(model, state, frame, 1.0 / RATE)
+            encode(Target(target_counts(out.positions, units)), seq & 0xFFFF)
         samples.append((time.perf_counter() - start) / len(frames) * 1e6)
     return statistics.median(samples)
 

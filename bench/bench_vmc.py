@@ -30,9 +30,10 @@ from riderlive.channels import HORSE_NAMES
 from riderlive.horse import DEFAULT_SCALE, generate_gait
 from riderlive.realtime.record import RecordLayout
 from riderlive.rules import RiderModel
-from riderlive.service.codecs import Subscription, encode_frame
+from riderlive.service.codecs import Subscription
 from riderlive.service.hello import pose_floats
 from riderlive.service.poses import RecordPoses
+from riderlive.service.rider_frames import encode_frame
 from riderlive.service.wsprotocol import wire_frame
 from riderlive.skeleton import HORSE_RIG
 from riderlive.vmc.performer import horse_bundle, rider_bundle

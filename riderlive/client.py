@@ -35,12 +35,12 @@ _DECODE: list[Callable[[bytes], dict[str, Any]]] = []
 
 
 def load_codecs() -> Callable[[bytes], dict[str, Any]]:
-    """:func:`riderlive.service.codecs.decode_binary_frame`, imported when a subscriber is made, not
+    """:func:`riderlive.service.rider_frames.decode_binary_frame`, imported when a subscriber is made, not
     with this module (the codecs pull in NumPy, pydantic and the horse model: seconds on a busy host):
     a tool that only probes or sends says a service is unreachable without waiting for them, and a
     subscriber never pauses on its first frame."""
     if not _DECODE:
-        from riderlive.service.codecs import decode_binary_frame as decode
+        from riderlive.service.rider_frames import decode_binary_frame as decode
 
         _DECODE.append(decode)
     return _DECODE[0]
@@ -62,7 +62,7 @@ def time_left(timeout: float, least: float = 0.5) -> float:
 
 
 def decode_binary_frame(message: bytes) -> dict[str, Any]:
-    """One binary ``/ws/rider`` frame (:func:`riderlive.service.codecs.decode_binary_frame`)."""
+    """One binary ``/ws/rider`` frame (:func:`riderlive.service.rider_frames.decode_binary_frame`)."""
     return load_codecs()(message)
 
 

@@ -24,12 +24,9 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 from riderlive.channels import Kind
+from riderlive.units import metres_per_unit
 
 Range = tuple[float, float]
-
-RIG_UNITS_PER_METRE = 25.0
-"""``riderlive.horse.DEFAULT_SCALE``, repeated so this module stays a leaf (a test checks
-they agree). A service with ``length_scale`` L speaks units of L/25 metres."""
 
 KIND_DEFAULTS: dict[Kind, Range] = {
     Kind.TRANSLATION: (-10.0, 10.0),
@@ -98,12 +95,12 @@ class Ranges:
 
     def limits(self, names: Iterable[str], length_scale: float) -> tuple[list[float], list[float]]:
         """Lows and highs of ``names`` in the service's units (a length unit is L/25 m)."""
-        metres_per_unit = length_scale / RIG_UNITS_PER_METRE
+        m = metres_per_unit(length_scale)
         lows, highs = [], []
         for name in names:
             low, high = self.of(name)
             if kind_of_name(name) is Kind.TRANSLATION:
-                low, high = low / metres_per_unit, high / metres_per_unit
+                low, high = low / m, high / m
             lows.append(low)
             highs.append(high)
         return lows, highs

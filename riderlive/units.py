@@ -38,6 +38,13 @@ def metres_per_unit(length_scale: float) -> float:
     return length_scale / RIG_UNITS_PER_METRE
 
 
+def units_per_metre(length_scale: float) -> float:
+    """Service length units per metre (the inverse of :func:`metres_per_unit`, computed as
+    ``RIG_UNITS_PER_METRE / length_scale`` so a scale of 25 gives exactly 1)."""
+    metres_per_unit(length_scale)  # the same check
+    return RIG_UNITS_PER_METRE / length_scale
+
+
 def length_columns(channels: Sequence[Channel]) -> tuple[int, ...]:
     """Indices of the length (translation) channels of ``channels``."""
     return tuple(i for i, c in enumerate(channels) if c.kind is Kind.TRANSLATION)

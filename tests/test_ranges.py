@@ -10,15 +10,19 @@ import pytest
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, Kind
 from riderlive.horse import DEFAULT_SCALE, GAITS, generate, generate_gait
 from riderlive.horse.script import load_script
-from riderlive.ranges import DEFAULT_RANGES, KIND_DEFAULTS, RIG_UNITS_PER_METRE, Ranges, kind_of_name
+from riderlive.ranges import DEFAULT_RANGES, KIND_DEFAULTS, Ranges, kind_of_name
 from riderlive.rules import RiderModel, load_preset
 from riderlive.service.config import ServiceConfig
 
 SHOTS = sorted((Path(__file__).resolve().parents[1] / "config" / "shots").glob("*.toml"))
 
 
-def test_the_leaf_repeats_the_horse_scale() -> None:
-    assert RIG_UNITS_PER_METRE == DEFAULT_SCALE
+def test_limits_are_in_the_service_unit() -> None:
+    """Lengths by ``units.metres_per_unit`` (a unit of L/25 m), angles as they are."""
+    assert DEFAULT_RANGES.limits(["lfHoof.ty"], DEFAULT_SCALE) == ([-5.0], [5.0])
+    lows, highs = DEFAULT_RANGES.limits(["lfHoof.ty", "rearPivot.rz"], 0.25)  # centimetres
+    assert lows == pytest.approx([-500.0, DEFAULT_RANGES.of("rearPivot.rz")[0]], rel=1e-12)
+    assert highs == pytest.approx([500.0, DEFAULT_RANGES.of("rearPivot.rz")[1]], rel=1e-12)
 
 
 def test_lookup_order_name_pattern_kind() -> None:

@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from riderlive.channels import HORSE, RIDER, SADDLE, Kind
 from riderlive.horse import DEFAULT_SCALE
-from riderlive.ranges import RIG_UNITS_PER_METRE as RANGES_RIG_UNITS
 from riderlive.units import (
     HORSE_LENGTHS,
     RIDER_LENGTHS,
@@ -19,12 +18,20 @@ from riderlive.units import (
     SADDLE_LENGTHS,
     horse_lengths,
     metres_per_unit,
+    units_per_metre,
 )
 
 
 def test_one_rig_unit_per_metre_everywhere() -> None:
-    assert RIG_UNITS_PER_METRE == DEFAULT_SCALE == RANGES_RIG_UNITS == 25.0
+    assert RIG_UNITS_PER_METRE == DEFAULT_SCALE == 25.0
     assert metres_per_unit(25.0) == 1.0 and metres_per_unit(1.0) == 0.04 and metres_per_unit(2500.0) == 100.0
+    assert units_per_metre(25.0) == 1.0 and units_per_metre(1.0) == 25.0 and units_per_metre(0.25) == 100.0
+
+
+@settings(deadline=None)  # a busy host stalls a case for 100s of ms: not what this checks
+@given(st.floats(min_value=1e-3, max_value=1e5))
+def test_units_per_metre_is_the_inverse(length_scale: float) -> None:
+    assert units_per_metre(length_scale) * metres_per_unit(length_scale) == pytest.approx(1.0, rel=1e-15)
 
 
 @pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, math.inf])

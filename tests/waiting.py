@@ -14,35 +14,40 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
 POLL_S = 0.01
 
 
-def wait_until(
-    condition: Callable[[], object], timeout: float, what: Callable[[], object] | str = "", poll: float = POLL_S
-) -> None:
-    """Return once ``condition()`` is true; AssertionError naming ``what`` after ``timeout`` s."""
+def _polls(
+    condition: Callable[[], object], timeout: float, what: Callable[[], object] | str, poll: float
+) -> Iterator[float]:
+    """The one poll loop of :func:`wait_until` and :func:`await_until`: yields the delay to sleep
+    (s) while ``condition()`` is false; AssertionError naming ``what`` after ``timeout`` s."""
     deadline = time.perf_counter() + timeout
     while not condition():
         if time.perf_counter() > deadline:
             said = what() if callable(what) else what
             raise AssertionError(f"timed out after {timeout} s: {said}")
-        time.sleep(poll)
+        yield poll
+
+
+def wait_until(
+    condition: Callable[[], object], timeout: float, what: Callable[[], object] | str = "", poll: float = POLL_S
+) -> None:
+    """Return once ``condition()`` is true; AssertionError naming ``what`` after ``timeout`` s."""
+    for delay in _polls(condition, timeout, what, poll):
+        time.sleep(delay)
 
 
 async def await_until(
     condition: Callable[[], object], timeout: float, what: Callable[[], object] | str = "", poll: float = POLL_S
 ) -> None:
     """:func:`wait_until` in a coroutine (the loop runs meanwhile)."""
-    deadline = time.perf_counter() + timeout
-    while not condition():
-        if time.perf_counter() > deadline:
-            said = what() if callable(what) else what
-            raise AssertionError(f"timed out after {timeout} s: {said}")
-        await asyncio.sleep(poll)
+    for delay in _polls(condition, timeout, what, poll):
+        await asyncio.sleep(delay)
 
 
 class Pacer:

@@ -1,8 +1,8 @@
 /* Actuator profiles: hardware facts as data. One profile is chosen by config (the host
  * build's --profile, the board's PROFILE make variable); CONFIG frames may only tighten it.
  *
- * To add a profile: add a row to PROFILES in profile.c (and its id to link.Profile in
- * riderlive/platform/link.py and docs/platform-link.md).
+ * To add a profile: add a row to PROFILES in profile.c (and its id to link_vocab.Profile in
+ * riderlive/platform/link_vocab.py and docs/platform-link.md).
  */
 #ifndef PROFILE_H
 #define PROFILE_H
@@ -29,7 +29,7 @@ typedef struct {
 
 typedef struct {
     const char *name;          /* also the default device name ARM must give */
-    uint8_t id;                /* link.Profile */
+    uint8_t id;                /* link_vocab.Profile */
     uint8_t actuators;         /* <= LINK_MAX_ACTUATORS */
     uint8_t needs_homing;      /* home before the first arm after boot or reset */
     uint8_t feedback;          /* the actuators report their positions (pots, encoders) */

@@ -4,7 +4,7 @@
  *
  * Every frame vector: its wire bytes parse to its fields, and its fields encode to its wire
  * bytes. Every bad vector: rejected with the same error kind. The seq and stream vectors:
- * the same verdicts and counts as Python's. The CONFIG ranges (riderlive.platform.link.
+ * the same verdicts and counts as Python's. The CONFIG ranges (riderlive.platform.link_vocab.
  * CONFIG_RANGES): the device core accepts each edge and refuses one beyond it. */
 #include <cjson/cJSON.h>
 #include <stdlib.h>

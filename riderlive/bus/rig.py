@@ -46,7 +46,8 @@ from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import DeviceState
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.record import RecordLayout
-from riderlive.service.codecs import PROTOCOL_VERSION, encode_frame
+from riderlive.service.codecs import PROTOCOL_VERSION
+from riderlive.service.rider_frames import encode_frame
 from riderlive.timecode import TimecodeError
 
 if TYPE_CHECKING:

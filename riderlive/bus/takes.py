@@ -33,7 +33,7 @@ import orjson
 from riderlive.bus.subjects import Kind, Stage, check_name
 from riderlive.bus.transport import Transport, TransportError
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
-from riderlive.service.codecs import BINARY_MAGIC, decode_binary_frame
+from riderlive.service.rider_frames import BINARY_MAGIC, decode_binary_frame
 
 PREFIX = "RLTAKE"
 

@@ -28,25 +28,23 @@ import logging
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 from riderlive.devices.latch import StopLatch, StopSource, StopView
 from riderlive.devices.lifecycle import (
-    ARMABLE,
     DeviceState,
     Fault,
     FaultKind,
     Lifecycle,
-    PortBusy,
     PortLost,
     Refusal,
     Refused,
-    SetupTimeout,
     StopRequested,
-    Transition,
+    arm_refusal,
 )
 from riderlive.devices.plug import Motion, Move, Plug
+from riderlive.devices.setup_run import SetupRun
+from riderlive.devices.status import DeviceStatus, StopRecord
 from riderlive.tickframe import TickFrame
 
 log = logging.getLogger("riderlive.devices")
@@ -58,74 +56,6 @@ CONFIRM_FAST_S = 1.0
 """After outputs go off, read them back every tick for this long, then every ``IDLE_CHECK_S``."""
 IDLE_CHECK_S = 0.5
 """While off (disarmed, parked, e-stop, fault): read back that outputs are still off."""
-SETUP_TIMEOUT_S = 15.0
-"""Longest a device may stay ``connecting`` (a transport held by another process, a setup
-that never ends): then a ``setup_timeout`` fault, counted; a reset tries again. The
-guardian's own wait for a port held by a process it has killed is shorter (5 s)."""
-
-
-@dataclass
-class StopRecord:
-    """The last e-stop (``perf_counter`` s, one clock for every process on the host):
-    requested (latch time), acted on by the bus owner, outputs-off written, read back off;
-    and when the last goal write before it began (None: the plug does not say)."""
-
-    source: str = ""
-    requested_at: float | None = None
-    acted_at: float | None = None
-    off_written_at: float | None = None
-    confirmed_at: float | None = None
-    repeats: int = 0
-    last_goal_at: float | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "source": self.source,
-            "requested_at": self.requested_at,
-            "acted_at": self.acted_at,
-            "off_written_at": self.off_written_at,
-            "confirmed_at": self.confirmed_at,
-            "confirmed": self.confirmed_at is not None,
-            "repeats": self.repeats,
-            "last_goal_at": self.last_goal_at,
-        }
-
-
-@dataclass(frozen=True)
-class DeviceStatus:
-    """One tick of a device, for publishing (``extra``: the plug's own status)."""
-
-    name: str
-    kind: str
-    state: DeviceState
-    detail: str
-    at: float
-    fault: Fault | None
-    armed_by: str | None
-    outputs_off_confirmed: bool
-    estop: StopRecord | None
-    wrote: bool
-    transitions: tuple[Transition, ...]
-    counters: dict[str, int]
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the plug's fields (servos...) plus the lifecycle's."""
-        return {
-            **self.extra,
-            "name": self.name,
-            "kind": self.kind,
-            "state": self.state.value,
-            "detail": self.detail,
-            "at": self.at,
-            "fault": None if self.fault is None else self.fault.to_dict(),
-            "armed_by": self.armed_by,
-            "outputs_off_confirmed": self.outputs_off_confirmed,
-            "estop": None if self.estop is None else self.estop.to_dict(),
-            "wrote": self.wrote,
-            "transitions": [t.to_dict() for t in self.transitions],
-            "counters": dict(self.counters),
-        }
 
 
 class Device:
@@ -145,8 +75,7 @@ class Device:
         self.fault: Fault | None = None
         self.armed_by: str | None = None
         self.last_stop: StopRecord | None = None
-        self._setup: Any = None
-        self._setup_since: float | None = None
+        self._setup: SetupRun | None = None
         self._move_t0: float | None = None
         self._last_now: float | None = None
         self._off_confirmed = True
@@ -170,19 +99,9 @@ class Device:
     def arm(self, name: str, by: str) -> DeviceState:
         """An operator's arm, naming this device: outputs on at the present pose, then the
         soft start (or homing first). Raises Refused (nothing changes) when not allowed."""
-        if name != self.name:
-            raise Refused(Refusal.UNKNOWN_DEVICE, f"this is {self.name!r}, not {name!r}")
-        state = self.state
-        if self.latch.latched or state is S.ESTOP:
-            raise Refused(Refusal.ESTOPPED, f"{self.name} is e-stopped: reset first (reset never arms)")
-        if state is S.FAULT:
-            raise Refused(Refusal.FAULTED, f"{self.name} has a fault ({self.fault_message()}): reset first")
-        if state.armed:
-            raise Refused(Refusal.ALREADY_ARMED, f"{self.name} is already armed ({state.value})")
-        if state is S.PARKING:
-            raise Refused(Refusal.PARKING, f"{self.name} is parking: arm again once it is parked")
-        if state not in ARMABLE:
-            raise Refused(Refusal.NOT_READY, f"{self.name} is {state.value}: wait until it is disarmed")
+        refused = arm_refusal(self.name, name, self.state, self.latch.latched, self.fault_message())
+        if refused is not None:
+            raise refused
         now = time.perf_counter()
         try:
             with self.stops.gate():  # no torque-on after an e-stop request either
@@ -338,43 +257,25 @@ class Device:
     def _begin_setup(self, reason: str, by: str) -> None:
         self.fault = None
         self._configured = False
-        self.detail = "opening the transport"
-        self._setup = self.plug.setup(self._say)
-        self._setup_since = time.perf_counter()
+        self._setup = SetupRun(self.plug, self._say, self.counters)
         self._go(S.CONNECTING, reason, by)
 
     def _say(self, detail: str) -> None:
         self.detail = detail
 
     def _run_setup(self, now: float) -> None:
-        """Setup transactions until half a tick is used (the rest is the tick's); a setup
-        longer than ``SETUP_TIMEOUT_S`` is a fault."""
-        since = self._setup_since
-        if since is not None and (took := time.perf_counter() - since) > SETUP_TIMEOUT_S:
-            detail = self.detail
-            self._quietly(self.plug.close)
-            raise SetupTimeout(f"still connecting after {took:.1f} s (bound {SETUP_TIMEOUT_S:g} s): {detail}")
-        budget_end = time.perf_counter() + 0.5 * self.period_s
-        while self._setup is not None:
-            try:
-                next(self._setup)
-            except StopIteration:
-                self._setup = None
-                self._configured = True
-                self.detail = ""
-                self._off_confirmed, self._off_since, self._next_check = False, now, now
-                if self.latch.latched:
-                    self._go(S.ESTOP, "connected while the e-stop is latched", "latch", now)
-                else:
-                    self._go(S.DISARMED, "connected, checked, configured, outputs off", "setup", now)
-                return
-            except PortBusy as exc:  # the guardian (or another tool) still has the bus
-                self.counters["port_busy"] += 1
-                self.detail = f"waiting for the transport: {exc}"
-                self._setup = self.plug.setup(self._say)
-                return
-            if time.perf_counter() >= budget_end:
-                return
+        """The setup's transactions for half a tick (the rest is the tick's): ends disarmed
+        (or ``estop`` while latched); a setup past ``SETUP_TIMEOUT_S`` raises (a fault)."""
+        if self._setup is None or not self._setup.advance(0.5 * self.period_s):
+            return
+        self._setup = None
+        self._configured = True
+        self.detail = ""
+        self._off_confirmed, self._off_since, self._next_check = False, now, now
+        if self.latch.latched:
+            self._go(S.ESTOP, "connected while the e-stop is latched", "latch", now)
+        else:
+            self._go(S.DISARMED, "connected, checked, configured, outputs off", "setup", now)
 
     def _start_move(self, target: DeviceState, reason: str, by: str, now: float) -> None:
         self._move_t0 = None

@@ -129,6 +129,25 @@ class Refused(DeviceError):
         super().__init__(message)
 
 
+def arm_refusal(device: str, name: str, state: DeviceState, latched: bool, fault: str) -> Refused | None:
+    """Why an operator's arm naming ``name`` is refused by ``device`` in ``state`` (``latched``:
+    the e-stop latch is set; ``fault``: the fault's message), or None: only an arm that names
+    the device, from ``disarmed`` or ``parked``, with no e-stop latched, enters motion."""
+    if name != device:
+        return Refused(Refusal.UNKNOWN_DEVICE, f"this is {device!r}, not {name!r}")
+    if latched or state is DeviceState.ESTOP:
+        return Refused(Refusal.ESTOPPED, f"{device} is e-stopped: reset first (reset never arms)")
+    if state is DeviceState.FAULT:
+        return Refused(Refusal.FAULTED, f"{device} has a fault ({fault}): reset first")
+    if state.armed:
+        return Refused(Refusal.ALREADY_ARMED, f"{device} is already armed ({state.value})")
+    if state is DeviceState.PARKING:
+        return Refused(Refusal.PARKING, f"{device} is parking: arm again once it is parked")
+    if state not in ARMABLE:
+        return Refused(Refusal.NOT_READY, f"{device} is {state.value}: wait until it is disarmed")
+    return None
+
+
 class StopRequested(DeviceError):
     """An e-stop is pending: the goal write was not sent (raised by the latch's gate)."""
 

@@ -2,15 +2,27 @@
 
 Derived from the control tables (tables.py) at import: one ``struct`` format per item,
 and contiguous groups of items (goals, limits, present values) read or written with a
-single struct call, which is what keeps the emulator cheap per packet.
+single struct call, which is what keeps the emulator cheap per packet. :func:`profile_of`
+reads the goal and limit blocks as the motion model's :class:`~riderlive.dynamixel.emulator_motion.Profile`
+(pulses, pulses/s, pulses/s^2).
 """
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 
-from riderlive.dynamixel.tables import MODELS, Item, ItemSpec, ModelSpec
+from riderlive.dynamixel import emulator_motion as motion
+from riderlive.dynamixel.tables import (
+    MODELS,
+    POSITION_MODES,
+    VELOCITY_UNIT_RPM,
+    Item,
+    ItemSpec,
+    ModelSpec,
+    OperatingMode,
+)
 
 
 def item_layout(spec: ItemSpec) -> tuple[int, str, str, int]:
@@ -77,3 +89,37 @@ BLOCKS = {
     for model, spec in MODELS.items()
 }
 """Per model: the (goals, limits, present values) blocks."""
+
+
+def profile_of(
+    spec: ModelSpec, memory: bytearray, *, torque_on: bool, mode: int, external_load: float
+) -> tuple[motion.Profile, tuple[int, int, int, int]]:
+    """What the registers ask of the motion model (``torque_on``: Torque Enable and no tripped
+    watchdog; ``mode``: Operating Mode), and the limits the present values are made with:
+    (Homing Offset, Moving Threshold, Current Limit (0 if none), PWM Limit), register units."""
+    goals_block, limits_block, _ = BLOCKS[spec.model]
+    goals = goals_block.read(memory)
+    limits = limits_block.read(memory)
+    cap = spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
+    velocity_cap = motion.velocity_from_register(round(min(goals[Item.PROFILE_VELOCITY] or cap, cap)))
+    accel = goals[Item.PROFILE_ACCELERATION]
+    goal_velocity = None
+    if mode == OperatingMode.VELOCITY:
+        goal_velocity = motion.velocity_from_register(goals[Item.GOAL_VELOCITY])
+    elif mode not in POSITION_MODES:
+        goal_velocity = 0.0
+    output_limits = (
+        limits[Item.HOMING_OFFSET],
+        limits[Item.MOVING_THRESHOLD],
+        limits.get(Item.CURRENT_LIMIT, 0),
+        limits[Item.PWM_LIMIT],
+    )
+    profile = motion.Profile(
+        torque_on=torque_on,
+        goal_position=float(goals[Item.GOAL_POSITION] - limits[Item.HOMING_OFFSET]),
+        max_velocity=velocity_cap,
+        max_acceleration=motion.acceleration_from_register(accel) if accel else math.inf,
+        goal_velocity=goal_velocity,
+        external_load=external_load,
+    )
+    return profile, output_limits

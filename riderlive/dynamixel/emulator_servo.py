@@ -3,10 +3,9 @@
 No I/O and no clock of its own: the bus passes ``now`` (seconds, monotonic) to every
 call. Register semantics follow the ROBOTIS e-manual:
 
-- EEPROM items (address < 64) are writable only with Torque Enable 0 (Access error).
-- Read-only items, bytes outside any item: Access error; part of an item: Data Length.
-- Values outside an item's range: Data Range; outside a range set by another register
-  (Goal Position vs the position limits, goals vs PWM/current/velocity limits): Data Limit.
+- Writes are checked before anything changes (:mod:`riderlive.dynamixel.emulator_access`):
+  EEPROM items (address < 64) only with Torque Enable 0, read-only items and bytes outside
+  any item refused (Access, Data Length), values outside a range (Data Range, Data Limit).
 - A hardware error whose bit is in Shutdown (63) turns torque off; every status then
   carries the Alert bit and torque cannot be enabled again until REBOOT.
 - Bus Watchdog (98, 20 ms units): with torque on, no instruction for longer than the
@@ -21,24 +20,19 @@ import struct
 from dataclasses import dataclass, replace
 
 from riderlive.dynamixel import emulator_motion as motion
-from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS
+from riderlive.dynamixel.emulator_access import write_error
+from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS, profile_of
 from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
-    EXTENDED_POSITION_RANGE,
     MODELS,
-    POSITION_MODES,
     PULSES_PER_TURN,
     RETURN_DELAY_UNIT_S,
-    VELOCITY_UNIT_RPM,
-    Access,
     Area,
     FactoryResetOption,
     HardwareError,
     Item,
-    ItemSpec,
     ModelSpec,
-    OperatingMode,
     StatusError,
     model_spec,
 )
@@ -50,12 +44,10 @@ THERMAL_CHUNK_CYCLES = 10
 _OVERHEATING = int(HardwareError.OVERHEATING)
 _WATCHDOG_ADDRESS = next(iter(MODELS.values())).items[Item.BUS_WATCHDOG].address
 
-GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
 CLEAR_FIRMWARE = 42
 """Firmware from which X-series servos accept CLEAR and ignore a broadcast FACTORY_RESET."""
 CLEAR_SIGNATURE = bytes((0x44, 0x58, 0x4C, 0x22))
 """The fixed bytes after CLEAR's option ("DXL\"")."""
-"""Items that become read-only while the Bus Watchdog has tripped."""
 
 
 @dataclass(frozen=True)
@@ -216,32 +208,14 @@ class EmulatedServo:
         return self._profile_cache
 
     def _make_profile(self) -> motion.Profile:
-        goals_block, limits_block, _ = BLOCKS[self.spec.model]
-        goals = goals_block.read(self.memory)
-        limits = limits_block.read(self.memory)
-        cap = self.spec.no_load_speed_rpm / VELOCITY_UNIT_RPM  # Profile Velocity 0 = as fast as the motor goes
-        velocity_cap = motion.velocity_from_register(round(min(goals[Item.PROFILE_VELOCITY] or cap, cap)))
-        accel = goals[Item.PROFILE_ACCELERATION]
-        mode = self.get(Item.OPERATING_MODE)
-        goal_velocity = None
-        if mode == OperatingMode.VELOCITY:
-            goal_velocity = motion.velocity_from_register(goals[Item.GOAL_VELOCITY])
-        elif mode not in POSITION_MODES:
-            goal_velocity = 0.0
-        self._output_limits = (
-            limits[Item.HOMING_OFFSET],
-            limits[Item.MOVING_THRESHOLD],
-            limits.get(Item.CURRENT_LIMIT, 0),
-            limits[Item.PWM_LIMIT],
-        )
-        return motion.Profile(
+        profile, self._output_limits = profile_of(
+            self.spec,
+            self.memory,
             torque_on=self.memory[self._torque_address] == 1 and not self.watchdog_tripped,
-            goal_position=float(goals[Item.GOAL_POSITION] - limits[Item.HOMING_OFFSET]),
-            max_velocity=velocity_cap,
-            max_acceleration=motion.acceleration_from_register(accel) if accel else math.inf,
-            goal_velocity=goal_velocity,
+            mode=self.get(Item.OPERATING_MODE),
             external_load=self.external_load,
         )
+        return profile
 
     def _sync_outputs(self, now: float) -> None:
         """Write the model state into the read-only present-value registers."""
@@ -321,54 +295,8 @@ class EmulatedServo:
         return StatusError.NONE, bytes(self.memory[address : address + length])
 
     def check_write(self, address: int, data: bytes) -> StatusError:
-        """Why a WRITE of ``data`` at ``address`` would be refused (NONE if allowed)."""
-        end = address + len(data)
-        if not data or end > len(self.memory):
-            return StatusError.ACCESS
-        owner = self.spec.byte_owner
-        covered: list[ItemSpec] = []
-        position = address
-        while position < end:
-            spec = owner[position]
-            if spec is None:
-                return StatusError.ACCESS
-            if spec.address != position or spec.end > end:
-                return StatusError.DATA_LENGTH
-            covered.append(spec)
-            position = spec.end
-        for spec in covered:
-            if spec.access is Access.R:
-                return StatusError.ACCESS
-            if spec.area is Area.EEPROM and self.torque_on:
-                return StatusError.ACCESS
-        for spec in covered:
-            raw = data[spec.address - address : spec.end - address]
-            value = int.from_bytes(raw, "little", signed=spec.signed)
-            error = self._check_value(spec, value)
-            if error is not StatusError.NONE:
-                return error
-        return StatusError.NONE
-
-    def _check_value(self, spec: ItemSpec, value: int) -> StatusError:
-        item = spec.item
-        if self.watchdog_tripped and (item in GOAL_ITEMS or (item is Item.BUS_WATCHDOG and value != 0)):
-            return StatusError.DATA_RANGE
-        if item is Item.TORQUE_ENABLE and value == 1 and self.shut_down:
-            return StatusError.RESULT_FAIL
-        if item is Item.OPERATING_MODE and value not in {int(m) for m in OperatingMode}:
-            return StatusError.DATA_RANGE
-        if item is Item.GOAL_POSITION and self.get(Item.OPERATING_MODE) != OperatingMode.POSITION:
-            low, high = EXTENDED_POSITION_RANGE
-            return StatusError.NONE if low <= value <= high else StatusError.DATA_RANGE
-        if spec.low is not None and spec.high is not None and not spec.low <= value <= spec.high:
-            return StatusError.DATA_RANGE
-        if spec.limit_low is not None and value < self.get(spec.limit_low):
-            return StatusError.DATA_LIMIT
-        if spec.limit_high is not None and value > self.get(spec.limit_high):
-            return StatusError.DATA_LIMIT
-        if spec.symmetric_limit is not None and abs(value) > self.get(spec.symmetric_limit):
-            return StatusError.DATA_LIMIT
-        return StatusError.NONE
+        """Why a WRITE of ``data`` at ``address`` would be refused (NONE if allowed): :func:`write_error`."""
+        return write_error(self.spec, self.get, self.watchdog_tripped, address, data)
 
     def write(self, address: int, data: bytes, now: float) -> StatusError:
         """WRITE: check, then store ``data`` and apply side effects. Nothing changes on error."""

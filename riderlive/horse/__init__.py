@@ -39,9 +39,11 @@ from riderlive.horse.model import Model, Perform, SetGait, State, command, initi
 from riderlive.horse.moves import MOVE_TABLE, MOVES, Move, parse_move
 from riderlive.horse.script import DEFAULT_VARIATION, ShotScript, gait_script, generate, load_script
 from riderlive.horse.terrain import Terrain, TerrainConfig, join
+from riderlive.units import RIG_UNITS_PER_METRE
 
-DEFAULT_SCALE = 25.0
-"""Thesis rig units per metre (a 1.6 m horse is 40 units tall at the withers)."""
+DEFAULT_SCALE = RIG_UNITS_PER_METRE
+"""The default ``length_scale``: thesis rig units per metre (a 1.6 m horse is 40 units tall at
+the withers), so the service speaks metres; the number's one source is ``riderlive.units``."""
 
 __all__ = [
     "DEFAULT_SCALE",

@@ -14,7 +14,7 @@ be driven safely: limits in the wrong order, a home or park pose outside the sof
 limits (naming the actuator and by how much), a home with no room on some axis, and a
 soft start or park too short for a full stroke within the speed and acceleration
 limits, and limits so slow that the firmware's dead-man park over a full stroke would
-outlast ``link.PARK_BOUND_S`` (the firmware refuses such a CONFIG). Every error names the
+outlast ``link_vocab.PARK_BOUND_S`` (the firmware refuses such a CONFIG). Every error names the
 file and the key.
 """
 
@@ -32,7 +32,7 @@ from riderlive.platform.cueing_params import PRESETS, CueingParams
 from riderlive.platform.geometry import Geometry, Kind, Pose, Vec3, hexagon, rotation, tangential_arms
 from riderlive.platform.ik import SCALAR, axis_ranges, make_ik
 from riderlive.platform.limits import ease_seconds
-from riderlive.platform.link import PARK_BOUND_S, PARK_SCALE, firmware_park_s
+from riderlive.platform.link_vocab import PARK_BOUND_S, PARK_SCALE, firmware_park_s
 
 PLATFORM_DIR = CONFIG_DIR / "platforms"
 """The shipped platform files (the repository's ``config/platforms``)."""

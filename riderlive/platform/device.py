@@ -40,27 +40,19 @@ from typing import Any
 
 from riderlive.channels import SADDLE
 from riderlive.devices.latch import StopView
-from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply, PortBusy, PortLost, Rejected
+from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply, Rejected
 from riderlive.devices.plug import Motion, Move, PlugBase, Steps
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
-from riderlive.platform import limits, link, pipeline
+from riderlive.platform import link, pipeline, plug_status
 from riderlive.platform.config import load_platform
-from riderlive.platform.geometry import rotation
-from riderlive.platform.link import ConfigKey, Flag, LinkState
+from riderlive.platform.link_vocab import Flag, LinkState, Profile, config_refusal
 from riderlive.platform.pipeline import PlatformModel, PlatformState
-from riderlive.platform.serial_link import (
-    CommandRefused,
-    Health,
-    NoAnswer,
-    PlatformLinkError,
-    SerialPlatformLink,
-    VersionMismatch,
-)
-from riderlive.platform.serial_link import PortBusy as LinkBusy
-from riderlive.platform.serial_link import PortLost as LinkLost
+from riderlive.platform.plug_link import config_values, lifecycle_errors, position_units, target_counts
+from riderlive.platform.plug_status import fault_names
+from riderlive.platform.serial_link import Health, SerialPlatformLink
 from riderlive.tickframe import Part, TickFrame
 
-HOMING_PROFILES = frozenset({link.Profile.PLATFORM6, link.Profile.PLATFORM3})
+HOMING_PROFILES = frozenset({Profile.PLATFORM6, Profile.PLATFORM3})
 """Profiles whose firmware homes on its first arm (firmware_proto/src/profile.c)."""
 _MOVING = frozenset({LinkState.HOMING, LinkState.SOFT_START, LinkState.RUNNING, LinkState.PARKING})
 _LATCHED = frozenset({LinkState.ESTOP, LinkState.FAULT})
@@ -74,11 +66,6 @@ FIRST_TELEMETRY_WAIT_S = 0.5
 """At the end of the setup, how long to wait for the firmware's first telemetry (it
 comes every ``telemetry_ms``, 20 ms by default); past it the setup ends anyway and the
 lifecycle's read-back of outputs-off decides."""
-
-
-def position_units(model: PlatformModel) -> float:
-    """Link units (mm or deg) per actuator position unit (m of stroke, or deg of crank)."""
-    return 1.0 if model.geometry.kind.rotary else 1000.0
 
 
 class PlatformPlug(PlugBase):
@@ -108,8 +95,6 @@ class PlatformPlug(PlugBase):
         self.counters: Counter[str] = Counter()
         self.hello: link.HelloReply | None = None
         self.units = position_units(model)
-        g = model.geometry
-        self.lower, self.upper = g.lower, g.upper
         self.state: PlatformState = pipeline.initial(model)
         self.positions: list[float] = list(model.park_positions)
         """The last positions sent (actuator units), or where the device said it was."""
@@ -165,14 +150,14 @@ class PlatformPlug(PlugBase):
                 raise NoReply(None, f"{self.port}: the device is still {LinkState(status.state).label}")
             status = self._call(lambda: self.link.command(link.Disarm(), check=False))
         if LinkState(status.state) in _LATCHED:
-            self.faults_at_connect = _fault_names(status.faults)
+            self.faults_at_connect = fault_names(status.faults)
             self.counters["latch_cleared_at_connect"] += 1
             detail("clearing the latch the device kept: " + (", ".join(self.faults_at_connect) or "e-stop"))
             self._call(lambda: self.link.command(link.Reset()))
             yield
-        for key, index, value in self._config_values():
+        for key, index, value in config_values(self.model, self.units, self.heartbeat_ms):
             detail(f"configuring {key.name.lower()} {index}")
-            why = link.config_refusal(hello.profile, key, value)  # the firmware's table, said before it refuses
+            why = config_refusal(hello.profile, key, value)  # the firmware's table, said before it refuses
             if why is not None:
                 raise Mismatch(
                     index, f"{self.name}: actuator {index + 1}: {why}: the platform file asks what its profile refuses"
@@ -231,11 +216,12 @@ class PlatformPlug(PlugBase):
             self._ramp_from = list(self.positions)
         saddle = self._saddle(frame)
         ease = (self._ramp_from, motion.elapsed) if motion.move is Move.SOFT_START else None
-        self.state, self.aim, out = commands(self.model, self.state, saddle, motion.dt, ease)
-        counts = target_counts(out, self.units)
+        self.state, out = pipeline.step(self.model, self.state, saddle, motion.dt, ease)
+        self.aim = out.aim
+        counts = target_counts(out.positions, self.units)
         with self._gate():
             self._call(lambda: self.link.send_targets(counts))
-        self.positions = out.tolist()
+        self.positions = out.positions.tolist()
         self.counters["targets_sent"] += 1
         if motion.move is Move.SOFT_START:
             return fw is LinkState.RUNNING and motion.elapsed >= self.model.soft_start_s
@@ -276,54 +262,18 @@ class PlatformPlug(PlugBase):
         self.counters["takeovers"] += 1
 
     def status(self) -> dict[str, Any]:
-        """Firmware state and faults, the link's counters both sides, workspace use, limits hit,
-        and per actuator the position sent, the one measured and its closeness to a soft limit."""
-        t = self.link.telemetry
-        measured: Sequence[float | None] = self._measured() or [None] * len(self.positions)
-        actuators = [
-            {
-                "name": f"a{i + 1}",
-                "target": q,
-                "measured": m,
-                "closeness": self._closeness(i, q),
-                "lower": self.lower[i],
-                "upper": self.upper[i],
-            }
-            for i, (q, m) in enumerate(zip(self.positions, measured, strict=True))
-        ]
-        safety = self.state.safety.counters
-        aim = self.aim
-        home = self.model.geometry.home
-        return {
-            "platform": {
-                "geometry": self.model.geometry.kind.value,
-                "unit": self.model.geometry.unit,
-                "firmware": None
-                if self.hello is None
-                else {
-                    "device": self.hello.device,
-                    "version": list(self.hello.firmware),
-                    "profile": self.hello.profile,
-                    "state": self.link.state.label,
-                    "faults": _fault_names(t.faults) if t else [],
-                    "flags": [str(f.name).lower() for f in Flag if t and t.flags & f],
-                    "counters": self.link.device_counters(),
-                },
-                "link": {"health": self.link.health.value, "counters": dict(self.link.counters)},
-                "actuators": actuators,
-                "workspace_use": max((self._closeness(i, q) for i, q in enumerate(self.positions)), default=0.0),
-                "scale": 1.0 if aim is None else aim.scale,
-                "pose": None if aim is None else [p - h for p, h in zip(aim.pose, home, strict=True)],
-                "saddle": list(self.saddle),
-                "limits_hit": {**safety, "scaled_back_frames": self.state.scaled_back},
-                "cueing": {
-                    "intensity": self.model.cueing.params.intensity,
-                    "preset": self.model.cueing.params.preset,
-                },
-                "faults_at_connect": self.faults_at_connect,
-                "joints": self._joints(),
-            }
-        }
+        """Firmware, link, actuators, workspace, limits hit and joints (:func:`plug_status.report`)."""
+        return plug_status.report(
+            model=self.model,
+            serial=self.link,
+            hello=self.hello,
+            positions=self.positions,
+            measured=self._measured(),
+            state=self.state,
+            aim=self.aim,
+            saddle=self.saddle,
+            faults_at_connect=self.faults_at_connect,
+        )
 
     def tune(self, **changes: Any) -> None:
         """Live cueing parameters (intensity, cut-offs, ...): the running state blends toward them."""
@@ -341,21 +291,8 @@ class PlatformPlug(PlugBase):
 
     def _call(self, call: Callable[[], Any]) -> Any:
         """The link's errors as the lifecycle's (PortLost, PortBusy, NoReply, Mismatch, Rejected)."""
-        try:
+        with lifecycle_errors(self.counters):
             return call()
-        except LinkLost as exc:
-            self.counters["port_lost"] += 1
-            raise PortLost(str(exc)) from exc
-        except LinkBusy as exc:
-            raise PortBusy(str(exc)) from exc
-        except VersionMismatch as exc:
-            raise Mismatch(0, str(exc)) from exc
-        except NoAnswer as exc:
-            raise NoReply(None, str(exc)) from exc
-        except CommandRefused as exc:
-            raise Rejected(0, type(exc.status).__name__.lower(), str(exc)) from exc
-        except PlatformLinkError as exc:  # pragma: no cover - every subclass is listed above
-            raise NoReply(None, str(exc)) from exc
 
     def _check_hello(self, hello: link.HelloReply) -> None:
         legs = self.model.geometry.legs
@@ -366,20 +303,6 @@ class PlatformPlug(PlugBase):
                 0, f"{self.port}: the device is {hello.device!r}, platform.device is {self.expected_device!r}"
             )
         self.needs_homing = hello.profile in HOMING_PROFILES
-
-    def _config_values(self) -> list[tuple[ConfigKey, int, int]]:
-        """CONFIG frames that tighten the firmware to the platform file (counts, counts/s, counts/s^2)."""
-        scale = self.units * link.COUNTS_PER_UNIT
-        g = self.model.geometry
-        values = [(ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, self.heartbeat_ms)]
-        for i in range(g.legs):
-            values += [
-                (ConfigKey.SOFT_MIN, i, math.ceil(g.lower[i] * scale - 1e-6)),
-                (ConfigKey.SOFT_MAX, i, math.floor(g.upper[i] * scale + 1e-6)),
-                (ConfigKey.VELOCITY_LIMIT, i, math.floor(g.max_speed[i] * scale)),
-                (ConfigKey.ACCELERATION_LIMIT, i, math.floor(g.max_accel[i] * scale)),
-            ]
-        return values
 
     def _measured(self) -> list[float] | None:
         t = self.link.telemetry
@@ -417,7 +340,7 @@ class PlatformPlug(PlugBase):
                 self._reported_faults = faults
                 self.counters["firmware_faults"] += 1
                 raise HardwareFault(
-                    0, tuple(_fault_names(t.faults)) or ("estop",), t.faults, what=f"{self.name} firmware"
+                    0, tuple(fault_names(t.faults)) or ("estop",), t.faults, what=f"{self.name} firmware"
                 )
         if self.link.health is not Health.SILENT:
             self._silent_since, self._silence_reported = None, False
@@ -444,49 +367,6 @@ class PlatformPlug(PlugBase):
 
     def _fresh_off(self, t: link.Telemetry) -> bool:
         return LinkState(t.state) in _AT_REST and not t.flags & Flag.OUTPUTS_ON
-
-    def _joints(self) -> dict[str, list[list[float]]]:
-        """Base joints and platform joints at the last aimed pose (the park pose before one), base frame, m."""
-        g = self.model.geometry
-        pose = g.park if self.aim is None else self.aim.pose
-        r = rotation(pose[3], pose[4], pose[5])
-        top = [[pose[k] + sum(r[k][j] * p[j] for j in range(3)) for k in range(3)] for p in g.platform]
-        return {"base": [list(b) for b in g.base], "top": top}
-
-    def _closeness(self, i: int, q: float) -> float:
-        """0 in the middle of actuator ``i``'s soft range, 1 at (or past) a soft limit."""
-        half = 0.5 * (self.upper[i] - self.lower[i])
-        mid = self.lower[i] + half
-        return min(1.0, abs(q - mid) / half) if half > 0 else 1.0
-
-
-def commands(
-    model: PlatformModel,
-    state: PlatformState,
-    saddle: Sequence[float],
-    dt: float,
-    ease: tuple[Sequence[float], float] | None = None,
-) -> tuple[PlatformState, pipeline.Aim, Any]:
-    """One tick's actuator commands (pure): cue the saddle pose, solve the IK with the workspace
-    scale-back, ease from ``ease = (start positions, elapsed s)`` during the soft start, then the
-    safety follower. Returns the new state, the aim and the commands (actuator units)."""
-    cue_state, aim = pipeline.aim(model, state.cueing, saddle, dt)
-    targets: Sequence[float] = aim.targets
-    if ease is not None:
-        targets = limits.eased(ease[0], aim.targets, ease[1], model.soft_start_s)
-    safety, out = limits.step(model.safety, state.safety, targets, dt)
-    scaled = state.scaled_back + (1 if aim.scale < 1.0 else 0)
-    return PlatformState(cue_state, safety, scaled), aim, out
-
-
-def target_counts(positions: Sequence[float], units: float) -> tuple[int, ...]:
-    """Actuator positions (m of stroke or deg) -> the link's counts (0.01 mm or 0.01 deg)."""
-    values = positions.tolist() if hasattr(positions, "tolist") else positions  # NumPy scalars are slow here
-    return link.to_counts([q * units for q in values])
-
-
-def _fault_names(bits: int) -> list[str]:
-    return [str(f.name).lower() for f in link.Fault if bits & f]
 
 
 def describe(file: str, port: str | None) -> DeviceInfo:

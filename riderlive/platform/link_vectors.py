@@ -18,32 +18,26 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from riderlive.platform import link, link_framing
+from riderlive.platform import link, link_framing, link_vocab
 from riderlive.platform.link import (
     COUNTERS,
     Arm,
     Config,
-    ConfigKey,
     Disarm,
     EStop,
-    Fault,
-    Flag,
-    FrameType,
     Heartbeat,
     Hello,
     HelloReply,
     Home,
-    LinkState,
     Message,
     Park,
-    Profile,
-    Reason,
     Reset,
     Status,
     Target,
     Telemetry,
 )
 from riderlive.platform.link_framing import SeqWindow
+from riderlive.platform.link_vocab import ConfigKey, Fault, Flag, FrameType, LinkState, Profile, Reason
 
 DEFAULT_PATH = Path(__file__).resolve().parents[2] / "firmware_proto" / "test" / "link_vectors.json"
 
@@ -219,9 +213,9 @@ def vectors() -> dict[str, Any]:
             "profile": {p.name: int(p) for p in Profile},
             "counters": list(COUNTERS),
         },
-        "park_bound_ms": round(link.PARK_BOUND_S * 1000),
+        "park_bound_ms": round(link_vocab.PARK_BOUND_S * 1000),
         "config_ranges": {
-            p.name: {k.name: list(r) for k, r in ranges.items()} for p, ranges in link.CONFIG_RANGES.items()
+            p.name: {k.name: list(r) for k, r in ranges.items()} for p, ranges in link_vocab.CONFIG_RANGES.items()
         },
         "frames": [
             {

@@ -11,6 +11,7 @@ these targets (:func:`riderlive.platform.limits.eased`) before the safety stage.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -124,10 +125,23 @@ def aim(model: PlatformModel, state: CueingState, saddle: Any, dt: float) -> tup
     return state, Aim(cue, pose, targets, scale)
 
 
-def step(model: PlatformModel, state: PlatformState, saddle: Any, dt: float) -> tuple[PlatformState, Frame]:
-    """One running frame: saddle pose in (6 values, m and deg), actuator commands out."""
+def step(
+    model: PlatformModel,
+    state: PlatformState,
+    saddle: Any,
+    dt: float,
+    ease: tuple[Sequence[float], float] | None = None,
+) -> tuple[PlatformState, Frame]:
+    """One frame: saddle pose in (6 values, m and deg), actuator commands out (actuator units).
+
+    During the soft start ``ease = (start positions, elapsed s)`` blends the targets from
+    where the actuators were (:func:`riderlive.platform.limits.eased`) before the safety stage.
+    """
     cue_state, target = aim(model, state.cueing, saddle, dt)
-    safety_state, positions = limits.step(model.safety, state.safety, target.targets, dt)
+    targets: Sequence[float] = target.targets
+    if ease is not None:
+        targets = limits.eased(ease[0], target.targets, ease[1], model.soft_start_s)
+    safety_state, positions = limits.step(model.safety, state.safety, targets, dt)
     scaled = state.scaled_back + (1 if target.scale < 1.0 else 0)
     return PlatformState(cue_state, safety_state, scaled), Frame(target, positions)
 

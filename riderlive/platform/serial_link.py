@@ -33,13 +33,10 @@ import serial
 from riderlive.platform.link import (
     COUNTERS,
     Frame,
-    FrameType,
     Heartbeat,
     Hello,
     HelloReply,
-    LinkState,
     Message,
-    Reason,
     Status,
     Target,
     Telemetry,
@@ -47,6 +44,7 @@ from riderlive.platform.link import (
     encode,
 )
 from riderlive.platform.link_framing import LINK_VERSION, SEQ_MOD, Deframer, LinkError, SeqWindow, VersionError
+from riderlive.platform.link_vocab import FrameType, LinkState, Reason
 
 DEFAULT_BAUD = 250_000
 """Exact on a 16 MHz AVR (the Mega 2560 shim); a pty ignores it."""

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from riderlive.channels import HORSE, HORSE_NAMES, Kind
-from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
+from riderlive.horse import ProceduralHorse
 from riderlive.realtime.layout import InputKind
 from riderlive.realtime.resample import Resampler
 from riderlive.realtime.saddle_input import NO_ESTIMATE, make_saddle_input, saddle_pose
@@ -53,6 +53,7 @@ from riderlive.rules.animator import DamperState, SpringState, damper_start, dam
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.parts import PART_OUTPUTS, RiderParts
 from riderlive.saddle.pose import SaddlePoint
+from riderlive.units import metres_per_unit, units_per_metre
 
 
 class Driver(enum.IntEnum):
@@ -180,9 +181,9 @@ class TickCore:
         self.neutral_horse = [0.0] * len(HORSE_NAMES)
         self.neutral_rider = model.evaluate(self.neutral_horse)
         # The procedural horse speaks metres; inputs are in the model's length unit.
-        self._procedural_gain = DEFAULT_SCALE / model.scale
-        self._to_metres = model.scale / DEFAULT_SCALE
-        self.parts = RiderParts(model.params, model.scale / DEFAULT_SCALE)
+        self._procedural_gain = units_per_metre(model.scale)
+        self._to_metres = metres_per_unit(model.scale)
+        self.parts = RiderParts(model.params, self._to_metres)
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode

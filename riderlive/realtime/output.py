@@ -18,11 +18,12 @@ from collections.abc import Sequence
 from typing import Any
 
 from riderlive.devices.board import SafetyBoard, guardian_watching
-from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
 from riderlive.devices.plug import NotTunable
 from riderlive.devices.registry import DeviceSpec, make_plug
+from riderlive.devices.status import DeviceStatus
 from riderlive.realtime import commands as cmd
 from riderlive.tickframe import TickFrame
 

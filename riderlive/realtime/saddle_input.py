@@ -36,11 +36,10 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from riderlive.channels import HORSE, Kind
-from riderlive.horse import DEFAULT_SCALE
 from riderlive.horse.gaits import Gait
 from riderlive.saddle import Lock, Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
 from riderlive.saddle.pose import BEND_COLUMN, SCALAR, TRUNK_COLUMNS, saddle_from_trunk
+from riderlive.units import horse_lengths, metres_per_unit, saddle_lengths
 
 LOCKS: tuple[str, ...] = tuple(lock.value for lock in Lock)
 """Lock states by their code in a record (``no_signal`` 0, ``still`` 1, ``searching`` 2, ``locked`` 3)."""
@@ -50,7 +49,6 @@ NO_ESTIMATE: tuple[float, ...] = (math.nan,) * 5
 """The estimate of a record no saddle input drives."""
 COUNTERS: tuple[str, ...] = ("samples", "missing", "empty", "gaps", "glitches", "rebases", "locks", "losses")
 """Estimator counters summed over every saddle stream the tick has seen (``saddle_<name>``)."""
-_HORSE_LENGTHS = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
 _OFFSETS = 256
 """Samples whose clock offset the mapping takes the least of (as the resampler's buffer)."""
 _HISTORY = 512
@@ -89,6 +87,10 @@ class SaddleInput:
     """The least delay (s): ``input.delay``."""
 
     def __post_init__(self) -> None:
+        self._samples = saddle_lengths(self.to_metres)
+        """A sample's lengths to metres (the estimator's unit)."""
+        self._frames_out = horse_lengths(self.to_metres)
+        """A rebuilt horse frame's lengths back to the service unit."""
         self.state = State()
         self.offsets: deque[float] = deque(maxlen=_OFFSETS)
         self.offset: float | None = None
@@ -138,9 +140,7 @@ class SaddleInput:
         """
         if not t > self.state.t:
             return False
-        gain = self.to_metres
-        sample = [v * gain for v in values[:3]] + [float(v) for v in values[3:6]] if gain != 1.0 else values[:6]
-        self.state = step(self.model, self.state, t, sample)
+        self.state = step(self.model, self.state, t, self._samples.to_metres(values[:6]))
         if self.state.t == t:  # taken (an empty sample is counted and leaves the pose as it was)
             self.history.append(self.state)
             self.times.append(t)
@@ -199,21 +199,13 @@ class SaddleInput:
         if query is None:
             return None
         if query < self.state.t:
-            frame = list(self._between(query))
-            if self.to_metres != 1.0:
-                for i in _HORSE_LENGTHS:
-                    frame[i] /= self.to_metres
-            return query, frame
+            return query, self._frames_out.from_metres(self._between(query))
         if query - self.state.t > self.model.hold + self.model.ease:
             if not self.stale:
                 self.stale = True
                 self.stale_episodes += 1
             return None
-        frame = horse_frame(self.model, self.state, query)
-        if self.to_metres != 1.0:
-            for i in _HORSE_LENGTHS:
-                frame[i] /= self.to_metres
-        return query, frame
+        return query, self._frames_out.from_metres(horse_frame(self.model, self.state, query))
 
     def estimate_row(self, now: float) -> tuple[float, ...]:
         query = self.source_time(now)
@@ -223,4 +215,4 @@ class SaddleInput:
 def make_saddle_input(length_scale: float, point: SaddlePoint, delay: float = 0.0) -> SaddleInput:
     """The tick's saddle input for a service speaking ``length_scale`` rig units per its length unit,
     reading the stream at least ``delay`` (s, ``input.delay``) behind its clock mapping."""
-    return SaddleInput(Model(point=point), length_scale / DEFAULT_SCALE, delay)
+    return SaddleInput(Model(point=point), metres_per_unit(length_scale), delay)

@@ -10,8 +10,8 @@ so an offline run on the take gives the same values). Publishing stays outside t
 step and is done only when a step was taken.
 
 Units: the tick's frames are in service length units; the physics speaks metres
-(``length_scale / DEFAULT_SCALE`` converts), and the published positions and ``fan``
-go back to service units. Pure apart from the kernels' compile-on-first-use:
+(``units.metres_per_unit`` converts the lengths of ``units``' column tables), and the published
+positions and ``fan`` go back to service units. Pure apart from the kernels' compile-on-first-use:
 :meth:`TickPhysics.warm` makes that happen before the loop starts.
 """
 
@@ -25,19 +25,19 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.channels import HORSE, RIDER, Kind, lookup
-from riderlive.horse import DEFAULT_SCALE
+from riderlive.channels import Kind, lookup
 from riderlive.physics.config import load_physics
 from riderlive.physics.drive import Drive, FixedStepper
 from riderlive.physics.outputs import channel_names, publish
 from riderlive.physics.skinned import SkinnedModel, SkinnedState
+from riderlive.units import HORSE_LENGTHS, RIDER_LENGTHS, metres_per_unit
 
 FloatArray = npt.NDArray[np.float64]
 MAX_CATCH_UP = 48
 """Internal steps one tick may take (0.2 s at 240 Hz); a longer stall skips the excess time."""
 
-_HORSE_LENGTHS = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
-_RIDER_LENGTHS = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
+_HORSE_LENGTHS = list(HORSE_LENGTHS)
+_RIDER_LENGTHS = list(RIDER_LENGTHS)
 
 
 def physics_channels(file: str | Path | None = None) -> tuple[str, ...]:
@@ -95,7 +95,7 @@ class TickPhysics:
         self.config = load_physics(file)
         self.model = SkinnedModel.build(self.config)
         self.names = channel_names(self.model)
-        self.to_metres = length_scale / DEFAULT_SCALE
+        self.to_metres = metres_per_unit(length_scale)
         self._lengths = np.array([lookup(n).kind is Kind.TRANSLATION for n in self.names])
         self.frames = TickFrames()
         self.stepper: FixedStepper[SkinnedState] | None = None

@@ -4,7 +4,7 @@
   metres and degrees) from any horse frame, and back; one source for floats and NumPy.
 - :mod:`~riderlive.saddle.estimator`: ``Model`` / ``State`` / ``step(model, state, t,
   values)``: saddle samples in, gait, stride frequency, phase and lock out; no clock.
-  ``estimate(state, t)`` is the publishable view.
+  :mod:`~riderlive.saddle.estimate`: ``estimate(state, t)``, the publishable view.
 - :mod:`~riderlive.saddle.rebuild`: ``horse_frame(model, state, t)``, the horse the
   rules ride (the procedural horse's hooves at the estimated gait and phase, the
   measured trunk); ``rebuild`` for a whole take.
@@ -15,7 +15,8 @@ See ``docs/saddle.md``.
 
 from __future__ import annotations
 
-from riderlive.saddle.estimator import Lock, Model, State, estimate, step
+from riderlive.saddle.estimate import estimate
+from riderlive.saddle.estimator import Lock, Model, State, step
 from riderlive.saddle.pose import (
     BACK_MID,
     WITHERS,

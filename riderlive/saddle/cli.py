@@ -20,7 +20,8 @@ from riderlive.configfile import ConfigError
 from riderlive.framefile import FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.horse.gaits import GAITS
 from riderlive.horse.script import ShotScript, gait_script, load_script
-from riderlive.saddle.estimator import Model, estimate
+from riderlive.saddle.estimate import estimate
+from riderlive.saddle.estimator import Model
 from riderlive.saddle.synthetic import IMU_STRAP, Imperfections, record
 from riderlive.saddle.takes import add_point_arguments, horse_take, point_of, saddle_take
 

@@ -3,7 +3,8 @@
 Model / State / step, no clocks: :func:`step` takes one sample (its time in s and the
 six ``channels.SADDLE`` values, NaN for a missing axis) and returns the next
 :class:`State`; nothing else changes. The tick can step it once per received sample
-and read :func:`riderlive.saddle.rebuild.horse_frame` at its own time.
+and read :func:`riderlive.saddle.rebuild.horse_frame` at its own time; what it publishes is
+:func:`riderlive.saddle.estimate.estimate` of the state.
 
 Per sample (cheap): validation, glitch and re-zero handling, a light smoothing of the
 pose, and one history row at most every ``resolution`` s. Every ``analysis_period``
@@ -19,7 +20,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -379,53 +380,3 @@ def _baseline(model: Model, tr: Tracking, t: float, fit: Fit | None) -> Tracking
         timing=model,
     )
     return replace(tr, drift=drift, level=level, levels=tr.levels + 1)
-
-
-@dataclass(frozen=True, slots=True)
-class Estimate:
-    """What the estimator publishes.
-
-    Gait, stride frequency (Hz), phase (0-1), speed (m/s), lock, the match's score,
-    ``age`` (s since the last sample, None before the first: a stopped stream shows
-    here, and the rebuilt frame eases to standing after ``Model.hold``) and the counters.
-    """
-
-    gait: str | None
-    stride_hz: float
-    phase: float
-    speed: float
-    lock: str
-    score: float
-    age: float | None
-    counters: dict[str, int]
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "gait": self.gait,
-            "stride_hz": self.stride_hz,
-            "phase": self.phase,
-            "speed": self.speed,
-            "lock": self.lock,
-            "score": self.score,
-            "age": self.age,
-            "counters": self.counters,
-        }
-
-
-def estimate(state: State, t: float | None = None) -> Estimate:
-    """The estimator's state as data, at ``t`` (default: the last sample's time)."""
-    t = state.t if t is None else t
-    tr = state.tracking
-    track = tr.track if tr.lock is Lock.LOCKED else None
-    counters = {"samples": state.samples, "missing": state.missing}
-    counters.update({name: getattr(tr.counters, name) for name in Counters.__slots__})
-    return Estimate(
-        gait=track.gait.value if track else (Gait.HALT.value if tr.lock is Lock.STILL else None),
-        stride_hz=track.frequency if track else 0.0,
-        phase=track.phase(t) % 1.0 if track else 0.0,
-        speed=track.speed if track else 0.0,
-        lock=tr.lock.value,
-        score=tr.fit.score if tr.fit else 0.0,
-        age=t - state.t if state.t > -math.inf else None,
-        counters=counters,
-    )

@@ -30,7 +30,8 @@ import numpy.typing as npt
 from riderlive.channels import HORSE, HORSE_OPTIONAL
 from riderlive.horse.curves import SCALAR as HORSE_SCALAR
 from riderlive.horse.model import to_rig_sides
-from riderlive.saddle.estimator import Model, State, estimate, step
+from riderlive.saddle.estimate import estimate
+from riderlive.saddle.estimator import Model, State, step
 from riderlive.saddle.pose import SCALAR, trunk_from_saddle
 from riderlive.saddle.track import Track
 

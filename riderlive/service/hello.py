@@ -10,12 +10,12 @@ import numpy as np
 
 from riderlive import __version__
 from riderlive.channels import AXIS_CONVENTION, HORSE, RIDER, RIDER_PART_NAMES, RIDER_PARTS, SADDLE, lookup
-from riderlive.horse import DEFAULT_SCALE
 from riderlive.realtime.record import ESTIMATE_FIELDS
 from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service.codecs import POSE_FLOATS_PER_BONE, PROTOCOL_VERSION, SKELETONS
 from riderlive.skeleton import hello_skeletons
 from riderlive.skeleton.rig import Pose
+from riderlive.units import metres_per_unit
 
 if TYPE_CHECKING:
     from riderlive.service.ports import PublishPort
@@ -41,7 +41,7 @@ def pose_floats(pose: Pose) -> np.ndarray:
 
 def units(length_scale: float) -> tuple[str, float]:
     """The service length unit as a symbol (``m``, ``cm``, ``mm``, else ``"<k> m"``) and in metres."""
-    metres = length_scale / DEFAULT_SCALE
+    metres = metres_per_unit(length_scale)
     for symbol, size in (("m", 1.0), ("cm", 0.01), ("mm", 0.001)):
         if abs(metres - size) <= 1e-12 * size:
             return symbol, size

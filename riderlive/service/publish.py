@@ -32,15 +32,9 @@ from riderlive.channels import RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.devices.latch import StopSource
 from riderlive.realtime.record import RecordLayout
 from riderlive.service import auth
-from riderlive.service.codecs import (
-    BadFrame,
-    Subscription,
-    decode_ping_id,
-    decode_subscription,
-    encode_frame,
-    parse_message,
-)
+from riderlive.service.codecs import BadFrame, Subscription, decode_ping_id, decode_subscription, parse_message
 from riderlive.service.hello import hello, pose_floats
+from riderlive.service.rider_frames import encode_frame
 from riderlive.service.wsprotocol import ABORT, TRANSPORT, wire_frame
 from riderlive.skeleton.rig import Pose
 

@@ -15,14 +15,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, RIDER_PART_NAMES, SADDLE_NAMES
-from riderlive.devices.registry import DeviceSpec
 from riderlive.horse import TerrainConfig
 from riderlive.realtime import commands as cmd
-from riderlive.realtime.core import Mode, Timing
+from riderlive.realtime.core import Mode
 from riderlive.realtime.latency import LatencySnapshot
 from riderlive.realtime.link import TickLink
 from riderlive.realtime.record import RecordLayout
-from riderlive.realtime.setup import TickSetup
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import RuleParams, load_preset
@@ -34,6 +32,7 @@ from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
 from riderlive.service.supervisor import TickSupervisor
+from riderlive.service.tick_setup import make_setup
 from riderlive.service.timecodes import host_timecode
 from riderlive.takes.recorder import TakeExists, TakeRecorder, read_sidecar, recover_take, replay_path, take_path
 from riderlive.takes.replay import Replay, load_replay
@@ -44,53 +43,6 @@ if TYPE_CHECKING:
     from riderlive.service.foxglove import FoxgloveLive
 
 log = logging.getLogger(__name__)
-
-
-def make_setup(
-    config: ServiceConfig,
-    params: RuleParams,
-    layout: RecordLayout | None = None,
-    devices: tuple[DeviceSpec, ...] = (),
-) -> TickSetup:
-    source = config.source
-    timing = Timing(
-        delay=config.input.delay,
-        hold=config.input.hold,
-        ease_time=config.input.ease_time,
-        blend_time=config.input.blend_time,
-        resume_after=source.resume_after,
-        fallback_procedural=source.fallback_procedural,
-        param_blend=config.tick.param_blend_time,
-    )
-    low, high = config.ranges.ranges().limits(RIDER_NAMES, config.tick.length_scale)
-    return TickSetup(
-        rate=config.tick.rate,
-        start=time.perf_counter(),
-        timing=timing,
-        params=params,
-        animator=AnimatorLayer(),
-        length_scale=config.tick.length_scale,
-        gait=source.gait,
-        speed=source.speed,
-        seed=source.seed,
-        terrain=source.terrain,
-        mode=Mode.PROCEDURAL if source.kind == "procedural" else Mode.INPUT,
-        realtime_priority=config.tick.realtime_priority,
-        isolation=config.tick.isolation,
-        spin=config.tick.spin,
-        devices=devices,
-        park_timeout=config.rig.park_timeout,
-        arm_on_start="serve --arm" if config.rig.arm else None,
-        guardian=bool(devices) and config.guardian.enabled,
-        tail=config.physics.tail,
-        physics_file=config.physics.file,
-        layout=RecordLayout() if layout is None else layout,
-        rider_bounds=(tuple(low), tuple(high)),
-        saddle_point=config.saddle,
-        phase_lock=config.tick.phase_lock,
-        phase_margin=config.tick.phase_margin,
-        spare_nice=config.tick.spare_nice,
-    )
 
 
 class Service:

@@ -25,13 +25,13 @@ from riderlive.bus.subjects import Kind, Stage
 from riderlive.bus.takes import export, list_takes, record, replay
 from riderlive.bus.transport import Refused
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
-from riderlive.service.codecs import decode_binary_frame
+from riderlive.service.rider_frames import decode_binary_frame
 from riderlive.takes.replay import load_replay
 from tests.bus.harness import AUTH, RIG_TICK, TOKEN, NatsProbe, start_rig, wait_for
 from tests.bus.harness import TOKEN_CONFIG as CONFIG
 from tests.service.live_server import ROOT, LiveServer
 from tests.service.producers import Producer
-from tests.waiting import Pacer
+from tests.waiting import Pacer, wait_until
 
 STAGE = Stage("A")
 RIG = STAGE.rig("r1")
@@ -239,7 +239,10 @@ def test_jetstream_take_records_lists_exports_and_replays(rig: LiveServer, probe
     got = probe.call(record(t, STAGE, "r1", "t1", seconds=0.6, max_age=60.0, max_bytes=8 << 20))
     assert got.rig == "r1" and not got.recording and 30 <= got.frames <= 90  # ~0.6 s at 100 Hz
     assert [x.name for x in probe.call(list_takes(t, STAGE))] == ["t1"]
-    time.sleep(0.2)  # the stream captures no more once recorded
+    # the stream captures no more once recorded: 20 more of the rig's frames (0.2 s) go by, not into it
+    frames = probe.collect(RIG.subject(Kind.FRAME))
+    seen = len(frames)
+    wait_until(lambda: len(frames) >= seen + 20, 10.0, lambda: f"{len(frames) - seen} of 20 frames after the take")
     assert probe.call(list_takes(t, STAGE))[0].frames == got.frames
     rows = probe.call(export(t, STAGE, "t1", tmp_path / "t1.csv"))
     assert rows == got.frames

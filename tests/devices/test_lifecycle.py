@@ -26,6 +26,7 @@ from riderlive.devices.lifecycle import (
     PortLost,
     Refusal,
     Refused,
+    arm_refusal,
 )
 from riderlive.devices.plug import smoothstep
 from tests.devices.memory_plug import MemoryPlug, rider_frame
@@ -83,6 +84,32 @@ def test_the_names_are_those_of_the_lifecycle_document() -> None:
     into_motion = {(a, b) for a, ts in TRANSITIONS.items() for b in ts if b in ARMED and a not in ARMED}
     assert into_motion == {(a, b) for a in (S.DISARMED, S.PARKED) for b in (S.HOMING, S.SOFT_START)}
     assert TRANSITIONS[S.ESTOP] == {S.DISARMED, S.CONNECTING, S.DISCONNECTED}  # reset (or close) only
+
+
+@pytest.mark.parametrize(
+    ("name", "state", "latched", "reason"),
+    [
+        ("other", DeviceState.DISARMED, False, Refusal.UNKNOWN_DEVICE),
+        ("mem", DeviceState.DISARMED, True, Refusal.ESTOPPED),  # the latch, whatever the state says
+        ("mem", DeviceState.ESTOP, False, Refusal.ESTOPPED),
+        ("mem", DeviceState.FAULT, False, Refusal.FAULTED),
+        ("mem", DeviceState.RUNNING, False, Refusal.ALREADY_ARMED),
+        ("mem", DeviceState.SOFT_START, False, Refusal.ALREADY_ARMED),
+        ("mem", DeviceState.PARKING, False, Refusal.PARKING),
+        ("mem", DeviceState.CONNECTING, False, Refusal.NOT_READY),
+        ("mem", DeviceState.DISCONNECTED, False, Refusal.NOT_READY),
+    ],
+)
+def test_arm_refusal_says_why(name: str, state: DeviceState, latched: bool, reason: Refusal) -> None:
+    refused = arm_refusal("mem", name, state, latched, "servo 2 overheated")
+    assert refused is not None and refused.reason is reason
+    if reason is Refusal.FAULTED:
+        assert "servo 2 overheated" in str(refused)
+
+
+@pytest.mark.parametrize("state", [DeviceState.DISARMED, DeviceState.PARKED])
+def test_arm_refusal_lets_an_arm_by_name_from_rest(state: DeviceState) -> None:
+    assert arm_refusal("mem", "mem", state, False, "none") is None
 
 
 def test_lifecycle_refuses_illegal_transitions_and_records_who_asked() -> None:
@@ -282,9 +309,9 @@ def test_a_port_held_for_good_ends_in_a_setup_timeout_fault_not_connecting_forev
     latch: StopLatch, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Issue 25: a generation stayed ``connecting`` for 100 s behind a held port."""
-    from riderlive.devices import device as device_module
+    from riderlive.devices import setup_run as setup_module
 
-    monkeypatch.setattr(device_module, "SETUP_TIMEOUT_S", 0.1)
+    monkeypatch.setattr(setup_module, "SETUP_TIMEOUT_S", 0.1)
     device, mem = make(latch)
 
     class Held(dict[str, BaseException]):

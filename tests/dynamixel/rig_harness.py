@@ -13,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from riderlive.channels import RIDER
-from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.device import Device
 from riderlive.devices.lifecycle import DeviceState
+from riderlive.devices.status import DeviceStatus
 from riderlive.dynamixel.driver import RigPlug
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.rig import RigConfig, load_rig

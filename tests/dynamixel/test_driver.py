@@ -19,8 +19,9 @@ from typing import Any
 import pytest
 
 from riderlive.channels import RIDER
-from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.device import Device
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
+from riderlive.devices.status import DeviceStatus
 from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import ServoMap, deg_to_pulses, profile_velocity, pulses_to_deg

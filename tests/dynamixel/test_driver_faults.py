@@ -226,9 +226,7 @@ def test_estop_recorded_while_a_goal_write_drains_the_line_stops_that_write(
 
     def drain(quiet_ms: float, max_ms: float) -> int:  # inside the gate, before the goal's bytes
         requester.start()
-        deadline = time.perf_counter() + 2.0
-        while device.latch.requested == device.stops.seen and time.perf_counter() < deadline:
-            time.sleep(0.0001)
+        wait_until(lambda: device.latch.requested != device.stops.seen, 2.0, "the request recorded", poll=0.0001)
         return 0
 
     bus.port.drain = drain
@@ -610,9 +608,11 @@ def test_stalled_ticks_trip_the_watchdog_then_park(timed_buses: Callable[..., Ti
     wait_until(lambda: emu.read_item(2, Item.BUS_WATCHDOG) == -1, 5.0, "the bus watchdog never tripped")
     assert time.perf_counter() - hung >= 0.25  # the servos stopped themselves, at its time (after a goal)...
     assert torque(emu, 2) == 1  # ...but keep their torque on (X-series e-manual)
-    stopped_at = emu.position(2)
-    time.sleep(0.05)
-    assert emu.position(2) == pytest.approx(stopped_at, abs=1.0)
+    with emu.lock:  # stopped and holding: no velocity, not moving, the goal where it stopped
+        servo = emu.servo(2)
+        servo.advance(emu.clock())
+        assert servo.state.velocity == 0.0 and servo.get(Item.PRESENT_VELOCITY) == 0 and servo.get(Item.MOVING) == 0
+        assert servo.get(Item.GOAL_POSITION) == servo.get(Item.PRESENT_POSITION)
     drive(device, 0.5, lambda t: rider, until=lambda s: s.state is not S.RUNNING)
     fault = device.fault
     assert fault is not None and fault.kind is FaultKind.TICK_GAP

@@ -23,21 +23,29 @@ from .conftest import SdkLink, open_sdk
 GOAL, PRESENT = 116, 132
 
 
-def exchange(link: SdkLink, packet: bytes, timeout: float = 0.2) -> list[bytes]:
-    """Write raw bytes on the SDK's port; return the packets that come back within ``timeout``."""
+def exchange(bus: EmulatedBus, link: SdkLink, packet: bytes, timeout: float = 2.0) -> list[bytes]:
+    """Write raw bytes on the SDK's port; return every packet the bus sent back for them.
+
+    Awaits the events, not the clock: the bus has handled the instruction (its packet count,
+    then its lock: a packet's replies are all written before the lock is let go), then the
+    host has read every byte the bus wrote meanwhile."""
     link.port.clearPort()
+    with bus.lock:
+        packets, sent = bus.stats.packets, bus.stats.bytes_out
     link.port.writePort(packet)
-    reader, out = PacketReader(), []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        reader.feed(link.port.readPort(1024))
-        out += [p for p in reader.packets() if isinstance(p, bytes)]
-        if out and not reader.pending:
-            time.sleep(0.002)  # let any chained replies arrive
-            reader.feed(link.port.readPort(1024))
-            out += [p for p in reader.packets() if isinstance(p, bytes)]
-            break
-    return out
+    wait_until(lambda: bus.stats.packets > packets, timeout, "the bus handled the instruction")
+    with bus.lock:
+        expected = bus.stats.bytes_out - sent
+    raw = bytearray()
+
+    def arrived() -> bool:
+        raw.extend(link.port.readPort(1024))
+        return len(raw) >= expected
+
+    wait_until(arrived, timeout, lambda: f"{len(raw)} of the {expected} bytes the bus wrote")
+    reader = PacketReader()
+    reader.feed(bytes(raw))
+    return [p for p in reader.packets() if isinstance(p, bytes)]
 
 
 def s32(value: int) -> int:
@@ -50,7 +58,7 @@ def test_ping_is_byte_exact_both_ways(bus: EmulatedBus, sdk: SdkLink) -> None:
     # The e-manual's example reply: an XM430-W210 (model 1030) with firmware 38.
     bus.write_item(1, Item.MODEL_NUMBER, 1030)
     bus.write_item(1, Item.FIRMWARE_VERSION, 38)
-    replies = exchange(sdk, bytes.fromhex("ff ff fd 00 01 03 00 01 19 4e"))
+    replies = exchange(bus, sdk, bytes.fromhex("ff ff fd 00 01 03 00 01 19 4e"))
     assert [r.hex(" ") for r in replies] == ["ff ff fd 00 01 07 00 55 00 06 04 26 65 5d"]
 
 
@@ -59,7 +67,7 @@ def test_ping_reports_each_model(sdk: SdkLink) -> None:
 
 
 def test_broadcast_ping_answers_in_id_order(bus: EmulatedBus, sdk: SdkLink) -> None:
-    replies = exchange(sdk, encode_instruction(0xFE, Instruction.PING))
+    replies = exchange(bus, sdk, encode_instruction(0xFE, Instruction.PING))
     assert [decode_status(r).id for r in replies] == [1, 2, 3]
     found, result = sdk.ph.broadcastPing(sdk.port)
     assert result == COMM_SUCCESS
@@ -128,11 +136,11 @@ def test_byte_stuffing_through_the_sdk(bus: EmulatedBus, sdk: SdkLink) -> None:
     bus.write_item(1, Item.HOMING_OFFSET, 0)
     packet = encode_instruction(1, Instruction.WRITE, bytes((20, 0)) + b"\xff\xff\xfd\xff")
     assert b"\xff\xff\xfd\xfd" in packet
-    (reply,) = exchange(sdk, packet)
+    (reply,) = exchange(bus, sdk, packet)
     assert decode_status(reply).error == 0
     assert bus.read_item(1, Item.HOMING_OFFSET) == value
     # The emulator stuffs its reply; the SDK unstuffs it.
-    (reply,) = exchange(sdk, encode_instruction(1, Instruction.READ, bytes((20, 0, 4, 0))))
+    (reply,) = exchange(bus, sdk, encode_instruction(1, Instruction.READ, bytes((20, 0, 4, 0))))
     assert b"\xff\xff\xfd\xfd" in reply
     read, result, _ = sdk.ph.read4ByteTxRx(sdk.port, 1, 20)
     assert (result, s32(read)) == (COMM_SUCCESS, value)
@@ -147,19 +155,19 @@ def test_reg_write_waits_for_action(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert sdk.ph.read1ByteTxRx(sdk.port, 2, 65)[0] == 1
     assert sdk.ph.read1ByteTxRx(sdk.port, 2, 69)[0] == 0
     # ACTION with nothing registered is an Instruction error.
-    (reply,) = exchange(sdk, encode_instruction(2, Instruction.ACTION))
+    (reply,) = exchange(bus, sdk, encode_instruction(2, Instruction.ACTION))
     assert decode_status(reply).error == StatusError.INSTRUCTION
 
 
-def test_unknown_instruction_and_bad_crc(sdk: SdkLink) -> None:
-    (reply,) = exchange(sdk, encode_instruction(1, 0x77))
+def test_unknown_instruction_and_bad_crc(bus: EmulatedBus, sdk: SdkLink) -> None:
+    (reply,) = exchange(bus, sdk, encode_instruction(1, 0x77))
     assert decode_status(reply).error == StatusError.INSTRUCTION
     bad = bytearray(encode_instruction(1, Instruction.PING))
     bad[-1] ^= 0x55
-    (reply,) = exchange(sdk, bytes(bad))
+    (reply,) = exchange(bus, sdk, bytes(bad))
     assert decode_status(reply) == decode_status(encode_status(1, StatusError.CRC))
     # Line noise before a packet is skipped.
-    (reply,) = exchange(sdk, b"\x00\xff\x13" + encode_instruction(3, Instruction.PING))
+    (reply,) = exchange(bus, sdk, b"\x00\xff\x13" + encode_instruction(3, Instruction.PING))
     assert decode_status(reply).id == 3
 
 
@@ -185,10 +193,10 @@ def test_factory_reset_options(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert bauds == [6, 1, 6]
 
 
-def test_status_return_level(sdk: SdkLink) -> None:
+def test_status_return_level(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert sdk.ph.write1ByteTxRx(sdk.port, 3, 68, 1) == (COMM_SUCCESS, 0)
     assert sdk.ph.read1ByteTxRx(sdk.port, 3, 68) == (1, COMM_SUCCESS, 0)
-    assert exchange(sdk, encode_instruction(3, Instruction.WRITE, bytes((65, 0, 1))), timeout=0.05) == []
+    assert exchange(bus, sdk, encode_instruction(3, Instruction.WRITE, bytes((65, 0, 1)))) == []
     assert sdk.ph.ping(sdk.port, 3)[1] == COMM_SUCCESS
 
 

@@ -17,13 +17,14 @@ import sys
 import time
 from collections.abc import Callable
 
-from riderlive.platform import link
+from riderlive.platform import link, link_vocab
 from riderlive.platform.firmware_host import FirmwareHost
-from riderlive.platform.link import Arm, EStop, Fault, LinkState, Park, Reason, Reset, Target
+from riderlive.platform.link import Arm, EStop, Park, Reset, Target
+from riderlive.platform.link_vocab import Fault, LinkState, Reason
 from riderlive.platform.serial_link import SerialPlatformLink
 
 PERIOD_S = 0.004
-PATIENT = link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000)
+PATIENT = link.Config(link_vocab.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000)
 """The longest dead-man timeout: for the tests whose subject is not the dead-man, so that a
 test process descheduled for 200 ms on a loaded 2-core machine does not trip it."""
 
@@ -124,7 +125,7 @@ def test_arm_run_estop_reset_rearm_park() -> None:
         assert max(speeds) <= 25000, max(speeds)
         assert port.command(Park()).state == LinkState.PARKING
         parked = port.wait_telemetry(lambda t: LinkState(t.state) is LinkState.PARKED, 5.0)
-        assert parked.commanded == (500,) * 6 and not parked.flags & link.Flag.OUTPUTS_ON
+        assert parked.commanded == (500,) * 6 and not parked.flags & link_vocab.Flag.OUTPUTS_ON
         firmware.wait_event(lambda e: e["event"] == "state" and e["to"] == "parked", 5.0)
         states = firmware.states()
     assert states == [
@@ -134,7 +135,8 @@ def test_arm_run_estop_reset_rearm_park() -> None:
 
 DRIVER = """
 import math, sys, time
-from riderlive.platform.link import Arm, LinkState, Target
+from riderlive.platform.link import Arm, Target
+from riderlive.platform.link_vocab import LinkState
 from riderlive.platform.serial_link import SerialPlatformLink
 port = SerialPlatformLink(sys.argv[1]); port.open(); port.command(Arm("servo8"))
 k = 0
@@ -210,7 +212,9 @@ def run_noisy(rate: float, seed: int, frames: int) -> tuple[list[dict], dict[int
 def test_ten_percent_corrupted_bytes_the_firmware_acts_on_no_false_frame_and_parks() -> None:
     accepted, sent, status = run_noisy(0.10, seed=14, frames=400)
     for event in accepted:  # every frame it took is one we sent, byte for byte
-        assert event["type"] == link.FrameType.TARGET and tuple(event["positions"]) == sent[event["seq"]].positions
+        assert (
+            event["type"] == link_vocab.FrameType.TARGET and tuple(event["positions"]) == sent[event["seq"]].positions
+        )
     errors = sum(v for k, v in status["counters"].items() if k in ("rx_cobs", "rx_short", "rx_oversize", "rx_crc"))
     errors += sum(status["counters"][k] for k in ("rx_version", "rx_type", "rx_length"))
     assert errors >= 25  # most frames of a 10 % line are hit

@@ -10,7 +10,7 @@ import threading
 import tty
 from collections.abc import Callable
 
-from riderlive.platform import link
+from riderlive.platform import link, link_vocab
 from riderlive.platform.link_framing import Deframer, LinkError
 
 
@@ -61,11 +61,11 @@ def reply_hello(version: int = link.LINK_VERSION, seq: int = 10) -> Callable[[Fa
 
     def on_frame(device: FakeDevice, frame: link.Frame) -> None:
         if isinstance(frame.message, link.Hello):
-            reply = link.HelloReply((9, 9), link.Profile.SERVO8, 8, 4000, 200, "fake")
+            reply = link.HelloReply((9, 9), link_vocab.Profile.SERVO8, 8, 4000, 200, "fake")
             device.write(link.encode(reply, seq, version=version))
 
     return on_frame
 
 
-def telemetry(positions: int, state: link.LinkState = link.LinkState.RUNNING) -> link.Telemetry:
+def telemetry(positions: int, state: link_vocab.LinkState = link_vocab.LinkState.RUNNING) -> link.Telemetry:
     return link.Telemetry(state, 0, 0, 0, 0, (positions,) * 8, (positions,) * 8, (0,) * len(link.COUNTERS))

@@ -14,10 +14,11 @@ from dataclasses import dataclass, field, replace
 
 import pytest
 
-from riderlive.devices.device import Device, DeviceStatus
+from riderlive.devices.device import Device
 from riderlive.devices.lifecycle import DeviceState, FaultKind, Refused
+from riderlive.devices.status import DeviceStatus
 from riderlive.horse import ProceduralHorse
-from riderlive.platform import link
+from riderlive.platform import link_vocab
 from riderlive.platform.device import PlatformPlug, describe
 from riderlive.platform.firmware_host import FirmwareHost
 from riderlive.platform.pipeline import PlatformModel
@@ -96,7 +97,9 @@ class Bench:
 
 def accepted_targets(firmware: FirmwareHost, start: int = 0) -> list[list[int]]:
     return [
-        e["positions"] for e in firmware.events[start:] if e["event"] == "rx" and e["type"] == link.FrameType.TARGET
+        e["positions"]
+        for e in firmware.events[start:]
+        if e["event"] == "rx" and e["type"] == link_vocab.FrameType.TARGET
     ]
 
 
@@ -126,10 +129,10 @@ def test_nothing_moves_until_armed_then_it_follows_a_trot_and_stops_as_asked() -
         assert bench.plug.link.telemetry is not None and bench.plug.counters["estop_frames"] == 0
         fw = firmware.status()
         assert fw["state"] == "disarmed" and fw["outputs_on"] == 0 and not accepted_targets(firmware)
-        configs = [e for e in firmware.events if e["event"] == "rx" and e["type"] == link.FrameType.CONFIG]
-        soft_max = [e["value"] for e in configs if e["key"] == link.ConfigKey.SOFT_MAX]
+        configs = [e for e in firmware.events if e["event"] == "rx" and e["type"] == link_vocab.FrameType.CONFIG]
+        soft_max = [e["value"] for e in configs if e["key"] == link_vocab.ConfigKey.SOFT_MAX]
         assert soft_max == [8000] * 6  # the platform file's 80 mm, in counts from retracted
-        assert [e["value"] for e in configs if e["key"] == link.ConfigKey.VELOCITY_LIMIT] == [24000] * 6
+        assert [e["value"] for e in configs if e["key"] == link_vocab.ConfigKey.VELOCITY_LIMIT] == [24000] * 6
 
         # arm: homing (the firmware's first arm), the soft start, running
         assert bench.arm() is S.HOMING
@@ -233,7 +236,7 @@ def test_a_device_speaking_another_version_is_refused_clearly() -> None:
             device.tick(None, time.perf_counter())
         assert device.state is S.FAULT and device.fault is not None and device.fault.kind is FaultKind.MISMATCH
         assert "v2" in device.fault.message and "v1" in device.fault.message
-        assert [f.message.TYPE for f in fake.frames] == [link.FrameType.HELLO]  # nothing else was sent
+        assert [f.message.TYPE for f in fake.frames] == [link_vocab.FrameType.HELLO]  # nothing else was sent
         with pytest.raises(Refused, match="has a fault"):
             device.arm("stewart_compact", "test")
         device.close()

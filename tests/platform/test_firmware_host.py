@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from riderlive.platform import link
+from riderlive.platform import link, link_vocab
 from riderlive.platform.firmware_host import FirmwareHost
-from riderlive.platform.link import Fault, LinkState, Reason
+from riderlive.platform.link_vocab import Fault, LinkState, Reason
 from riderlive.platform.serial_link import CommandRefused, SerialPlatformLink
 from tests.waiting import Pacer
 
@@ -45,18 +45,18 @@ def test_cli_runs_the_host_build_and_prints_its_pty() -> None:
 def test_the_estop_input_latches_and_holds_reset_off() -> None:
     with FirmwareHost("servo8") as firmware, SerialPlatformLink(firmware.port) as port:
         port.open()
-        port.command(link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))  # not the dead-man's test
+        port.command(link.Config(link_vocab.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))  # not the dead-man's test
         port.command(link.Arm("servo8"))
         stream(port, LinkState.RUNNING, [2000] * 8, 5.0)
         firmware.send("estop on")
         seen = port.wait_telemetry(lambda t: LinkState(t.state) is LinkState.ESTOP, 2.0)
-        assert seen.faults == Fault.ESTOP_INPUT and seen.flags & link.Flag.ESTOP_INPUT
-        assert not seen.flags & link.Flag.OUTPUTS_ON
+        assert seen.faults == Fault.ESTOP_INPUT and seen.flags & link_vocab.Flag.ESTOP_INPUT
+        assert not seen.flags & link_vocab.Flag.OUTPUTS_ON
         with pytest.raises(CommandRefused) as refused:
             port.command(link.Reset())
         assert refused.value.reason is Reason.ESTOP_INPUT
         firmware.send("estop off")
-        port.wait_telemetry(lambda t: not t.flags & link.Flag.ESTOP_INPUT, 2.0)
+        port.wait_telemetry(lambda t: not t.flags & link_vocab.Flag.ESTOP_INPUT, 2.0)
         assert port.command(link.Reset()).state == LinkState.DISARMED
         assert port.command(link.Arm("servo8")).state == LinkState.SOFT_START
 
@@ -64,11 +64,11 @@ def test_the_estop_input_latches_and_holds_reset_off() -> None:
 def test_a_stuck_actuator_is_a_following_error() -> None:
     with FirmwareHost("platform6") as firmware, SerialPlatformLink(firmware.port) as port:
         port.open()
-        port.command(link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))
+        port.command(link.Config(link_vocab.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))
         port.command(link.Arm("platform6"))
         stream(port, LinkState.RUNNING, [7500] * 6, 10.0)
         firmware.send("stick 3")
         faulted = stream(port, LinkState.FAULT, [11000] * 6, 10.0)
-        assert faulted.faults == Fault.FOLLOWING_ERROR and not faulted.flags & link.Flag.OUTPUTS_ON
+        assert faulted.faults == Fault.FOLLOWING_ERROR and not faulted.flags & link_vocab.Flag.OUTPUTS_ON
         assert abs(faulted.measured[3] - 7500) < 50  # it never moved
         assert "parking" in firmware.states()

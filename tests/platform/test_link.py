@@ -10,15 +10,14 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from riderlive.platform import link
+from riderlive.platform import link_vocab as vocab
 from riderlive.platform.link import (
     COUNTERS,
     Arm,
     Config,
-    FrameType,
     Hello,
     HelloReply,
     Home,
-    LinkState,
     Status,
     Target,
     Telemetry,
@@ -41,6 +40,7 @@ from riderlive.platform.link_framing import (
     cobs_encode,
     crc16,
 )
+from riderlive.platform.link_vocab import FrameType, LinkState
 
 
 def crc16_bitwise(data: bytes) -> int:
@@ -280,30 +280,32 @@ def test_state_labels_are_the_lifecycle_names() -> None:
 
 
 def test_config_ranges_edges_and_refusals() -> None:
-    velocity = link.ConfigKey.VELOCITY_LIMIT
-    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 13000) is None
-    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 25000) is None
-    assert link.config_refusal(link.Profile.PLATFORM6, velocity, 12999) == (
+    velocity = vocab.ConfigKey.VELOCITY_LIMIT
+    assert vocab.config_refusal(vocab.Profile.PLATFORM6, velocity, 13000) is None
+    assert vocab.config_refusal(vocab.Profile.PLATFORM6, velocity, 25000) is None
+    assert vocab.config_refusal(vocab.Profile.PLATFORM6, velocity, 12999) == (
         "VELOCITY_LIMIT 12999 is outside 13000..25000 (firmware profile platform6)"
     )
-    assert link.config_refusal(link.Profile.SERVO8, link.ConfigKey.ACCELERATION_LIMIT, 300001) is not None
-    assert link.config_refusal(link.Profile.SERVO8, link.ConfigKey.SOFT_MIN, 1) is not None  # park (0) outside
-    assert link.config_refusal(99, velocity, 1) is None  # a profile this host does not know: the device decides
-    for ranges in link.CONFIG_RANGES.values():
-        assert set(ranges) == set(link.ConfigKey) and all(lo <= hi for lo, hi in ranges.values())
+    assert vocab.config_refusal(vocab.Profile.SERVO8, vocab.ConfigKey.ACCELERATION_LIMIT, 300001) is not None
+    assert vocab.config_refusal(vocab.Profile.SERVO8, vocab.ConfigKey.SOFT_MIN, 1) is not None  # park (0) outside
+    assert vocab.config_refusal(99, velocity, 1) is None  # a profile this host does not know: the device decides
+    for ranges in vocab.CONFIG_RANGES.values():
+        assert set(ranges) == set(vocab.ConfigKey) and all(lo <= hi for lo, hi in ranges.values())
 
 
 def test_the_slowest_accepted_limits_park_within_the_bound() -> None:
     """Hand-computed: 14500 counts (out range 0..15000 from park 500) at 25 % of 13000 counts/s
     with 125000 counts/s^2, from full speed: 0.104 + 4.4615 + 0.026 = 4.59 s."""
-    assert link.firmware_park_s(14500, 13000, 125000) == pytest.approx(0.104 + 14500 / 3250 + 3250 / 125000)
-    assert link.firmware_park_s(14500, 13000, 125000) == pytest.approx(4.5915, abs=1e-4)
-    assert link.firmware_park_s(1.0, 100.0, 1.0) == pytest.approx(100.0 + 2.0)  # short: a triangle
-    worst = {link.Profile.PLATFORM6: 14500, link.Profile.PLATFORM3: 14500, link.Profile.SERVO8: 9000}
+    assert vocab.firmware_park_s(14500, 13000, 125000) == pytest.approx(0.104 + 14500 / 3250 + 3250 / 125000)
+    assert vocab.firmware_park_s(14500, 13000, 125000) == pytest.approx(4.5915, abs=1e-4)
+    assert vocab.firmware_park_s(1.0, 100.0, 1.0) == pytest.approx(100.0 + 2.0)  # short: a triangle
+    worst = {vocab.Profile.PLATFORM6: 14500, vocab.Profile.PLATFORM3: 14500, vocab.Profile.SERVO8: 9000}
     for profile, distance in worst.items():
-        ranges = link.CONFIG_RANGES[profile]
-        for v in ranges[link.ConfigKey.VELOCITY_LIMIT]:
-            for a in ranges[link.ConfigKey.ACCELERATION_LIMIT]:
-                assert link.firmware_park_s(distance, v, a) <= link.PARK_BOUND_S - 0.2, (profile, v, a)
-        slower = ranges[link.ConfigKey.VELOCITY_LIMIT][0] * 0.8  # the floor is not far above what the bound needs
-        assert link.firmware_park_s(distance, slower, ranges[link.ConfigKey.ACCELERATION_LIMIT][0]) > link.PARK_BOUND_S
+        ranges = vocab.CONFIG_RANGES[profile]
+        for v in ranges[vocab.ConfigKey.VELOCITY_LIMIT]:
+            for a in ranges[vocab.ConfigKey.ACCELERATION_LIMIT]:
+                assert vocab.firmware_park_s(distance, v, a) <= vocab.PARK_BOUND_S - 0.2, (profile, v, a)
+        slower = ranges[vocab.ConfigKey.VELOCITY_LIMIT][0] * 0.8  # the floor is not far above what the bound needs
+        assert (
+            vocab.firmware_park_s(distance, slower, ranges[vocab.ConfigKey.ACCELERATION_LIMIT][0]) > vocab.PARK_BOUND_S
+        )

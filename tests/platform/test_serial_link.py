@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from riderlive.platform import link
+from riderlive.platform import link, link_vocab
 from riderlive.platform.firmware_host import FirmwareHost
-from riderlive.platform.link import LinkState, Reason
+from riderlive.platform.link_vocab import LinkState, Reason
 from riderlive.platform.serial_link import (
     CommandRefused,
     Health,
@@ -22,7 +22,7 @@ from tests.platform.fake_device import FakeDevice, reply_hello, telemetry
 def test_handshake_commands_and_telemetry_with_the_firmware() -> None:
     with FirmwareHost("platform6") as firmware, SerialPlatformLink(firmware.port) as port:
         hello = port.open()
-        assert hello.device == "platform6" and hello.actuators == 6 and hello.profile == link.Profile.PLATFORM6
+        assert hello.device == "platform6" and hello.actuators == 6 and hello.profile == link_vocab.Profile.PLATFORM6
         assert hello.period_us == 4000 and hello.heartbeat_ms == 200
         assert port.heartbeat_s == pytest.approx(0.05)
         with pytest.raises(CommandRefused) as refused:
@@ -120,7 +120,7 @@ def test_reconnecting_parks_a_moving_device_and_never_rearms() -> None:
     with FirmwareHost("servo8") as firmware, SerialPlatformLink(firmware.port) as port:
         port.open()
         # the longest dead-man: a test process descheduled for 200 ms must not trip it here
-        port.command(link.Config(link.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))
+        port.command(link.Config(link_vocab.ConfigKey.HEARTBEAT_TIMEOUT_MS, 0, 1000))
         port.command(link.Arm("servo8"))
         flood = 0
         while port.telemetry is None or LinkState(port.telemetry.state) is not LinkState.RUNNING:

@@ -15,9 +15,10 @@ from riderlive.channels import HORSE_NAMES, RIDER_NAMES, SADDLE_NAMES
 from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
 from riderlive.realtime.record import LayoutMismatch, RecordLayout, RecordValues
 from riderlive.realtime.saddle_input import GAITS, LOCKS
-from riderlive.service.codecs import Subscription, encode_frame, saddle_estimate
+from riderlive.service.codecs import Subscription
 from riderlive.service.config import TimecodeSection
 from riderlive.service.poses import RecordPoses
+from riderlive.service.rider_frames import encode_frame, saddle_estimate
 from riderlive.service.timecodes import host_timecode
 
 # The offsets every reader sliced by hand before the layout (``realtime/layout.py`` on main,

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 
 from riderlive.channels import HORSE, HORSE_INDEX, Kind
 from riderlive.horse.script import gait_script
-from riderlive.saddle.estimator import Lock, Model, State, estimate, step
+from riderlive.saddle.estimate import estimate
+from riderlive.saddle.estimator import Lock, Model, State, step
 from riderlive.saddle.rebuild import horse_frame, rebuild
 from riderlive.saddle.synthetic import IMU_STRAP, record
 from riderlive.saddle.trial import RIDER

@@ -96,7 +96,7 @@ def test_rate_changes_from_1000_to_10_hz_keep_the_lock() -> None:
 def test_the_estimate_is_data_the_service_can_publish() -> None:
     import orjson
 
-    from riderlive.saddle.estimator import estimate
+    from riderlive.saddle.estimate import estimate
 
     run = GaitCase.draw("canter", seed=3).run(4.0, IMU_STRAP, MODEL)
     published = estimate(run.rebuilt.final).as_dict()

@@ -15,16 +15,8 @@ from hypothesis import strategies as st
 from riderlive.channels import HORSE_INDEX, HORSE_NAMES, RIDER_NAMES
 from riderlive.realtime import layout as L
 from riderlive.realtime.record import RecordLayout
-from riderlive.service.codecs import (
-    BINARY_HEADER,
-    BadFrame,
-    Subscription,
-    decode_binary_frame,
-    decode_horse_frame,
-    decode_subscription,
-    encode_frame,
-    parse_message,
-)
+from riderlive.service.codecs import BadFrame, Subscription, decode_horse_frame, decode_subscription, parse_message
+from riderlive.service.rider_frames import BINARY_HEADER, decode_binary_frame, encode_frame
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 

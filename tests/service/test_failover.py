@@ -25,8 +25,8 @@ from riderlive.realtime.record import RecordLayout
 from riderlive.rules import load_preset
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.service.config import ServiceConfig
-from riderlive.service.runtime import make_setup
 from riderlive.service.supervisor import TickSupervisor
+from riderlive.service.tick_setup import make_setup
 from tests.waiting import Pacer
 
 RATE = 100.0

@@ -15,8 +15,9 @@ from starlette.websockets import WebSocket
 from riderlive.channels import RIDER_NAMES, RIDER_PART_NAMES
 from riderlive.devices.latch import StopSource
 from riderlive.realtime.record import RecordLayout
-from riderlive.service.codecs import Subscription, decode_binary_frame
+from riderlive.service.codecs import Subscription
 from riderlive.service.publish import CATCH_UP, Hub, Subscriber
+from riderlive.service.rider_frames import decode_binary_frame
 from riderlive.service.wsprotocol import wire_frame
 from tests.service.fakes import FakeService
 

@@ -12,7 +12,7 @@ from riderlive.bake import bake_table
 from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.framefile import FrameTable
 from riderlive.rules import RiderModel, load_preset
-from riderlive.service.codecs import decode_binary_frame
+from riderlive.service.rider_frames import decode_binary_frame
 from tests.service.live_server import LiveServer
 
 

@@ -16,17 +16,8 @@ from riderlive.channels import SADDLE_NAMES
 from riderlive.realtime.record import RecordLayout
 from riderlive.realtime.saddle_input import GAITS, LOCKS
 from riderlive.service.arbiter import HORSE_INPUT, SADDLE_INPUT, Producer
-from riderlive.service.codecs import (
-    BINARY_HEADER,
-    SADDLE_HEADER,
-    BadFrame,
-    Subscription,
-    channel_order,
-    decode_binary_frame,
-    decode_frame,
-    decode_subscription,
-    encode_frame,
-)
+from riderlive.service.codecs import BadFrame, Subscription, channel_order, decode_frame, decode_subscription
+from riderlive.service.rider_frames import BINARY_HEADER, SADDLE_HEADER, decode_binary_frame, encode_frame
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 SPEC = SADDLE_INPUT

@@ -22,7 +22,7 @@ from riderlive.rules import RiderModel, load_preset
 from riderlive.saddle import Model, saddle_from_horse, saddle_matrix
 from riderlive.saddle.synthetic import IMU_STRAP, record
 from riderlive.saddle.trial import COMPARED, GaitCase
-from riderlive.service.codecs import decode_binary_frame
+from riderlive.service.rider_frames import decode_binary_frame
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower, Producer, Stream, constant
 from tests.waiting import wait_until

@@ -10,15 +10,8 @@ from websockets.sync.client import connect
 
 from riderlive.channels import RIDER_NAMES
 from riderlive.realtime.record import RecordLayout
-from riderlive.service.codecs import (
-    BINARY_HEADER,
-    BONES_HEADER,
-    BadFrame,
-    Subscription,
-    decode_binary_frame,
-    decode_subscription,
-    encode_frame,
-)
+from riderlive.service.codecs import BadFrame, Subscription, decode_subscription
+from riderlive.service.rider_frames import BINARY_HEADER, BONES_HEADER, decode_binary_frame, encode_frame
 from riderlive.skeleton import bone_quaternions, hello_skeletons, rider_rig
 from tests.service.live_server import LiveServer
 from tests.service.test_publish import frames

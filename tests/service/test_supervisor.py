@@ -17,8 +17,8 @@ from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink
 from riderlive.rules import load_preset
 from riderlive.service.config import ServiceConfig
-from riderlive.service.runtime import make_setup
 from riderlive.service.supervisor import TickSupervisor
+from riderlive.service.tick_setup import make_setup
 from tests.waiting import await_until
 
 CONFIG = ServiceConfig.model_validate({"tick": {"rate": 100.0, "realtime_priority": False, "restart_backoff": 0.05}})

@@ -169,7 +169,9 @@ def test_replay_from_tc_starts_within_one_tick(server: LiveServer) -> None:
             # the take's rows are 1/120 s apart: the replay starts on the row nearest the label
             assert abs(first["source_t"] - offset) <= 1 / 120, (first["source_t"], offset)
             server.request("PUT", "/api/source", json={"kind": "live"})
-            time.sleep(0.1)  # the next replay's first frame must come after this one's last
+            # the replay's end in the stream (its producer gone, the input no longer drives):
+            # the next replay's first frame comes after this one's last
+            follower.wait_for(lambda f: f["driver"] != "input", timeout=5.0)
     finally:
         follower.close()
     for bad, status in (("09:00:00;00", 400), ("10:00:01:00", 400), ("10:00", 422)):
@@ -198,7 +200,7 @@ def test_ws_rider_frames_carry_the_timecode_when_asked(server: LiveServer) -> No
         labels = [tc.parse(f["tc"], RATE) for f in frames]
         assert all(0 <= tc.frames_between(b, a, RATE) <= 1 for a, b in zip(labels, labels[1:]))  # 200 Hz ticks
         ws.send(json.dumps({"type": "subscribe", "timecode": True, "encoding": "binary"}))
-        from riderlive.service.codecs import decode_binary_frame
+        from riderlive.service.rider_frames import decode_binary_frame
 
         while True:
             message = ws.recv(timeout=5)
