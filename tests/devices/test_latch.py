@@ -209,3 +209,18 @@ def test_a_write_stamped_after_the_request_s_time_is_refused(
     thread.join(10)
     assert requested and outcome[0][1] > requested[0]  # began after the request's time
     assert outcome[0][0] == "refused"
+
+
+def test_the_latch_s_slots_are_typed_each_naming_its_writer(latch: StopLatch) -> None:
+    """The segment's slots by attribute (devices/shared.py's Slot), never by string key."""
+    slots = latch_module._LatchSlots
+    assert slots.slot_names() == ("requested", "latched", "requested_at", "source", "lock_timeouts")
+    assert all(s.writer and s.doc for s in slots.slots())
+    latch.request(StopSource.NATS)
+    latch.request(StopSource.SIGNAL)
+    assert latch.requested == 2 and type(latch.requested) is int and latch.source is StopSource.SIGNAL
+    attached = StopLatch(latch.name)
+    try:
+        assert attached.requested == 2 and attached.latched and attached.requested_at == latch.requested_at
+    finally:
+        attached.close()

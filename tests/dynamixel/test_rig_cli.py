@@ -151,7 +151,7 @@ def test_an_orphan_guardian_gives_up_on_a_silent_bus(
     latch, board = StopLatch(), SafetyBoard()
     dead = subprocess.Popen(["true"])
     dead.wait()
-    board["tick_pid"], board["tick_generation"] = float(dead.pid), 1.0
+    board.tick_pid, board.tick_generation = dead.pid, 1
     board.publish(0, DeviceState.DISARMED, [0.0] * len(rig.servos))
     for servo_id in (1, 2, 3):
         emu.apply(parse_fault(f"vanish:{servo_id}"))
