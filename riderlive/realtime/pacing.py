@@ -9,6 +9,7 @@ are skipped (counted) rather than run back to back.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import select
@@ -123,3 +124,10 @@ def try_realtime_priority(priority: int = 50, reset_on_fork: bool = False, who: 
         log.warning("SCHED_FIFO failed (%s); %s runs at normal priority", exc, who)
         return "failed"
     return "fifo"
+
+
+def normal_priority() -> None:
+    """This thread back to normal scheduling (after :func:`try_realtime_priority`)."""
+    if hasattr(os, "sched_setscheduler"):
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

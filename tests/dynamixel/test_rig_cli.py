@@ -16,9 +16,9 @@ import pytest
 from riderlive.cli import main
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import load_rig, pulses_to_deg
-from riderlive.dynamixel.rig_cli import EXIT_ESTOP, drive
 from riderlive.dynamixel.tables import Instruction, Item
-from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups, short_rig
+from riderlive.rig_drive import EXIT_ESTOP, drive
+from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
 from tests.service.live_server import ROOT
 from tests.waiting import wait_until
 
@@ -45,17 +45,19 @@ def goal_writes(emu: EmulatedBus) -> list[tuple[float, bytes]]:
 
 
 def test_drive_without_arm_moves_nothing_with_arm_runs_the_lifecycle(
-    bus_factory: Callable[..., EmulatedBus], capsys: pytest.CaptureFixture[str]
+    bus_factory: Callable[..., EmulatedBus], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    rig = short_rig("bench3")
+    """In this process (the service's tick loop in pytest's main thread), no guardian."""
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
     emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    assert drive(rig.with_port(emu.port), 1.0, "walk") == 0
+    assert drive(str(path), emu.port, 1.0, "walk", guardian=False) == 0
     out = capsys.readouterr().out
     assert "connecting -> disarmed" in out and "Nothing moves without --arm" in out
     emu.settle()
     assert goal_writes(emu) == [] and all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
 
-    assert drive(rig.with_port(emu.port), 1.0, "walk", arm=True) == 0
+    assert drive(str(path), emu.port, 1.0, "walk", arm=True, guardian=False) == 0
     out = capsys.readouterr().out
     for step in ("disarmed -> soft_start: armed (by cli --arm)", "soft_start -> running", "running -> parking"):
         assert step in out
