@@ -138,6 +138,7 @@ class Operator:
         self._armed_at = 0.0
         self._estop_at: float | None = None
         self._guardian_lost: str | None = None
+        self._losses = 0
         self._watching: tuple[int | None, int | None] = (None, None)
         self._next_print = 0.0
         self.start = time.perf_counter()
@@ -244,14 +245,15 @@ class Operator:
             self.say(f"guardian {watching[0]} watches; standby {watching[1] or 'none'}")
 
     def _say_guardian_watch(self, guardian: dict[str, Any] | None) -> None:
-        """The tick's own watch of the guardian: a loss (it parks the rig), a guardian again."""
-        lost = None if guardian is None else guardian.get("lost")
-        if lost != self._guardian_lost:
-            if lost is not None:
-                self.say(f"the tick lost its guardian: {lost} (it parks the rig; arming is refused)")
-            else:
-                self.say("the tick sees a guardian watching again (nothing re-arms)")
-            self._guardian_lost = lost or self._guardian_lost
+        """The tick's own watch of the guardian: each loss it counts (it parks the rig; a
+        guardian replaced by its standby between two looks counts too, though none is missing)."""
+        if guardian is None:
+            return
+        lost = guardian.get("lost")
+        if guardian["losses"] > self._losses:
+            self._losses = guardian["losses"]
+            self._guardian_lost = lost or "the guardian that watched was replaced by its standby"
+            self.say(f"the tick lost its guardian: {self._guardian_lost} (it parks the rig; arming is refused)")
 
     def _summary(self, now: float) -> str:
         rig = self.rig

@@ -1,8 +1,12 @@
 """``riderlive rig``: checks a map, prints its wire budget, connects and drives it on the
-emulator only when armed; Ctrl-C is an e-stop; a killed driver is parked by its guardian."""
+emulator (the service's tick loop, ``riderlive/rig_drive.py``) only when armed; Ctrl-C is an
+e-stop; a killed driver is parked by its guardian, a killed guardian replaced by its standby
+(the tick parks the rig), a hung guardian parks the rig too."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import signal
 import subprocess
@@ -14,10 +18,12 @@ from pathlib import Path
 import pytest
 
 from riderlive.cli import main
+from riderlive.devices.board import GUARDIAN_HANG_S
+from riderlive.devices.shared import pid_alive
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import load_rig, pulses_to_deg
 from riderlive.dynamixel.tables import Instruction, Item
-from riderlive.rig_drive import EXIT_ESTOP, drive
+from riderlive.rig_drive import EXIT_ESTOP, EXIT_FAULT, drive
 from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
 from tests.service.live_server import ROOT
 from tests.waiting import wait_until
@@ -77,7 +83,9 @@ def rig_file(tmp_path: Path) -> Path:
     return path
 
 
-def start_cli(path: Path, port: str) -> subprocess.Popen[str]:
+def start_cli(path: Path, port: str, seen: list[str] | None = None) -> subprocess.Popen[str]:
+    """``rig PATH --port PORT --drive 60 --arm`` in its own process, once its rig runs (the
+    lines it printed until then into ``seen``)."""
     cli = subprocess.Popen(
         [sys.executable, "-m", "riderlive", "rig", str(path), "--port", port, "--drive", "60", "--arm"],
         stdout=subprocess.PIPE,
@@ -87,6 +95,8 @@ def start_cli(path: Path, port: str) -> subprocess.Popen[str]:
     )
     assert cli.stdout is not None
     for line in cli.stdout:
+        if seen is not None:
+            seen.append(line)
         if "soft_start -> running" in line:
             return cli
     raise AssertionError(f"the CLI never ran: exit {cli.wait(10)}")
@@ -172,3 +182,129 @@ def test_an_orphan_guardian_gives_up_on_a_silent_bus(
     assert code == 0
     assert re.search(r"outputs-off not confirmed in [\d.]+ s of read-backs; giving up", err), err
     assert 1.0 <= elapsed < 20.0
+
+
+def watchers(lines: list[str]) -> tuple[int, int]:
+    """The guardian and standby pids the CLI said last (``guardian 12 watches; standby 34``)."""
+    found = [m for line in lines if (m := re.search(r"guardian (\d+) watches; standby (\d+)", line))]
+    assert found, "".join(lines)
+    return int(found[-1].group(1)), int(found[-1].group(2))
+
+
+def all_torque_off(emu: EmulatedBus) -> bool:
+    return all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
+
+
+def reap(*pids: int) -> None:
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def test_a_killed_guardian_is_replaced_by_its_standby_and_the_tick_parks_the_rig(
+    bus_factory: Callable[..., EmulatedBus], tmp_path: Path
+) -> None:
+    """The service's rule, in ``rig --drive``: the guardian that watched is gone (SIGKILL), its
+    standby takes over and a new standby follows (the rig keeps its watch); the tick parks
+    the armed rig itself (category 1), the CLI says why and exits 1; torque off, read back."""
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    seen: list[str] = []
+    cli = start_cli(path, emu.port, seen)
+    guardian, standby = watchers(seen)
+    try:
+        running = len(goal_writes(emu))
+        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+        killed = time.perf_counter()
+        os.kill(guardian, signal.SIGKILL)
+        out, _ = cli.communicate(timeout=30)
+        lines = seen + out.splitlines(keepends=True)
+        assert cli.returncode == EXIT_FAULT, out
+        assert "the tick lost its guardian" in out and "running -> parking" in out, out
+        assert re.search(r"running -> parking: disarmed \(by tick: the guardian", out), out
+        assert "parking -> parked" in out and "parked by the tick" in out and "closed; fault: none" in out
+        now_watching, new_standby = watchers(lines)
+        assert now_watching == standby and new_standby not in (0, guardian, standby), "the watch goes on"
+        emu.settle()
+        goals = [t for t, _ in goal_writes(emu) if t > killed]
+        off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > killed]
+        assert off and goals and goals[-1] < off[0], "eased to park, then torque off, no goal after"
+        assert off[0] - killed >= rig.bus.park_ramp_s  # category 1: a park, not a drop
+        assert all_torque_off(emu)
+        head = rig.servos["head"]
+        assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
+        wait_until(lambda: not pid_alive(standby) and not pid_alive(new_standby), 10.0, "the guardians stayed")
+    finally:
+        reap(guardian, standby)
+        if cli.poll() is None:
+            cli.kill()
+            cli.communicate(timeout=10)
+
+
+def test_a_hung_driver_whose_guardian_is_killed_is_parked_by_the_standby(
+    bus_factory: Callable[..., EmulatedBus], tmp_path: Path
+) -> None:
+    """Tick (the CLI, SIGSTOP) and guardian (SIGKILL) both gone: without a standby nobody
+    parks (issue 25); with it, the standby becomes the guardian, finds the tick hung, kills
+    it and parks the rig from its last published pose; torque off read back."""
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    seen: list[str] = []
+    cli = start_cli(path, emu.port, seen)
+    guardian, standby = watchers(seen)
+    try:
+        running = len(goal_writes(emu))
+        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+        cli.send_signal(signal.SIGSTOP)
+        os.kill(guardian, signal.SIGKILL)
+        hung = time.perf_counter()
+        assert cli.wait(timeout=20) == -signal.SIGKILL, "the standby kills the hung driver"
+        wait_until(lambda: all_torque_off(emu), 10.0, "the standby never turned torque off", poll=0.02)
+        emu.settle()
+        goals = [t for t, _ in goal_writes(emu) if t > hung]
+        off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > hung]
+        assert goals and off and goals[-1] < off[0] and off[0] - goals[0] >= rig.bus.park_ramp_s
+        assert goals[0] - hung < 2.0, "the standby's first park goal"
+        head = rig.servos["head"]
+        assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
+        wait_until(lambda: not pid_alive(standby), 20.0, "the standby stayed after its stop")
+    finally:
+        reap(guardian, standby)
+        if cli.poll() is None:
+            cli.kill()
+        cli.communicate(timeout=10)
+
+
+def test_a_hung_guardian_and_standby_make_the_tick_park_the_rig(
+    bus_factory: Callable[..., EmulatedBus], tmp_path: Path
+) -> None:
+    """The tick's guardian watch: no guardian beats (both SIGSTOP) -> after GUARDIAN_HANG_S the
+    tick parks the rig itself, says why, and the CLI exits 1; torque off read back."""
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    seen: list[str] = []
+    cli = start_cli(path, emu.port, seen)
+    guardian, standby = watchers(seen)
+    try:
+        running = len(goal_writes(emu))
+        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+        os.kill(standby, signal.SIGSTOP)  # first: it would kill a hung guardian and take over
+        os.kill(guardian, signal.SIGSTOP)
+        stopped = time.perf_counter()
+        out, _ = cli.communicate(timeout=40)
+        assert cli.returncode == EXIT_FAULT, out
+        hung = rf"the tick lost its guardian: the guardian {guardian} has not beaten for \d+ ms \(hung\)"
+        assert re.search(hung, out), out
+        assert "parking -> parked" in out and "parked by the tick" in out, out
+        emu.settle()
+        off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > stopped]
+        assert off and off[0] - stopped >= GUARDIAN_HANG_S + rig.bus.park_ramp_s
+        assert all_torque_off(emu)
+    finally:
+        reap(guardian, standby)
+        if cli.poll() is None:
+            cli.kill()
+            cli.communicate(timeout=10)
