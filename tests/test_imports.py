@@ -27,7 +27,7 @@ LAYERS: dict[str, int] = {
     # 5: the web process and what it hosts
     **dict.fromkeys(("service", "bus", "client"), 5),
     # 6: the command line
-    **dict.fromkeys(("cli", "__main__", "rig_drive"), 6),
+    **dict.fromkeys(("cli", "__main__", "rig_drive", "rig_operator"), 6),
 }
 """Top-level module or package of riderlive -> its layer (an import may only go to the same or a lower one)."""
 

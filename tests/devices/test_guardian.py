@@ -28,7 +28,8 @@ from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState
 from riderlive.devices.registry import DeviceSpec
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import RigConfig, load_rig, pulses_to_deg
+from riderlive.dynamixel.rig import RigConfig, load_rig
+from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import Instruction, Item
 from riderlive.service.stall import read_sched
 from tests.dynamixel.conftest import bus_factory, fast_switching  # noqa: F401  (fixtures)

@@ -21,9 +21,11 @@ from riderlive.cli import main
 from riderlive.devices.board import GUARDIAN_HANG_S
 from riderlive.devices.shared import pid_alive
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import load_rig, pulses_to_deg
+from riderlive.dynamixel.rig import load_rig
+from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import Instruction, Item
-from riderlive.rig_drive import EXIT_ESTOP, EXIT_FAULT, drive
+from riderlive.rig_drive import drive
+from riderlive.rig_operator import EXIT_ESTOP, EXIT_FAULT
 from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
 from tests.service.live_server import ROOT
 from tests.waiting import wait_until
