@@ -1,8 +1,9 @@
 """The tick process's entry points: a cold start, a spare's prepared loop, serving it.
 
-The edge of the tick: signals (SIGTERM is an e-stop, SIGINT is the web process's to
-decide), real-time priority, the frozen collector, the devices connected; the loop itself
-is :class:`~riderlive.realtime.tick.TickLoop`.
+The edge of the tick: signals (:class:`Signals`: in the spawned tick SIGTERM is an e-stop
+and SIGINT the web process's to decide; in ``rig --drive``, which runs this loop in its own
+process, both are an e-stop), real-time priority, the frozen collector, the devices
+connected; the loop itself is :class:`~riderlive.realtime.tick.TickLoop`.
 """
 
 from __future__ import annotations
