@@ -40,14 +40,15 @@ TARGETS_MS = {"estop": (None, 10 + 21), "kill": (200, 700), "guardian": (200, 80
 """Case -> (first park goal, torque off) targets in ms from the signal."""
 
 
-def start(path: Path, port: str) -> tuple[subprocess.Popen[str], int, int]:
-    """The CLI, once its rig runs; with its guardian's and standby's pids."""
+def start(path: Path, port: str, root: Path = ROOT) -> tuple[subprocess.Popen[str], int, int]:
+    """The CLI of the checkout ``root``, once its rig runs; with its guardian's and standby's pids
+    (0: it said none)."""
     cli = subprocess.Popen(
         [sys.executable, "-m", "riderlive", "rig", str(path), "--port", port, "--drive", "120", "--arm"],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
-        env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"},
+        env={**os.environ, "PYTHONPATH": str(root), "PYTHONUNBUFFERED": "1"},
     )
     assert cli.stdout is not None
     pids = (0, 0)
@@ -59,8 +60,8 @@ def start(path: Path, port: str) -> tuple[subprocess.Popen[str], int, int]:
     raise RuntimeError(f"the CLI never ran: exit {cli.wait(10)}")
 
 
-def trial(emu: Emulator, path: Path, case: str) -> dict[str, float]:
-    cli, guardian, standby = start(path, emu.port)
+def trial(emu: Emulator, path: Path, case: str, root: Path = ROOT) -> dict[str, float]:
+    cli, guardian, standby = start(path, emu.port, root)
     time.sleep(0.5)  # half a second of running goals before the signal (a bench, not a test)
     emu.ask("arrivals")
     try:
@@ -100,15 +101,17 @@ def main() -> int:
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--cases", nargs="+", default=list(TARGETS_MS))
     parser.add_argument("--idle", action="store_true", help="do not keep both cores busy")
+    parser.add_argument("--root", type=Path, default=ROOT, help="the checkout whose CLI runs (a baseline: main's)")
     args = parser.parse_args()
     ok = True
     with tempfile.TemporaryDirectory() as tmp, other_core_busy(7200, not args.idle, burners=2):
         rig = bench_rig(Path(tmp) / "bench3.toml", 100.0, park_s=PARK_S, soft_start_s=0.3, bus_watchdog_ms=600)
         emu = Emulator(rig, priority=60)
         try:
-            print(f"host: {'quiet' if args.idle else 'loaded (two burners)'}; load {os.getloadavg()[0]:.1f}")
+            host = "quiet" if args.idle else "loaded (two burners)"
+            print(f"{args.root}: host {host}; load {os.getloadavg()[0]:.1f}")
             for case in args.cases:
-                results = [trial(emu, Path(tmp) / "bench3.toml", case) for _ in range(args.trials)]
+                results = [trial(emu, Path(tmp) / "bench3.toml", case, args.root) for _ in range(args.trials)]
                 goal_target, off_target = TARGETS_MS[case]
                 off = [r["torque_off"] * 1000 for r in results]
                 after = sum(int(r["after_off"]) for r in results if r["after_off"] == r["after_off"])
