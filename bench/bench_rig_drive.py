@@ -49,6 +49,7 @@ def start(path: Path, port: str, root: Path = ROOT) -> tuple[subprocess.Popen[st
         stderr=subprocess.STDOUT,
         text=True,
         env={**os.environ, "PYTHONPATH": str(root), "PYTHONUNBUFFERED": "1"},
+        cwd=root,  # `-m` puts the working directory first on sys.path
     )
     assert cli.stdout is not None
     pids = (0, 0)
