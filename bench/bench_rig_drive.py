@@ -90,6 +90,8 @@ def trial(emu: Emulator, path: Path, case: str, root: Path = ROOT) -> dict[str, 
         }
     finally:
         for pid in (guardian, standby):
+            if pid <= 0:  # none said (main's CLI): kill(0) would be this process group
+                continue
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         if cli.poll() is None:

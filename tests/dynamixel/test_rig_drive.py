@@ -199,6 +199,8 @@ def all_torque_off(emu: EmulatedBus) -> bool:
 
 def reap(*pids: int) -> None:
     for pid in pids:
+        if pid <= 0:  # kill(0) would be this process group
+            continue
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
 
