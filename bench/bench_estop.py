@@ -41,7 +41,7 @@ from pathlib import Path
 import httpx
 
 from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write, other_core_busy, torque_offs
-from riderlive.dynamixel.rig import deg_to_pulses
+from riderlive.dynamixel.servo_map import deg_to_pulses
 from tests.service.live_server import LiveServer
 
 START_TIMEOUT_S = 120.0

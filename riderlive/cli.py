@@ -18,7 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "firmware-emu": ("riderlive.platform.firmware_host", "run firmware_proto's host build on a pseudo-terminal"),
     "platform": ("riderlive.platform.cli", "bake a take to motion-platform actuator tracks; describe a platform"),
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),
-    "rig": ("riderlive.dynamixel.rig_cli", "check a servo map; drive it with a procedural horse"),
+    "rig": ("riderlive.rig_drive", "check a servo map; drive it with a procedural horse"),
     "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
     "export": ("riderlive.export.cli", "write a take as BVH or glTF (.glb) for engines and Blender"),
     "fit": ("riderlive.fit.cli", "fit a preset to horse takes and the rider recorded with them"),

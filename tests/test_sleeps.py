@@ -26,11 +26,10 @@ LEFT: dict[str, str] = {
     "realtime/test_pacing.py:test_an_overrun_is_counted_and_missed_deadlines_are_skipped": "five deadlines missed",
     "realtime/test_pacing.py:test_deadlines_do_not_drift_whatever_the_work_costs": "the work a tick costs",
     "dynamixel/test_driver_faults.py:press": "an e-stop pressed at an arbitrary moment of a tick, or of a read",
-    "devices/test_latch.py:writer": "a write system call (2 ms) inside the gate",
     "clients/blender_drive.py:main": "Blender's side (no tests/ on its path): the add-on's timer pace",
 }
 """``path:function`` -> why the sleep stays (the stimulus is time itself, or an absence is checked)."""
-CEILING = 10
+CEILING = 9
 """Issue 26 asks for at most 10; 10 are left (each above), from 50 (the fixed sleeps of this
 definition before the session that added this test)."""
 

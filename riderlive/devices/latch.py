@@ -34,11 +34,10 @@ import time
 from collections.abc import Iterator
 
 from riderlive.devices.lifecycle import StopRequested
-from riderlive.devices.shared import Slots, lock_path
+from riderlive.devices.shared import Slot, SlotBlock, Slots, lock_path
 
 LOCK_WAIT_S = 0.002
 """How long a request (already recorded) waits for a goal write under way to leave."""
-_SLOTS = ("requested", "handled", "latched", "requested_at", "source", "lock_timeouts")
 
 
 class StopSource(enum.IntEnum):
@@ -57,11 +56,27 @@ class StopSource(enum.IntEnum):
         return self.name.lower()
 
 
+_ANY = "any process that asks for an e-stop"
+
+
+class _LatchSlots(Slots, SlotBlock):
+    """The latch's segment: typed slots, read and written by attribute."""
+
+    requested = Slot(int, _ANY, "e-stop requests so far (the one store every gate and write checks)")
+    latched = Slot(float, f"{_ANY}; cleared by an operator's reset", "1 from a request until a reset")
+    requested_at = Slot(float, _ANY, "perf_counter s of the last request (read after its store)")
+    source = Slot(int, _ANY, "the last request's StopSource")
+    lock_timeouts = Slot(int, _ANY, "requests that did not get the gate's lock within LOCK_WAIT_S")
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(self.slot_names(), name)
+
+
 class StopLatch:
     """The latch; ``StopLatch()`` creates one, ``StopLatch(name)`` attaches to it."""
 
     def __init__(self, name: str | None = None) -> None:
-        self._slots = Slots(_SLOTS, name)
+        self._slots = _LatchSlots(name)
         path = str(lock_path(self._slots.name))
         self._gate_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
         self._request_fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
@@ -90,11 +105,11 @@ class StopLatch:
         check refuses it if it has not begun). Two requests at the same instant from two
         processes may count as one in ``requested`` (both latch, and both are pending)."""
         slots = self._slots
-        slots["requested"] = slots["requested"] + 1.0  # first: pending from here, every gate and write refuses
+        slots.requested = slots.requested + 1  # first: pending from here, every gate and write refuses
         now = time.perf_counter()  # after the store: nothing stamped later can pass a check
-        slots["latched"] = 1.0  # (a gate refuses on `requested`; `latched` is for reset and new devices)
-        slots["requested_at"] = now
-        slots["source"] = float(source)
+        slots.latched = 1.0  # (a gate refuses on `requested`; `latched` is for reset and new devices)
+        slots.requested_at = now
+        slots.source = int(source)
         if self._gate_owner == threading.get_ident():
             return now
         acquired = self._thread_lock.acquire(timeout=LOCK_WAIT_S)
@@ -102,7 +117,7 @@ class StopLatch:
             if self._flock(self._request_fd, LOCK_WAIT_S):
                 fcntl.flock(self._request_fd, fcntl.LOCK_UN)
             else:
-                slots["lock_timeouts"] = slots["lock_timeouts"] + 1.0
+                slots.lock_timeouts = slots.lock_timeouts + 1
         finally:
             if acquired:
                 self._thread_lock.release()
@@ -125,25 +140,25 @@ class StopLatch:
     @property
     def requested(self) -> int:
         """E-stop requests so far (each device remembers how many it has acted on)."""
-        return int(self._slots["requested"])
+        return self._slots.requested
 
     @property
     def latched(self) -> bool:
         """An e-stop was requested and no reset has cleared it since."""
-        return self._slots["latched"] != 0.0
+        return self._slots.latched != 0.0
 
     @property
     def requested_at(self) -> float:
-        return self._slots["requested_at"]
+        return self._slots.requested_at
 
     @property
     def source(self) -> StopSource | None:
-        code = int(self._slots["source"])
+        code = self._slots.source
         return StopSource(code) if code in StopSource._value2member_map_ else None
 
     @property
     def lock_timeouts(self) -> int:
-        return int(self._slots["lock_timeouts"])
+        return self._slots.lock_timeouts
 
     def view(self) -> StopView:
         """One writer's view: which requests it has acted on, and its goal-write gate."""
@@ -151,7 +166,7 @@ class StopLatch:
 
     def clear(self) -> None:
         """An operator's reset: unlatch (requests already made stay counted)."""
-        self._slots["latched"] = 0.0
+        self._slots.latched = 0.0
 
     def close(self) -> None:
         for fd in (self._gate_fd, self._request_fd):

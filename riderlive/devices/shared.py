@@ -42,11 +42,11 @@ _DOUBLE = struct.Struct("d")
 
 
 class Slots:
-    """``names`` float64 slots in a segment: created (``name`` None) or attached."""
+    """``names`` float64 slots in a segment: created (``name`` None) or attached; read and
+    written through a :class:`SlotBlock` subclass's typed slots (by attribute, never by name)."""
 
     def __init__(self, names: tuple[str, ...], name: str | None = None) -> None:
         self.names = names
-        self.index = {n: i for i, n in enumerate(names)}
         size = 8 * len(names)
         if name is None:
             self._shm = shared_memory.SharedMemory(create=True, size=size)
@@ -62,12 +62,6 @@ class Slots:
     @property
     def name(self) -> str:
         return self._shm.name
-
-    def __getitem__(self, key: str) -> float:
-        return self.values[self.index[key]]
-
-    def __setitem__(self, key: str, value: float) -> None:
-        self.values[self.index[key]] = value
 
     def close(self) -> None:
         """Detach; the owner also removes the segment (and its lock file, off Linux)."""

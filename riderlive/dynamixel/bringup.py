@@ -18,9 +18,9 @@ from typing import TypeVar
 
 from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply
 from riderlive.devices.plug import Steps
-from riderlive.dynamixel.rig import (
-    RigConfig,
-    ServoConfig,
+from riderlive.dynamixel.rig import RigConfig, ServoConfig
+from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
+from riderlive.dynamixel.servo_map import (
     deg_to_pulses,
     profile_acceleration,
     profile_velocity,
@@ -28,7 +28,6 @@ from riderlive.dynamixel.rig import (
     return_delay_units,
     watchdog_units,
 )
-from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
 from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, ModelSpec, OperatingMode, decode_hardware_error
 
 log = logging.getLogger("riderlive.dynamixel")

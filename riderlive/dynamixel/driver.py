@@ -36,8 +36,9 @@ from riderlive.devices.registry import DeviceInfo, DeviceSpec
 from riderlive.devices.stall import usable_between
 from riderlive.dynamixel.bringup import arm_watchdog, bring_up, first_spec, read_present, torque_on_here
 from riderlive.dynamixel.readback import Readback, raise_hardware_error
-from riderlive.dynamixel.rig import RigConfig, ServoMap, deg_to_pulses, load_rig, longest_tick_wait_s, wire_budget
+from riderlive.dynamixel.rig import RigConfig, load_rig, longest_tick_wait_s, wire_budget
 from riderlive.dynamixel.sdkbus import SdkBus
+from riderlive.dynamixel.servo_map import ServoMap, deg_to_pulses
 from riderlive.dynamixel.tables import Item
 from riderlive.tickframe import TickFrame
 

@@ -33,8 +33,9 @@ from riderlive.devices.budget import ErrorBudget
 from riderlive.devices.lifecycle import BusErrors, HardwareFault, NoReply
 from riderlive.devices.stall import HostClock, Sampler, SilenceState, lost_between, silence_step, usable_between
 from riderlive.dynamixel.bringup import servo_hardware_error
-from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
+from riderlive.dynamixel.rig import RigConfig
 from riderlive.dynamixel.sdkbus import SdkBus
+from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec
 
 log = logging.getLogger("riderlive.dynamixel")

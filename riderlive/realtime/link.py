@@ -32,15 +32,11 @@ from typing import Any
 import numpy as np
 import orjson
 
-from riderlive.devices.board import SafetyBoard
-from riderlive.devices.latch import StopLatch
 from riderlive.realtime import commands as cmd
-from riderlive.realtime import handover, latency
 from riderlive.realtime import layout as L
-from riderlive.realtime.counters import COUNTERS
 from riderlive.realtime.down import down_status
+from riderlive.realtime.memory import TickMemory
 from riderlive.realtime.setup import TickSetup
-from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.realtime.spare import Spare, TakeOver, spare_main
 from riderlive.realtime.tick_process import tick_main
 
@@ -56,32 +52,14 @@ def exit_reason(code: int | None) -> str:
     return f"exit {code}"
 
 
-class TickLink:
-    """Owns the shared memory and the tick process; used from the web process only."""
+class TickLink(TickMemory):
+    """Owns the shared memory (:class:`~riderlive.realtime.memory.TickMemory`) and the tick
+    process; used from the web process only."""
 
     def __init__(self, setup: TickSetup) -> None:
-        self.inputs = SharedRing(L.INPUT_CAPACITY, L.INPUT_WIDTH)
-        self.outputs = SharedRing(L.OUTPUT_CAPACITY, setup.layout.width)
-        self.counters = SharedCounters(COUNTERS)
-        self.histogram_block = SharedCounters(latency.slot_names(latency.TICK_HISTOGRAMS))
-        self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
-        """Filled by the tick: ``tick_lateness``, ``ingest_to_wire``, ``ingest_to_tick`` (``realtime.latency``)."""
-        self.status_blob = SharedBlob()
-        self.handover_blob = SharedBlob(handover.SNAPSHOT_BYTES)
-        self.latch = StopLatch()
-        self.board = SafetyBoard()
+        super().__init__(setup.layout.width)
         self.board.web_pid = os.getpid()
-        names = {
-            "input": self.inputs.name,
-            "output": self.outputs.name,
-            "counters": self.counters.name,
-            "histograms": self.histogram_block.name,
-            "status": self.status_blob.name,
-            "handover": self.handover_blob.name,
-        }
-        self.base_setup = dataclasses.replace(
-            setup, shm_names=names, latch_name=self.latch.name, board_name=self.board.name
-        )
+        self.base_setup = self.attach(setup)
         self.start_setup = self.setup = self.base_setup
         """``start_setup``: as configured; ``base_setup``: with what :meth:`apply` kept since."""
         self.generation = 0
@@ -360,12 +338,7 @@ class TickLink:
     def close(self) -> None:
         self._commands.close()
         self._notify.close()
-        self.histograms.clear()
         if self.spare is not None:
             self.spare.discard()
             self.spare = None
-        for shared in (self.inputs, self.outputs, self.counters, self.histogram_block, self.status_blob):
-            shared.close()
-        self.handover_blob.close()
-        self.latch.close()
-        self.board.close()
+        super().close()

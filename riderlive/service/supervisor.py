@@ -37,7 +37,7 @@ first heartbeat; from a failure until then the status says the tick is down and 
 device as the guardian reports it (``realtime/down.py``). ``/api/state`` (``supervision``)
 and ``/healthz`` say the rest.
 
-The supervisor also keeps the guardian and its standby (``service/guardians.py``) and
+The supervisor also keeps the guardian and its standby (``devices/guardians.py``) and
 answers the web side of e-stops and of requests that want a reply (``service/requests.py``).
 """
 
@@ -51,12 +51,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from riderlive.devices.guardians import Guardians, GuardianTimes
 from riderlive.devices.latch import StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink, exit_reason
 from riderlive.service import stall
 from riderlive.service.config import ServiceConfig
-from riderlive.service.guardians import Guardians
 from riderlive.service.requests import TickRequests
 from riderlive.service.spares import SpareKeeper
 from riderlive.service.watch import BeatWatch
@@ -129,7 +129,9 @@ class TickSupervisor:
         self._watch_task: asyncio.Task[None] | None = None
         self._bound: list[int] = []
         self.tick_requests = TickRequests(link, lambda: self._recovery is not None, lambda: self.last_exit)
-        self.guardians = Guardians(link.board, link.latch.name, link.setup, config)
+        g = config.guardian
+        times = GuardianTimes(g.tick_timeout, g.web_timeout, g.give_up, g.priority)
+        self.guardians = Guardians(link.board, link.latch.name, link.setup.devices, times)
         self.spares = SpareKeeper(link)
 
     @property
@@ -209,7 +211,7 @@ class TickSupervisor:
             woke_late = max(0.0, now - due)
             if woke_late > interval:
                 due = now  # a stall of our own: do not run the missed checks back to back
-            board["web_beat"] = now
+            board.web_beat = now
             if self._recovery is None and self.supervised:
                 self._check_tick(now, woke_late)
             if self._first_beat is not None and now - self._first_beat > STABLE_S:
@@ -221,8 +223,8 @@ class TickSupervisor:
     def _check_tick(self, now: float, woke_late: float) -> None:
         """One look at the tick (``service/watch.py``): its first heartbeat, a hang, a stall (``service/stall.py``)."""
         link, watch = self.link, self.watch
-        guardian_beat = link.board["guardian_beat"] if self.guardians.guardian is not None else 0.0
-        observation = watch.observe(now, woke_late, link.board["tick_beat"], int(link.board["tick_pid"]), guardian_beat)
+        guardian_beat = link.board.guardian_beat if self.guardians.guardian is not None else 0.0
+        observation = watch.observe(now, woke_late, link.board.tick_beat, link.board.tick_pid, guardian_beat)
         if watch.beaten and self._first_beat is None:
             self._on_first_beat(now)
         finding = stall.classify(stall.Model(self.hang_threshold()), observation)
@@ -286,6 +288,16 @@ class TickSupervisor:
         self.tick_requests.fail_all(f"the tick {why}")
         self._recovery = asyncio.get_running_loop().create_task(self._recover(died))
 
+    async def _wait_for_the_guardian(self, generation: int) -> None:
+        """Until the guardian has stopped that generation's devices (bounded: a guardian that
+        dies meanwhile is relaunched and goes on)."""
+        deadline = time.perf_counter() + self.guardians.stop_wait_s(self.config.rig.park_timeout)
+        while not self.guardians.stopped(generation):
+            if time.perf_counter() > deadline:
+                log.error("the guardian did not report the stop of generation %d in time", generation)
+                return
+            await asyncio.sleep(0.01)
+
     async def _recover(self, died: bool) -> None:
         link = self.link
         self._unbind()
@@ -293,7 +305,7 @@ class TickSupervisor:
             link.kill()  # SIGKILL: it runs none of its code once that returns (reaped later)
         if died:
             await self._drop_settings_if_they_killed_it()
-        await self.guardians.wait_for_stop(link.generation)
+        await self._wait_for_the_guardian(link.generation)
         if self._streak:  # failures in a row: back off (a first failure costs none)
             await asyncio.sleep(min(self.config.tick.restart_backoff * 2 ** (self._streak - 1), MAX_BACKOFF_S))
         self._streak += 1
@@ -353,7 +365,7 @@ class TickSupervisor:
         return {
             "up": self.up,
             "generation": self.link.generation,
-            "tick_pid": int(board["tick_pid"]),
+            "tick_pid": board.tick_pid,
             "restarts": self.restarts,
             "deaths": self.deaths,
             "hangs": self.hangs,

@@ -29,7 +29,8 @@ from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState
 from riderlive.devices.registry import DeviceSpec
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import RigConfig, load_rig, pulses_to_deg
+from riderlive.dynamixel.rig import RigConfig, load_rig
+from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import Instruction, Item
 from riderlive.service.stall import read_sched
 from tests.dynamixel.conftest import bus_factory, fast_switching  # noqa: F401  (fixtures)
@@ -81,8 +82,8 @@ class DeadTick:
         dead = subprocess.Popen(["true"])
         dead.wait()
         board = self.board
-        board["web_pid"], board["web_beat"] = float(os.getpid()), time.perf_counter()
-        board["tick_pid"], board["tick_generation"] = float(dead.pid), 1.0
+        board.web_pid, board.web_beat = os.getpid(), time.perf_counter()
+        board.tick_pid, board.tick_generation = dead.pid, 1
         board.publish(0, DeviceState.RUNNING, START)
         self.spec = DeviceSpec("dynamixel", str(file), port, rig.name, 1, rig.bus.tick_s)
         self._stop = threading.Event()
@@ -91,18 +92,18 @@ class DeadTick:
 
     def _beat(self) -> None:
         while not self._stop.wait(0.01):
-            self.board["web_beat"] = time.perf_counter()
+            self.board.web_beat = time.perf_counter()
 
     def guardian(self) -> subprocess.Popen[bytes]:
         return launch(self.board.name, self.latch.name, [self.spec], tick_timeout_s=0.1, web_timeout_s=1.0)
 
     def wait_done(self, timeout: float = 30.0) -> None:
-        wait_until(lambda: self.board["guardian_done"] >= 1.0, timeout, "the guardian did not finish its stop")
+        wait_until(lambda: self.board.guardian_done >= 1.0, timeout, "the guardian did not finish its stop")
 
     def close(self, *guardians: subprocess.Popen[bytes]) -> None:
         if self._stop.is_set():
             return
-        self.board["shutdown"] = 1.0
+        self.board.shutdown = 1.0
         for guardian in guardians:
             try:
                 guardian.wait(10)
@@ -192,24 +193,24 @@ def test_a_hung_guardian_is_replaced_by_the_standby_which_finishes_the_park(
     standby = launch(scene.board.name, scene.latch.name, [scene.spec], 0.1, 1.0, standby_after=active.pid)
     board = scene.board
     try:
-        wait_until(lambda: board["guardian_standby"] == standby.pid, 30.0, "a standby")
+        wait_until(lambda: board.guardian_standby == standby.pid, 30.0, "a standby")
         wait_until(lambda: park_progress(emu, rig) > 0.01, 30.0, "the park under way")
         assert park_progress(emu, rig) < 0.9, "the park must still be under way (raise park_s)"
         ages: list[float] = []
         watch_until = time.perf_counter() + 2 * GUARDIAN_HANG_S
 
         def watched() -> bool:
-            ages.append(time.perf_counter() - board["guardian_beat"])
+            ages.append(time.perf_counter() - board.guardian_beat)
             return time.perf_counter() > watch_until
 
         wait_until(watched, 10.0, "the watch of a healthy park", poll=0.005)
         assert max(ages) < GUARDIAN_HANG_S, f"a parking guardian's beat aged {max(ages) * 1e3:.0f} ms"
-        assert board["guardian_pid"] == active.pid and standby.poll() is None  # a long park is not a hang
+        assert board.guardian_pid == active.pid and standby.poll() is None  # a long park is not a hang
         active.send_signal(signal.SIGSTOP)
         stopped = time.perf_counter()
         wait_until(lambda: getattr(read_sched(active.pid), "stopped", False), 10.0, "the guardian stopped", poll=0.001)
-        last_beat = board["guardian_beat"]  # frozen now; the standby's rule counts from it
-        wait_until(lambda: board["guardian_pid"] == standby.pid, 10.0, "the standby took over", poll=0.001)
+        last_beat = board.guardian_beat  # frozen now; the standby's rule counts from it
+        wait_until(lambda: board.guardian_pid == standby.pid, 10.0, "the standby took over", poll=0.001)
         took = time.perf_counter() - last_beat
         assert active.wait(10) == -signal.SIGKILL, "the hung guardian is killed"
         assert GUARDIAN_HANG_S <= took < GUARDIAN_HANG_S + 0.5, f"took over {took * 1e3:.0f} ms after the last beat"
@@ -248,21 +249,21 @@ def test_the_guardian_beats_before_its_imports() -> None:
         seen: dict[str, float] = {}
 
         def ready_now() -> bool:
-            if "beat" not in seen and board["guardian_beat"]:
-                seen["beat"] = board["guardian_beat"]
-            if board["guardian_ready"] == 1.0:
+            if "beat" not in seen and board.guardian_beat:
+                seen["beat"] = board.guardian_beat
+            if board.guardian_ready == 1.0:
                 seen["ready"] = time.perf_counter()
             return "ready" in seen
 
         wait_until(ready_now, 30.0, "the guardian ready", poll=0.001)
         beat, ready = seen.get("beat"), seen["ready"]
         assert beat is not None
-        assert board["guardian_pid"] == guardian.pid
+        assert board.guardian_pid == guardian.pid
         assert launched < beat < ready
         took = (beat - launched) * 1000, (ready - launched) * 1000
         print(f"guardian: launch -> first beat {took[0]:.0f} ms, -> ready {took[1]:.0f} ms")
     finally:
-        board["shutdown"] = 1.0
+        board.shutdown = 1.0
         guardian.wait(10)
         board.close()
         latch.close()
@@ -308,15 +309,13 @@ def test_the_guardian_and_its_standby_run_at_their_priority_once_ready(priority:
     active = launch(board.name, latch.name, [spec], 0.1, 1.0, priority=priority)
     standby = launch(board.name, latch.name, [spec], 0.1, 1.0, standby_after=active.pid, priority=priority)
     try:
-        wait_until(
-            lambda: board["guardian_standby"] == standby.pid and board["guardian_ready"] == 1.0, 30.0, "both ready"
-        )
+        wait_until(lambda: board.guardian_standby == standby.pid and board.guardian_ready == 1.0, 30.0, "both ready")
         fifo = priority > 0 and fifo_permitted(priority)
         for pid in (active.pid, standby.pid):
             assert (os.sched_getscheduler(pid) == os.SCHED_FIFO) == fifo
             assert os.sched_getparam(pid).sched_priority == (priority if fifo else 0)
     finally:
-        board["shutdown"] = 1.0
+        board.shutdown = 1.0
         for guardian in (active, standby):
             guardian.wait(10)
         board.close()
@@ -334,22 +333,20 @@ def test_a_standby_guardian_takes_over_within_milliseconds_of_the_guardians_deat
     active = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0)
     standby = launch(board.name, latch.name, [spec], tick_timeout_s=0.1, web_timeout_s=1.0, standby_after=active.pid)
     try:
-        wait_until(
-            lambda: board["guardian_standby"] == standby.pid and board["guardian_ready"] == 1.0, 30.0, "a standby"
-        )
-        assert board["guardian_pid"] == active.pid and board["guardian_standby"] == standby.pid
+        wait_until(lambda: board.guardian_standby == standby.pid and board.guardian_ready == 1.0, 30.0, "a standby")
+        assert board.guardian_pid == active.pid and board.guardian_standby == standby.pid
         since = time.perf_counter()  # the guardian beats on for 0.2 s (its beats, not a sleep) ...
-        wait_until(lambda: board["guardian_beat"] >= since + 0.2, 5.0, "the guardian's beats for 0.2 s")
-        assert board["guardian_pid"] == active.pid and standby.poll() is None  # ... and the standby stands by
+        wait_until(lambda: board.guardian_beat >= since + 0.2, 5.0, "the guardian's beats for 0.2 s")
+        assert board.guardian_pid == active.pid and standby.poll() is None  # ... and the standby stands by
         active.send_signal(signal.SIGKILL)
         killed = time.perf_counter()
-        wait_until(lambda: board["guardian_pid"] == standby.pid, 5.0, "the standby took over", poll=0.0005)
+        wait_until(lambda: board.guardian_pid == standby.pid, 5.0, "the standby took over", poll=0.0005)
         took = time.perf_counter() - killed
-        assert board["guardian_pid"] == standby.pid and board["guardian_beat"] >= killed
+        assert board.guardian_pid == standby.pid and board.guardian_beat >= killed
         assert took < 0.2, f"the standby took {took * 1000:.0f} ms"
         print(f"guardian: kill -9 -> the standby is the guardian in {took * 1000:.1f} ms")
     finally:
-        board["shutdown"] = 1.0
+        board.shutdown = 1.0
         for guardian in (active, standby):
             if guardian.poll() is None:
                 guardian.wait(10)

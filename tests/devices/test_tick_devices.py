@@ -59,8 +59,8 @@ def run(devices: TickDevices, ticks: int, start: int = 0, beat: bool = True) -> 
     """Tick; ``beat``: the guardian on the board (if any) beats as its watch loop would."""
     board, pacer = devices.board, Pacer(0.001)
     for i in range(start, start + ticks):
-        if beat and board is not None and board["guardian_pid"]:
-            board["guardian_beat"] = time.perf_counter()
+        if beat and board is not None and board.guardian_pid:
+            board.guardian_beat = time.perf_counter()
         devices.tick(rider_frame(1.0, tick=i, at=time.perf_counter()))
         pacer.wait()  # a 1 kHz tick
 
@@ -97,8 +97,8 @@ def test_requests_are_answered_and_refusals_change_nothing(tick_devices) -> None
 
     reply = devices.request(cmd.Arm("left", "test", 1))
     assert not reply.ok and reply.refusal == "no_guardian" and "guardian" in reply.message  # no guardian running
-    board["guardian_ready"], board["guardian_pid"] = 1.0, float(os.getpid())
-    board["guardian_beat"] = time.perf_counter()
+    board.guardian_ready, board.guardian_pid = 1.0, os.getpid()
+    board.guardian_beat = time.perf_counter()
     reply = devices.request(cmd.Arm("middle", "test", 2))
     assert not reply.ok and reply.refusal == "unknown_device" and "'left', 'right'" in reply.message
     reply = devices.request(cmd.Arm("left", "test", 3))
@@ -147,7 +147,7 @@ def running_then_killed(devices: TickDevices, guardian: subprocess.Popen[bytes])
     guardian killed (SIGKILL) and reaped."""
     board = devices.board
     assert board is not None
-    board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+    board.guardian_pid, board.guardian_ready = guardian.pid, 1.0
     until(devices, {"left": "disarmed", "right": "disarmed"})
     assert devices.request(cmd.Arm("left", "test", 1)).ok
     until(devices, {"left": "running", "right": "disarmed"})
@@ -183,13 +183,13 @@ def test_the_tick_watches_the_guardian_dead_or_hung_armed_devices_park_arming_is
         assert (status["losses"], status["stops"], status["arms_refused"]) == (1, 1, 1)
         assert left.counters["guardian_stops"] == 1
 
-        board["guardian_pid"] = float(os.getpid())  # a new guardian: arming is allowed again
+        board.guardian_pid = os.getpid()  # a new guardian: arming is allowed again
         run(devices, 10, 200)  # more than GUARDIAN_CHECK_S
         assert devices.status()["guardian"]["alive"] and devices.status()["guardian"]["lost"] is None
         assert devices.states()["left"] == "parked"  # nothing re-arms by itself
         assert devices.request(cmd.Arm("left", "test", 3)).ok
         until(devices, {"left": "running", "right": "disarmed"})
-        hung_from = board["guardian_beat"]  # its last beat: it stops beating (SIGSTOP, a stuck loop)
+        hung_from = board.guardian_beat  # its last beat: it stops beating (SIGSTOP, a stuck loop)
         while devices.states()["left"] == "running" and time.perf_counter() - hung_from < 5.0:
             run(devices, 1, 300, beat=False)
         assert devices.states()["left"] == "parking" and 0.15 <= time.perf_counter() - hung_from < 1.0
@@ -209,7 +209,7 @@ def test_a_guardian_killed_during_arming_parks_the_soft_start_and_nothing_moves_
     for attempt in (1, 2):
         guardian = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
         try:
-            board["guardian_pid"], board["guardian_ready"] = float(guardian.pid), 1.0
+            board.guardian_pid, board.guardian_ready = guardian.pid, 1.0
             until(devices, {"left": "parked" if attempt == 2 else "disarmed", "right": "disarmed"})
             assert devices.request(cmd.Arm("left", "test", attempt)).ok
             assert devices.states()["left"] == "soft_start"
@@ -237,7 +237,7 @@ def test_a_standby_that_takes_over_between_two_looks_still_parks_the_armed_devic
     first, standby = (subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) for _ in range(2))
     try:
         running_then_killed(devices, first)
-        board["guardian_beat"], board["guardian_pid"] = time.perf_counter(), float(standby.pid)  # as stand_by does
+        board.guardian_beat, board.guardian_pid = time.perf_counter(), standby.pid  # as stand_by does
         run(devices, 12, 500)
         assert devices.states()["left"] in ("parking", "parked")
         assert "standby" in devices.devices[0].life.history[-1].by or devices.states()["left"] == "parked"

@@ -24,7 +24,7 @@ from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
 from riderlive.devices.status import DeviceStatus
 from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import ServoMap, deg_to_pulses, profile_velocity, pulses_to_deg
+from riderlive.dynamixel.servo_map import ServoMap, deg_to_pulses, profile_velocity, pulses_to_deg
 from riderlive.dynamixel.tables import Item
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel

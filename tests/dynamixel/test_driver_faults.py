@@ -35,7 +35,8 @@ from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import ServoSetup
 from riderlive.dynamixel.emulator_faults import FaultKind as EmuFault
 from riderlive.dynamixel.emulator_faults import FaultSpec
-from riderlive.dynamixel.rig import RigConfig, pulses_to_deg
+from riderlive.dynamixel.rig import RigConfig
+from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import HardwareError, Instruction, Item
 from tests.devices.memory_plug import rider_frame
 from tests.dynamixel.rig_harness import (

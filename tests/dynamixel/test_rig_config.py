@@ -16,18 +16,14 @@ from riderlive.configfile import ConfigError, read_toml
 from riderlive.dynamixel.rig import (
     MAX_DEG,
     RIG_DIR,
-    ServoMap,
-    deg_to_pulses,
     load_rig,
     longest_tick_wait_s,
-    profile_acceleration,
-    profile_velocity,
-    pulses_to_deg,
     read_tick_seconds,
     rig_from_dict,
     wire_bytes_per_tick,
     wire_seconds_per_tick,
 )
+from riderlive.dynamixel.servo_map import ServoMap, deg_to_pulses, profile_acceleration, profile_velocity, pulses_to_deg
 from riderlive.dynamixel.tables import HardwareError
 
 FULL = RIG_DIR / "full_rider.toml"

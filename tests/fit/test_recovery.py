@@ -19,9 +19,7 @@ def literal_start() -> RuleParams:
     """English numbers with Appendix B's literal readings and no jump layer: errata and [jump] are held,
     never fitted (chosen with the starting preset)."""
     literal = load_preset("kuhnel2003_literal").flat()
-    return load_preset("english").with_values(
-        {k: v for k, v in literal.items() if k.startswith(("errata.", "jump."))}
-    )
+    return load_preset("english").with_values({k: v for k, v in literal.items() if k.startswith(("errata.", "jump."))})
 
 
 CASES = {

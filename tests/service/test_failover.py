@@ -107,14 +107,14 @@ async def _kill_and_take_over() -> None:
         before = len(w.records)
         last_seq = float(w.records[-1][1][RecordLayout.seq.start])
         killed_at = time.perf_counter()
-        os.kill(int(w.link.board["tick_pid"]), signal.SIGKILL)
+        os.kill(w.link.board.tick_pid, signal.SIGKILL)
         await w.until(lambda: w.link.generation == 2 and w.supervisor.up, 30.0, w.supervisor.snapshot())
         await w.until(
             lambda: any(t > killed_at and r[RecordLayout.seq.start] > last_seq for t, r in w.records[before:]), 10.0, ""
         )
         snapshot = w.supervisor.snapshot()
         assert (snapshot["deaths"], snapshot["hangs"], snapshot["restarts"], snapshot["takeovers"]) == (1, 0, 1, 1)
-        assert int(w.link.board["tick_pid"]) == spare_pid, "the warm spare took over"
+        assert w.link.board.tick_pid == spare_pid, "the warm spare took over"
         # While no generation served, the status said so (and `up` was false).
         down = [(up, s) for up, s in w.statuses if s.get("restarting")]
         assert down and all(not up and s["driver"] == "down" and s["tick_up"] is False for up, s in down)
@@ -140,9 +140,9 @@ async def _kill_and_take_over() -> None:
         await w.spare_warm()
         assert w.link.spare is not None and w.link.spare.process.pid != spare_pid
         # Two deaths in a row: the second with the new spare, the third with none warm (cold).
-        os.kill(int(w.link.board["tick_pid"]), signal.SIGKILL)
+        os.kill(w.link.board.tick_pid, signal.SIGKILL)
         await w.until(lambda: w.link.generation == 3 and w.supervisor.up, 30.0, w.supervisor.snapshot())
-        os.kill(int(w.link.board["tick_pid"]), signal.SIGKILL)
+        os.kill(w.link.board.tick_pid, signal.SIGKILL)
         await w.until(lambda: w.link.generation == 4 and w.supervisor.up, 60.0, w.supervisor.snapshot())
         await w.until(lambda: w.link.status().get("generation") == 4, 10.0, "generation 4's status")
         assert w.link.status()["preset"] == "kept", "settings survive a cold start"
@@ -174,7 +174,7 @@ async def _stop_and_take_over() -> None:
         assert w.link.spare.process.pid != first_spare
         assert (w.link.spares_failed, w.link.generation, w.supervisor.restarts) == (1, 1, 0)
         await w.until(lambda: time.perf_counter() - (w.supervisor._first_beat or 0.0) > 3.5, 10.0, "past warm-up")
-        pid = int(w.link.board["tick_pid"])
+        pid = w.link.board.tick_pid
         stopped_at = time.perf_counter()
         os.kill(pid, signal.SIGSTOP)
         await w.until(lambda: w.link.generation == 2 and w.supervisor.up, 30.0, w.supervisor.snapshot())

@@ -54,7 +54,7 @@ async def _crash_then_start_as_configured() -> None:
         await _until(lambda: link.status().get("gait") == "trot", 5.0, "the tick reports its gait")
         assert abs(link.status()["speed"] - 3.8) < 1e-9, "the configured trot at its own speed"
         # A second kill with nothing applied since: a plain restart, nothing more dropped.
-        os.kill(int(link.board["tick_pid"]), signal.SIGKILL)
+        os.kill(link.board.tick_pid, signal.SIGKILL)
         await _until(lambda: link.generation >= 4 and supervisor.ready(), 60.0, supervisor.snapshot())
         assert supervisor.snapshot()["setups_dropped"] == 1
     finally:

@@ -63,6 +63,7 @@ class Server:
                 env=env,
                 start_new_session=True,  # its own process group: stop() ends the tick process too
             )
+
         def answers() -> bool:
             if self.process is None or self.process.poll() is not None:
                 return True

@@ -1,27 +1,28 @@
-"""The guardian process and its standby, as the web process keeps them (``devices/guardian.py``).
+"""The guardian process and its standby, as the driving side keeps them (``devices/guardian.py``).
 
-The guardian parks and releases the devices of a tick generation that died or hung; it
-lives outside the tick so that it survives it. A **standby** guardian (imports paid,
-plugs built) becomes the guardian within a few ms of its death: a relaunch would cost a
+The guardian parks and releases the devices of a tick that died or hung; it lives
+outside the tick so that it survives it. A **standby** guardian (imports paid, plugs
+built) becomes the guardian within a few ms of its death: a relaunch would cost a
 Python start and the imports. :class:`Guardians` launches both, relaunches what died
-(at most one launch a second), reports their state and waits, at a failover, until the
-guardian has stopped the dead generation's devices.
+(at most one launch a second), reports their state and says when the guardian has
+stopped a generation's devices. Kept by the web process's supervisor
+(``service/supervisor.py``) and by ``riderlive rig --drive`` (``riderlive/rig_drive.py``).
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import subprocess
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from riderlive.devices.board import SafetyBoard, guardian_watching
-from riderlive.devices.guardian import launch
-from riderlive.realtime.setup import TickSetup
-from riderlive.service.config import ServiceConfig
+from riderlive.devices.guardian import GIVE_UP_AFTER_S, launch
+from riderlive.devices.registry import DeviceSpec
 
-log = logging.getLogger("riderlive.service.supervisor")
+log = logging.getLogger("riderlive.guardians")
 START_S = 5.0
 """Allowance for a guardian relaunched during a stop to start and finish it (its imports
 on a loaded host), on top of the park timeout."""
@@ -29,14 +30,27 @@ RELAUNCH_S = 1.0
 """At most one launch this often (s)."""
 
 
-class Guardians:
-    """The guardian and its standby for the devices of ``setup``, on ``board`` (see the module docstring)."""
+@dataclass(frozen=True)
+class GuardianTimes:
+    """The guardian's thresholds (s): a tick or web process whose heartbeat is older is
+    failed; with nobody to hand a bus back to, an unconfirmed outputs-off is given up after
+    ``give_up``. ``web_timeout`` is unused where there is no web process (``web_pid`` 0).
+    ``priority``: SCHED_FIFO of the guardian and its standby once ready (0: normal)."""
 
-    def __init__(self, board: SafetyBoard, latch_name: str, setup: TickSetup, config: ServiceConfig) -> None:
+    tick_timeout: float
+    web_timeout: float
+    give_up: float = GIVE_UP_AFTER_S
+    priority: int = 0
+
+
+class Guardians:
+    """The guardian and its standby for ``specs``, on ``board`` (see the module docstring)."""
+
+    def __init__(self, board: SafetyBoard, latch_name: str, specs: Sequence[DeviceSpec], times: GuardianTimes) -> None:
         self.board = board
         self.latch_name = latch_name
-        self.setup = setup
-        self.config = config
+        self.specs = tuple(specs)
+        self.times = times
         self.guardian: subprocess.Popen[bytes] | None = None
         self.standby: subprocess.Popen[bytes] | None = None
         """A standby guardian: becomes the guardian the moment it is gone (guardian.py)."""
@@ -44,16 +58,16 @@ class Guardians:
         self._launched_at = 0.0
 
     def _launch(self, standby_after: int = 0) -> subprocess.Popen[bytes]:
-        guardian = self.config.guardian
+        times = self.times
         return launch(
             self.board.name,
             self.latch_name,
-            self.setup.devices,
-            guardian.tick_timeout,
-            guardian.web_timeout,
-            give_up_s=guardian.give_up,
+            self.specs,
+            times.tick_timeout,
+            times.web_timeout,
+            give_up_s=times.give_up,
             standby_after=standby_after,
-            priority=guardian.priority,
+            priority=times.priority,
         )
 
     def start(self) -> None:
@@ -64,7 +78,7 @@ class Guardians:
 
     def check(self, now: float) -> None:
         """The guardian gone: its standby has taken over (or it is relaunched); a new standby
-        follows (at most one launch a second)."""
+        follows (at most one launch a second). ``now``: perf_counter s."""
         if self.guardian is None:
             return
         if self.guardian.poll() is not None:
@@ -74,7 +88,7 @@ class Guardians:
                 self.guardian, self.standby = self.standby, None
             elif now - self._launched_at >= RELAUNCH_S:
                 log.critical("the guardian exited (%s), no standby: relaunching it; arming is refused", code)
-                self.board["guardian_ready"] = 0.0
+                self.board.guardian_ready = 0.0
                 self.guardian, self.standby = self._launch(), None
                 self._launched_at = now
             else:
@@ -88,20 +102,25 @@ class Guardians:
         """Ready, its process alive, its heartbeat fresh (the tick's own test: board.guardian_watching)."""
         return self.guardian is not None and guardian_watching(self.board, time.perf_counter()) is None
 
-    async def wait_for_stop(self, generation: int) -> None:
-        """Until the guardian has stopped that generation's devices (bounded)."""
+    def ready(self) -> str | None:
+        """None once the launched guardian is ready; else why not (still starting, or exited)."""
         if self.guardian is None:
-            return
-        deadline = time.perf_counter() + self.config.rig.park_timeout + 3.0 + START_S
-        while time.perf_counter() < deadline:  # a guardian that dies meanwhile is relaunched and goes on
-            if self.board["guardian_done"] >= generation:
-                return
-            await asyncio.sleep(0.01)
-        log.error("the guardian did not report the stop of generation %d in time", generation)
+            return "no guardian was launched"
+        if self.guardian.poll() is not None:
+            return f"the guardian exited ({self.guardian.returncode}) before it was ready"
+        return None if self.board.guardian_ready == 1.0 else "the guardian is starting"
+
+    def stopped(self, generation: int) -> bool:
+        """The guardian has stopped the devices of tick ``generation`` (or none is kept)."""
+        return self.guardian is None or self.board.guardian_done >= generation
+
+    def stop_wait_s(self, park_timeout: float) -> float:
+        """How long a failover waits for :meth:`stopped` (s): a park, its read-back, and a relaunch."""
+        return park_timeout + 3.0 + START_S
 
     def stop(self) -> None:
-        """After the tick has stopped (its devices are closed): the guardian may go."""
-        self.board["shutdown"] = 1.0
+        """After the tick has stopped (its devices are closed): the guardians may go."""
+        self.board.shutdown = 1.0
         for guardian in (self.guardian, self.standby):
             if guardian is not None:
                 try:
@@ -117,7 +136,7 @@ class Guardians:
             "alive": self.alive(),
             "pid": None if guardian is None else guardian.pid,
             "standby_pid": None if standby is None or standby.poll() is not None else standby.pid,
-            "standby_ready": standby is not None and self.board["guardian_standby"] == standby.pid,
+            "standby_ready": standby is not None and self.board.guardian_standby == standby.pid,
             "restarts": self.restarts,
-            "takeovers": int(self.board["guardian_takeovers"]),
+            "takeovers": self.board.guardian_takeovers,
         }
