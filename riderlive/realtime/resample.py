@@ -2,14 +2,30 @@
 
 Frames arrive with the producer's own time ``t`` (seconds, any origin) and the
 receive time (engine seconds). The producer's clock is mapped onto the engine's by
-the smallest ``receive - t`` seen in the buffer (the least-delayed frame), so the
-mapping follows the producer's clock but not its network jitter. The tick then
-reads the stream ``delay`` seconds in the past:
+the least-delayed frames: the line ``engine = offset + rate * t`` below every buffered
+frame (``receive - rate * t`` at its least), so the mapping follows the producer's
+clock but not its network jitter. The tick then reads the stream ``delay`` seconds in
+the past:
 
 - between two frames: linear interpolation;
 - before the oldest buffered frame: the oldest frame;
 - after the newest frame: the newest frame held, for at most ``hold`` seconds of
   source time; beyond that the stream is stale (None). Nothing is extrapolated.
+
+**Clock rate** (docs/protocol.md, "Clocks that drift"): a producer's clock may run a few
+per cent slow or fast against ours (a game stepping a fixed timestep on a busy host).
+With the rate taken as 1, the least-delayed frame of a slow clock is the oldest one
+buffered: the tick's reading ran ahead of the newest frame by up to 5 % of the buffer's
+span (0.21 s at 120 Hz, 0.43 s at 60 Hz), holding the newest frame on every tick, and
+past ``hold`` the stream went stale (at 60 Hz: 79 % of ticks neutral). So the rate is
+estimated: every :data:`RATE_EVERY_S` of source time, once the buffer spans
+:data:`RATE_SPAN_S`, from the least-delayed frame of each half of the buffer
+(``rate = 1 + d(receive - t) / dt``), bounded to 1 +- :data:`MAX_SKEW`. At each new
+estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
+toward the line under the frames (lowered by a less-delayed frame) by at most
+:data:`MAX_SKEW` of the frame's source time step: the tick's reading never steps, it runs
+at most 10 % slower or faster while it catches up. Cost: one pass over the buffer
+(<= ``capacity`` frames) 4 times a second of source time.
 """
 
 from __future__ import annotations
@@ -17,6 +33,14 @@ from __future__ import annotations
 import bisect
 from collections import deque
 from dataclasses import dataclass, field
+
+MAX_SKEW = 0.1
+"""A producer's clock rate is taken within 1 +- this of ours (a faster or slower clock is
+mapped at the bound: its frames then run ahead or behind, held or stale, as before)."""
+RATE_SPAN_S = 1.0
+"""The source time the buffer spans before the first rate estimate (s)."""
+RATE_EVERY_S = 0.25
+"""Source time between two estimates (s): each is one pass over the buffer."""
 
 
 @dataclass
@@ -29,14 +53,30 @@ class Resampler:
     times: deque[float] = field(default_factory=deque)
     frames: deque[list[float]] = field(default_factory=deque)
     offsets: deque[float] = field(default_factory=deque)
+    received: deque[float] = field(default_factory=deque)
     offset: float | None = None
-    """Engine time minus producer time of the least-delayed buffered frame."""
+    """Engine time minus producer time of the least-delayed buffered frame (the mapping
+    while no rate is estimated)."""
+    rate: float = 1.0
+    """Engine seconds per producer second (1 until estimated; within 1 +- MAX_SKEW)."""
+    anchor: float | None = None
+    """With a rate estimated: engine time of producer time 0 on the mapping line (None: none yet)."""
+    target: float = 0.0
+    """The anchor of the line under the buffered frames at ``rate``: ``anchor`` moves to it
+    by at most ``MAX_SKEW`` of each frame's source time step."""
+    estimated_at: float = 0.0
+    """Producer time of the newest frame at the last rate estimate."""
 
     def clear(self) -> None:
         self.times.clear()
         self.frames.clear()
         self.offsets.clear()
+        self.received.clear()
         self.offset = None
+        self.rate = 1.0
+        self.anchor = None
+        self.target = 0.0
+        self.estimated_at = 0.0
 
     def push(self, t: float, received: float, values: list[float]) -> bool:
         """Add a frame; a frame not newer than the newest is dropped (returns False)."""
@@ -44,6 +84,7 @@ class Resampler:
             return False
         self.times.append(t)
         self.frames.append(values)
+        self.received.append(received)
         offset = received - t
         self.offsets.append(offset)
         if self.offset is None or offset < self.offset:
@@ -51,12 +92,40 @@ class Resampler:
         if len(self.times) > self.capacity:
             self.times.popleft()
             self.frames.popleft()
+            self.received.popleft()
             if self.offsets.popleft() == self.offset:
                 self.offset = min(self.offsets)
+        if self.anchor is not None:
+            self.target = min(self.target, received - self.rate * t)  # a less-delayed frame
+            step = MAX_SKEW * (t - self.times[-2])  # the read runs at most 10 % slower or faster
+            self.anchor += min(step, max(-step, self.target - self.anchor))
+        if t - self.times[0] >= RATE_SPAN_S and t - self.estimated_at >= RATE_EVERY_S:
+            self._estimate_rate(t)
         return True
+
+    def _estimate_rate(self, newest: float) -> None:
+        """A new rate from the least-delayed frame of each half of the buffer; the mapping
+        kept continuous at ``newest`` and moved toward the line under the frames (bounded)."""
+        half = len(self.times) // 2
+        offsets = self.offsets
+        a = min(range(half), key=offsets.__getitem__)
+        b = min(range(half, len(offsets)), key=offsets.__getitem__)
+        span = self.times[b] - self.times[a]
+        if span < RATE_SPAN_S / 4:
+            return
+        skew = min(MAX_SKEW, max(-MAX_SKEW, (offsets[b] - offsets[a]) / span))
+        rate = 1.0 + skew
+        before = self.offset if self.anchor is None else self.anchor
+        assert before is not None  # a frame was pushed
+        self.anchor = before + (self.rate - rate) * newest  # the newest frame maps where it did
+        self.target = min(rx - rate * t for rx, t in zip(self.received, self.times, strict=True))
+        self.rate = rate
+        self.estimated_at = newest
 
     def source_time(self, now: float) -> float | None:
         """The producer time the tick at engine time ``now`` should show."""
+        if self.anchor is not None:
+            return (now - self.anchor) / self.rate - self.delay
         if self.offset is None:
             return None
         return now - self.offset - self.delay
