@@ -18,14 +18,15 @@ With the rate taken as 1, the least-delayed frame of a slow clock is the oldest 
 buffered: the tick's reading ran ahead of the newest frame by up to 5 % of the buffer's
 span (0.21 s at 120 Hz, 0.43 s at 60 Hz), holding the newest frame on every tick, and
 past ``hold`` the stream went stale (at 60 Hz: 79 % of ticks neutral). So the rate is
-estimated: every :data:`RATE_EVERY_S` of source time, once the buffer spans
-:data:`RATE_SPAN_S`, from the least-delayed frame of each half of the buffer
-(``rate = 1 + d(receive - t) / dt``), bounded to 1 +- :data:`MAX_SKEW`. At each new
+estimated: the least-delayed frame of each window of :data:`RATE_EVERY_S` of source time
+is kept (the last :data:`RATE_WINDOWS`: 10 s), and at the end of each window, once they
+span :data:`RATE_SPAN_S`, ``rate = 1 + d(receive - t) / dt`` between the least-delayed
+of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`. At each new
 estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
-toward the line under the frames (lowered by a less-delayed frame) by at most
-:data:`MAX_SKEW` of the frame's source time step: the tick's reading never steps, it runs
-at most 10 % slower or faster while it catches up. Cost: one pass over the buffer
-(<= ``capacity`` frames) 4 times a second of source time.
+toward the line (at that rate) through the least-delayed frame of the last second (lowered
+by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
+tick's reading never steps, it runs at most 10 % slower or faster while it catches up.
+Cost: a few comparisons per frame, ~40 per window.
 """
 
 from __future__ import annotations
@@ -40,7 +41,9 @@ mapped at the bound: its frames then run ahead or behind, held or stale, as befo
 RATE_SPAN_S = 1.0
 """The source time the buffer spans before the first rate estimate (s)."""
 RATE_EVERY_S = 0.25
-"""Source time between two estimates (s): each is one pass over the buffer."""
+"""Source time between two estimates (s), each a window whose least-delayed frame is kept."""
+RATE_WINDOWS = 40
+"""Windows kept for the rate (10 s of source time at most): the baseline of the estimate."""
 
 
 @dataclass
@@ -53,7 +56,6 @@ class Resampler:
     times: deque[float] = field(default_factory=deque)
     frames: deque[list[float]] = field(default_factory=deque)
     offsets: deque[float] = field(default_factory=deque)
-    received: deque[float] = field(default_factory=deque)
     offset: float | None = None
     """Engine time minus producer time of the least-delayed buffered frame (the mapping
     while no rate is estimated)."""
@@ -66,17 +68,23 @@ class Resampler:
     by at most ``MAX_SKEW`` of each frame's source time step."""
     estimated_at: float = 0.0
     """Producer time of the newest frame at the last rate estimate."""
+    windows: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=RATE_WINDOWS))
+    """The least-delayed frame ``(t, receive - t)`` of each of the last ``RATE_WINDOWS``
+    windows of ``RATE_EVERY_S`` (a longer baseline than the buffer's: a steadier rate)."""
+    least: tuple[float, float] | None = None
+    """The least-delayed frame of the window under way."""
 
     def clear(self) -> None:
         self.times.clear()
         self.frames.clear()
         self.offsets.clear()
-        self.received.clear()
         self.offset = None
         self.rate = 1.0
         self.anchor = None
         self.target = 0.0
         self.estimated_at = 0.0
+        self.windows.clear()
+        self.least = None
 
     def push(self, t: float, received: float, values: list[float]) -> bool:
         """Add a frame; a frame not newer than the newest is dropped (returns False)."""
@@ -84,7 +92,6 @@ class Resampler:
             return False
         self.times.append(t)
         self.frames.append(values)
-        self.received.append(received)
         offset = received - t
         self.offsets.append(offset)
         if self.offset is None or offset < self.offset:
@@ -92,35 +99,41 @@ class Resampler:
         if len(self.times) > self.capacity:
             self.times.popleft()
             self.frames.popleft()
-            self.received.popleft()
             if self.offsets.popleft() == self.offset:
                 self.offset = min(self.offsets)
         if self.anchor is not None:
             self.target = min(self.target, received - self.rate * t)  # a less-delayed frame
             step = MAX_SKEW * (t - self.times[-2])  # the read runs at most 10 % slower or faster
             self.anchor += min(step, max(-step, self.target - self.anchor))
-        if t - self.times[0] >= RATE_SPAN_S and t - self.estimated_at >= RATE_EVERY_S:
-            self._estimate_rate(t)
+        if self.least is None or offset < self.least[1]:
+            self.least = (t, offset)
+        if t - self.estimated_at >= RATE_EVERY_S:
+            self.windows.append(self.least)
+            self.least = None
+            self.estimated_at = t
+            if self.windows[-1][0] - self.windows[0][0] >= RATE_SPAN_S:
+                self._estimate_rate(t)
         return True
 
     def _estimate_rate(self, newest: float) -> None:
-        """A new rate from the least-delayed frame of each half of the buffer; the mapping
-        kept continuous at ``newest`` and moved toward the line under the frames (bounded)."""
-        half = len(self.times) // 2
-        offsets = self.offsets
-        a = min(range(half), key=offsets.__getitem__)
-        b = min(range(half, len(offsets)), key=offsets.__getitem__)
-        span = self.times[b] - self.times[a]
-        if span < RATE_SPAN_S / 4:
+        """A new rate from the least-delayed frames of the oldest and the newest third of the
+        windows; the mapping kept continuous at ``newest`` and aimed at the line through the
+        least-delayed frame of the last second (not the whole baseline's: a rate a little
+        off would put the line under the old frames, ahead of the new ones)."""
+        windows = list(self.windows)
+        third = max(1, len(windows) // 3)
+        ta, oa = min(windows[:third], key=lambda w: w[1])
+        tb, ob = min(windows[-third:], key=lambda w: w[1])
+        if tb - ta < RATE_SPAN_S / 2:
             return
-        skew = min(MAX_SKEW, max(-MAX_SKEW, (offsets[b] - offsets[a]) / span))
+        skew = min(MAX_SKEW, max(-MAX_SKEW, (ob - oa) / (tb - ta)))
         rate = 1.0 + skew
         before = self.offset if self.anchor is None else self.anchor
         assert before is not None  # a frame was pushed
         self.anchor = before + (self.rate - rate) * newest  # the newest frame maps where it did
-        self.target = min(rx - rate * t for rx, t in zip(self.received, self.times, strict=True))
+        recent = windows[-max(1, round(1.0 / RATE_EVERY_S)) :]
+        self.target = min(o + t - rate * t for t, o in recent)  # receive - rate * t
         self.rate = rate
-        self.estimated_at = newest
 
     def source_time(self, now: float) -> float | None:
         """The producer time the tick at engine time ``now`` should show."""
