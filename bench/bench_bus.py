@@ -1,7 +1,7 @@
 """The rig device on a 24-servo emulated bus with wire timing: loop rate, e-stop, soak.
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py [--seconds 1.5] [--bauds 1000000 4000000]
-    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak [--runs 20] [--run-seconds 60] [--burners 2]
+    PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak [--runs 20] [--run-seconds 60] [--burners 2] [--logs DIR]
     PYTHONPATH=$PWD .venv/bin/python bench/bench_bus.py --soak --in-process [--runs 20] [--run-seconds 60]
 
 The emulator runs in a child process (bench/rig_fixtures.py) and holds every packet on
@@ -13,7 +13,8 @@ the rate the wire allows (target ratio >= 0.8) and the bare SDK doing the same
 transactions (the device's overhead).
 
 Soak (issue 24, ``--soak``): the rig through the real service on a loaded host
-(bench/bus_soak.py): faults, false hangs, vanish detection.
+(bench/bus_soak.py): faults, false hangs, deaths and their exit status, tick gaps, vanish
+detection; the server's log of every run gone wrong kept in ``--logs``.
 
 In-process soak (issue 10, ``--soak --in-process``): ``--runs`` runs of ``--run-seconds`` of the shipped 24-servo map
 (config/rigs/full_rider.toml, its own budgets and timeouts, nothing relaxed) at its
@@ -28,6 +29,7 @@ import argparse
 import statistics
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import dynamixel_sdk as sdk
@@ -246,10 +248,14 @@ def main() -> int:
     parser.add_argument("--in-process", action="store_true", help="the soak of the device alone (issue 10)")
     parser.add_argument("--burners", type=int, default=2, help="normal-priority busy loops in the service soak")
     parser.add_argument("--web-priority", type=int, default=10, help="server.realtime_priority in the service soak")
+    parser.add_argument(
+        "--logs", type=Path, default=None, help="service soak: where the logs go (default: a new temp dir)"
+    )
     args = parser.parse_args()
     sys.setswitchinterval(0.0005)
     if args.soak and not args.in_process:
-        return service_soak(args.runs, args.run_seconds, 0 if args.idle else args.burners, args.web_priority)
+        burners = 0 if args.idle else args.burners
+        return service_soak(args.runs, args.run_seconds, burners, args.web_priority, args.logs)
     if args.soak:
         return soak(args.runs, args.run_seconds, not args.idle)
     ok = True

@@ -1,6 +1,7 @@
 """The whole service under load: latency, delivery and CPU with 100 clients and the other core busy.
 
     PYTHONPATH=$PWD .venv/bin/python bench/bench_service.py --rates 120 500 --seconds 30 [--rig] [--unlocked] [--thread]
+        [--burners 2]   (both cores busy at normal priority: a render engine beside the service)
 
 Starts the real ``riderlive serve`` on a loopback port, once per *variant* and rate:
 
@@ -402,20 +403,24 @@ def main() -> None:
     parser.add_argument("--thread", action="store_true", help="also the tick-in-a-thread baseline")
     parser.add_argument("--unlocked", action="store_true", help="also the design without the phase lock")
     parser.add_argument("--no-burner", action="store_true")
+    parser.add_argument(
+        "--burners", type=int, default=1, help="normal-priority busy loops (2: both cores, a render-like load)"
+    )
     parser.add_argument("--nice", type=int, default=0, help="server.nice of the service (e.g. -10)")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-service-"))
     variants = ["design", "today", *(["unlocked"] if args.unlocked else []), *(["thread"] if args.thread else [])]
     total = len(variants) * len(args.rates) * (args.seconds + 40)
     results: dict[tuple[str, float], dict[str, float]] = {}
-    with busy_cores(0 if args.no_burner else 1, total):
+    burners = 0 if args.no_burner else args.burners
+    with busy_cores(burners, total) as load:
         for rate in args.rates:
             for variant in variants:
                 print(f"{variant} at {rate:g} Hz ...", flush=True)
                 results[variant, rate] = run(variant, rate, args, workdir)
     print(
         f"{args.clients} clients at {args.client_rate:g} Hz, producer at {args.producer_rate:g} Hz, rig: {args.rig}, "
-        f"other core busy: {not args.no_burner}, {args.seconds:g} s per run, load average {os.getloadavg()[0]:.1f}"
+        f"{load}, {args.seconds:g} s per run, load average {os.getloadavg()[0]:.1f}"
     )
     for rate in args.rates:
         goal = 1e3 / rate + 1.0

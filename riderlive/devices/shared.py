@@ -9,7 +9,6 @@ the new value; a slot that a single process writes needs no lock. Segments live 
 from __future__ import annotations
 
 import os
-import struct
 import tempfile
 from multiprocessing import resource_tracker, shared_memory
 from pathlib import Path
@@ -38,9 +37,6 @@ def lock_path(name: str) -> Path:
     return shm if shm.exists() else Path(tempfile.gettempdir()) / f"{name}.lock"
 
 
-_DOUBLE = struct.Struct("d")
-
-
 class Slots:
     """``names`` float64 slots in a segment: created (``name`` None) or attached; read and
     written through a :class:`SlotBlock` subclass's typed slots (by attribute, never by name)."""
@@ -54,10 +50,17 @@ class Slots:
         else:
             self._shm = attach(name)
             self.owner = False
-        self.values = _Values(self._shm)
+        self.values = _Values(self._shm, len(names))
         if self.owner:
             for i in range(len(names)):
                 self.values[i] = 0.0
+
+    def __del__(self) -> None:
+        """Never closed (a test, an exiting process): the views go first, so that the
+        segment's own finalizer can close it."""
+        values = getattr(self, "values", None)
+        if values is not None:
+            values.release()
 
     @property
     def name(self) -> str:
@@ -65,6 +68,7 @@ class Slots:
 
     def close(self) -> None:
         """Detach; the owner also removes the segment (and its lock file, off Linux)."""
+        self.values.release()
         self._shm.close()
         if self.owner:
             path = lock_path(self._shm.name)
@@ -74,18 +78,34 @@ class Slots:
 
 
 class _Values:
-    """float64 slot ``i`` of a segment, read and written in place (no exported views,
-    so the segment can always be closed)."""
+    """float64 slot ``i`` of a segment, read and written in place, each read and each write
+    one aligned 8-byte access: another process never sees a value half written.
 
-    def __init__(self, shm: shared_memory.SharedMemory) -> None:
-        self._shm = shm
+    Not ``struct.pack_into``: it zero-fills its target before packing (CPython's
+    ``s_pack_internal``), so a reader in another process saw 0.0 in ~5 % of its reads of
+    a slot written in a loop (the soak's "the guardian has not beaten for 23425072 ms":
+    a beat read as 0; ``tests/devices/test_shared.py``). A ``memoryview`` cast to ``d``
+    stores and loads a double with one ``memcpy`` of constant size 8 (one instruction).
+    The views are released by :meth:`release` before the segment is closed."""
+
+    def __init__(self, shm: shared_memory.SharedMemory, count: int) -> None:
+        buf = shm.buf
+        if buf is None:
+            raise ValueError(f"shared memory {shm.name} is closed")
+        self._bytes = buf[: 8 * count]
+        self._view = self._bytes.cast("d")
 
     def __getitem__(self, i: int) -> float:
-        value: float = _DOUBLE.unpack_from(self._shm.buf, 8 * i)[0]  # type: ignore[arg-type]
+        value: float = self._view[i]
         return value
 
     def __setitem__(self, i: int, value: float) -> None:
-        _DOUBLE.pack_into(self._shm.buf, 8 * i, value)  # type: ignore[arg-type]
+        self._view[i] = value
+
+    def release(self) -> None:
+        """Drop the views (the segment can be closed after this)."""
+        self._view.release()
+        self._bytes.release()
 
 
 def pid_alive(pid: int) -> bool:

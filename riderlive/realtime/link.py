@@ -40,16 +40,24 @@ from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.spare import Spare, TakeOver, spare_main
 from riderlive.realtime.tick_process import tick_main
 
+EXIT_255 = (
+    "exit 255: exit(-1) (SystemExit(-1), or a C library's exit(-1)) or its exec failed before Python ran"
+    " (multiprocessing's spawn says nothing then); the log above says which: a 'last words' line"
+    " with a traceback, a faulthandler dump, or no 'started' line for that pid"
+)
+"""What ``exit 255`` can mean (the soak saw one once, its log not kept: ``tick_process.last_words``)."""
+
 
 def exit_reason(code: int | None) -> str:
-    """A process's ``exitcode`` said: ``exit 1``, ``SIGKILL``..., or ``running`` (None)."""
+    """A process's ``exitcode`` said: ``exit 1``, ``SIGKILL``..., ``exit 255`` with what it can
+    mean (:data:`EXIT_255`), or ``running`` (None)."""
     if code is None:
         return "running"
     if code < 0:
         with contextlib.suppress(ValueError):
             return signal.Signals(-code).name
         return f"signal {-code}"
-    return f"exit {code}"
+    return EXIT_255 if code == 255 else f"exit {code}"
 
 
 class TickLink(TickMemory):

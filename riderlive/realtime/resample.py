@@ -2,14 +2,31 @@
 
 Frames arrive with the producer's own time ``t`` (seconds, any origin) and the
 receive time (engine seconds). The producer's clock is mapped onto the engine's by
-the smallest ``receive - t`` seen in the buffer (the least-delayed frame), so the
-mapping follows the producer's clock but not its network jitter. The tick then
-reads the stream ``delay`` seconds in the past:
+the least-delayed frames: the line ``engine = offset + rate * t`` below every buffered
+frame (``receive - rate * t`` at its least), so the mapping follows the producer's
+clock but not its network jitter. The tick then reads the stream ``delay`` seconds in
+the past:
 
 - between two frames: linear interpolation;
 - before the oldest buffered frame: the oldest frame;
 - after the newest frame: the newest frame held, for at most ``hold`` seconds of
   source time; beyond that the stream is stale (None). Nothing is extrapolated.
+
+**Clock rate** (docs/protocol.md, "Clocks that drift"): a producer's clock may run a few
+per cent slow or fast against ours (a game stepping a fixed timestep on a busy host).
+With the rate taken as 1, the least-delayed frame of a slow clock is the oldest one
+buffered: the tick's reading ran ahead of the newest frame by up to 5 % of the buffer's
+span (0.21 s at 120 Hz, 0.43 s at 60 Hz), holding the newest frame on every tick, and
+past ``hold`` the stream went stale (at 60 Hz: 79 % of ticks neutral). So the rate is
+estimated: the least-delayed frame of each window of :data:`RATE_EVERY_S` of source time
+is kept (the last :data:`RATE_WINDOWS`: 10 s), and at the end of each window, once they
+span :data:`RATE_SPAN_S`, ``rate = 1 + d(receive - t) / dt`` between the least-delayed
+of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`. At each new
+estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
+toward the line (at that rate) through the least-delayed frame of the last second (lowered
+by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
+tick's reading never steps, it runs at most 10 % slower or faster while it catches up.
+Cost: a few comparisons per frame, ~40 per window.
 """
 
 from __future__ import annotations
@@ -17,6 +34,16 @@ from __future__ import annotations
 import bisect
 from collections import deque
 from dataclasses import dataclass, field
+
+MAX_SKEW = 0.1
+"""A producer's clock rate is taken within 1 +- this of ours (a faster or slower clock is
+mapped at the bound: its frames then run ahead or behind, held or stale, as before)."""
+RATE_SPAN_S = 1.0
+"""The source time the buffer spans before the first rate estimate (s)."""
+RATE_EVERY_S = 0.25
+"""Source time between two estimates (s), each a window whose least-delayed frame is kept."""
+RATE_WINDOWS = 40
+"""Windows kept for the rate (10 s of source time at most): the baseline of the estimate."""
 
 
 @dataclass
@@ -30,13 +57,34 @@ class Resampler:
     frames: deque[list[float]] = field(default_factory=deque)
     offsets: deque[float] = field(default_factory=deque)
     offset: float | None = None
-    """Engine time minus producer time of the least-delayed buffered frame."""
+    """Engine time minus producer time of the least-delayed buffered frame (the mapping
+    while no rate is estimated)."""
+    rate: float = 1.0
+    """Engine seconds per producer second (1 until estimated; within 1 +- MAX_SKEW)."""
+    anchor: float | None = None
+    """With a rate estimated: engine time of producer time 0 on the mapping line (None: none yet)."""
+    target: float = 0.0
+    """The anchor of the line under the buffered frames at ``rate``: ``anchor`` moves to it
+    by at most ``MAX_SKEW`` of each frame's source time step."""
+    estimated_at: float = 0.0
+    """Producer time of the newest frame at the last rate estimate."""
+    windows: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=RATE_WINDOWS))
+    """The least-delayed frame ``(t, receive - t)`` of each of the last ``RATE_WINDOWS``
+    windows of ``RATE_EVERY_S`` (a longer baseline than the buffer's: a steadier rate)."""
+    least: tuple[float, float] | None = None
+    """The least-delayed frame of the window under way."""
 
     def clear(self) -> None:
         self.times.clear()
         self.frames.clear()
         self.offsets.clear()
         self.offset = None
+        self.rate = 1.0
+        self.anchor = None
+        self.target = 0.0
+        self.estimated_at = 0.0
+        self.windows.clear()
+        self.least = None
 
     def push(self, t: float, received: float, values: list[float]) -> bool:
         """Add a frame; a frame not newer than the newest is dropped (returns False)."""
@@ -53,10 +101,44 @@ class Resampler:
             self.frames.popleft()
             if self.offsets.popleft() == self.offset:
                 self.offset = min(self.offsets)
+        if self.anchor is not None:
+            self.target = min(self.target, received - self.rate * t)  # a less-delayed frame
+            step = MAX_SKEW * (t - self.times[-2])  # the read runs at most 10 % slower or faster
+            self.anchor += min(step, max(-step, self.target - self.anchor))
+        if self.least is None or offset < self.least[1]:
+            self.least = (t, offset)
+        if t - self.estimated_at >= RATE_EVERY_S:
+            self.windows.append(self.least)
+            self.least = None
+            self.estimated_at = t
+            if self.windows[-1][0] - self.windows[0][0] >= RATE_SPAN_S:
+                self._estimate_rate(t)
         return True
+
+    def _estimate_rate(self, newest: float) -> None:
+        """A new rate from the least-delayed frames of the oldest and the newest third of the
+        windows; the mapping kept continuous at ``newest`` and aimed at the line through the
+        least-delayed frame of the last second (not the whole baseline's: a rate a little
+        off would put the line under the old frames, ahead of the new ones)."""
+        windows = list(self.windows)
+        third = max(1, len(windows) // 3)
+        ta, oa = min(windows[:third], key=lambda w: w[1])
+        tb, ob = min(windows[-third:], key=lambda w: w[1])
+        if tb - ta < RATE_SPAN_S / 2:
+            return
+        skew = min(MAX_SKEW, max(-MAX_SKEW, (ob - oa) / (tb - ta)))
+        rate = 1.0 + skew
+        before = self.offset if self.anchor is None else self.anchor
+        assert before is not None  # a frame was pushed
+        self.anchor = before + (self.rate - rate) * newest  # the newest frame maps where it did
+        recent = windows[-max(1, round(1.0 / RATE_EVERY_S)) :]
+        self.target = min(o + t - rate * t for t, o in recent)  # receive - rate * t
+        self.rate = rate
 
     def source_time(self, now: float) -> float | None:
         """The producer time the tick at engine time ``now`` should show."""
+        if self.anchor is not None:
+            return (now - self.anchor) / self.rate - self.delay
         if self.offset is None:
             return None
         return now - self.offset - self.delay

@@ -161,6 +161,11 @@ class SharedBlob:
 
     Layout: ``int64 seq``, ``int64 length``, then ``size`` bytes. The writer never
     blocks; the reader gets the newest complete blob or None if it changed meanwhile.
+    One writer at a time, in turn (the tick generations): a writer killed between its two
+    stores leaves ``seq`` odd, and the next writer starts from the next even value (without
+    that, every later blob was published with the parity inverted and read as "being
+    written": the status of the generations after a kill mid-write never reached the web
+    process, which showed the dead one's, a rig ``running`` after its fault).
     """
 
     def __init__(self, size: int = 65536, name: str | None = None) -> None:
@@ -188,6 +193,7 @@ class SharedBlob:
         if len(data) > self.size:
             raise ValueError(f"blob of {len(data)} bytes exceeds {self.size}")
         seq = int(self._words[0])
+        seq += seq % 2  # odd: a writer died between its two stores (a tick killed mid-write): skip its blob
         self._words[0] = seq + 1
         buf = self._shm.buf
         assert buf is not None

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import faulthandler
 import gc
 import logging
 import multiprocessing.process
@@ -35,6 +36,7 @@ import pickle
 import signal
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
@@ -104,12 +106,37 @@ class Spare:
         self.process.join(1.0)
 
 
+@contextlib.contextmanager
+def last_words(who: str) -> Iterator[None]:
+    """A tick or spare process's Python entry: say it started (a process that exits 255 without
+    this line never ran Python: its exec failed), dump the stacks on a fatal signal
+    (``faulthandler``), and log how its Python code ended when not by returning: the
+    exception with its traceback, or ``SystemExit`` with its code (``SystemExit(-1)`` is
+    ``exit 255``, silent otherwise). Nothing is logged for a normal end."""
+    faulthandler.enable()
+    log.info("%s started (pid %d)", who, os.getpid())
+    try:
+        yield
+    except SystemExit as exc:
+        if exc.code not in (None, 0):
+            log.critical("%s (pid %d) ends by SystemExit(%r)", who, os.getpid(), exc.code, exc_info=True)
+        raise
+    except BaseException as exc:
+        log.critical("%s (pid %d) ends by %s: %s", who, os.getpid(), type(exc).__name__, exc, exc_info=True)
+        raise
+
+
 def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connection, nice: int = WARM_NICE) -> None:
     """Entry point of a spare process. ``setups``: pickled ``TickSetup`` objects to warm up with,
     the first that works (the settings as applied, then as configured: a setting that fails
     here fails at the takeover too, where the supervisor deals with it)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the web process decides when to stop
     logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
+    with last_words("the spare tick"):
+        _spare(setups, commands, notify, nice)
+
+
+def _spare(setups: tuple[bytes, ...], commands: Connection, notify: Connection, nice: int) -> None:
     box: dict[str, Any] = {}
     started, cpu0 = time.perf_counter(), time.process_time()
 

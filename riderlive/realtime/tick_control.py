@@ -150,6 +150,7 @@ class TickControl:
             "physics": None if self.physics is None else self.physics.status(),
             "saddle": self._saddle_status(),
             "phase_lock": self.phase.status(),
+            "input_clock_rate": core.resampler.rate,
             "events": list(self.events),
         }
 

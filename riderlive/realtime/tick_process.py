@@ -24,14 +24,18 @@ from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.setup import TickSetup
+from riderlive.realtime.spare import last_words
 from riderlive.realtime.tick import TickLoop
 from riderlive.sched import normal_priority_thread, try_realtime_priority
 
 
 def tick_main(setup: TickSetup, commands: Connection, notify: Connection) -> None:
     """Entry point of the spawned tick process (a cold start: the first generation, or one
-    with no warm spare ready)."""
-    serve(prepare(setup, commands, notify.fileno()))
+    with no warm spare ready; in the web process itself with ``tick.isolation = "thread"``)."""
+    if threading.current_thread() is threading.main_thread():
+        logging.basicConfig(level=logging.INFO, format="%(levelname)s tick: %(message)s")
+    with last_words(f"tick generation {setup.generation}"):
+        serve(prepare(setup, commands, notify.fileno()))
 
 
 def prepare(setup: TickSetup, commands: Connection, notify_fd: int) -> TickLoop:

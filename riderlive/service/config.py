@@ -85,6 +85,10 @@ class TickSection(StrictModel):
     hang_floor_realtime: float = pydantic.Field(default=0.03, ge=0.0, le=60.0)
     """With real-time priority the hang threshold is at least this (seconds): even a
     SCHED_FIFO tick is late by ~10 ms now and then on a busy 2-core machine."""
+    hang_floor_cold: float = pydantic.Field(default=2.0, ge=0.0, le=60.0)
+    """While no warm spare waits and no device moves the hang threshold is at least this
+    (seconds): a failover would be a cold start (5-27 s at load 20-25 in the soak), and a
+    moving device has the guardian's ``tick_timeout`` anyway."""
     restart_backoff: float = pydantic.Field(default=0.25, gt=0.0, le=60.0)
     """Seconds before restarting a dead tick, doubled per failure in a row (up to 30 s)."""
     phase_lock: bool = True

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from riderlive.realtime.link import TickLink
+from riderlive.realtime.link import TickLink, exit_reason
 
 log = logging.getLogger("riderlive.service.supervisor")
 SPARE_RETRY_S = 2.0
@@ -40,7 +40,8 @@ class SpareKeeper:
                 if spare.warm is not None:
                     self.failures = 0
                 return
-            log.error("the spare tick %s: starting another", spare.failed or f"exited ({spare.process.exitcode})")
+            reason = spare.failed or f"exited ({exit_reason(spare.process.exitcode)}, pid {spare.process.pid})"
+            log.error("the spare tick %s: starting another", reason)
             self.failures += 1
             link.spares_failed += 1
             spare.discard()

@@ -263,6 +263,8 @@ class TickSupervisor:
             # No warm spare: a failover would be a cold start (seconds on a busy host), dearer
             # than most stalls; a moving device is the guardian's (``guardian.tick_timeout``).
             threshold = max(threshold, tick.hang_floor)
+            if not self._a_device_moves():  # a cold start costs seconds; a moving device is the guardian's
+                threshold = max(threshold, tick.hang_floor_cold)
         first = self._first_beat
         if (first is None or time.perf_counter() - first < WARMUP_S) and not self._a_device_moves():
             threshold = max(threshold, WARMUP_HANG_S)

@@ -88,3 +88,23 @@ def test_blob_and_counters() -> None:
     finally:
         blob.close()
         counters.close()
+
+
+def test_blob_after_a_writer_killed_mid_write() -> None:
+    """A tick killed between a blob's two stores (``seq`` left odd): the next generation's
+    blobs are read again, each in full. The old code wrote them with the parity inverted:
+    every read gave None, and the web process kept showing the dead generation's status."""
+    blob = SharedBlob(64)
+    writer = SharedBlob(name=blob.name)  # the next generation attaches
+    try:
+        blob.write(b'{"state":"running"}')
+        blob._words[0] += 1  # its next write began (seq odd) and the process died there
+        assert blob.read(attempts=2) is None  # being written: nothing complete to read yet
+        for n in range(3):
+            data = b'{"state":"fault","n":%d}' % n
+            writer.write(data)
+            assert blob.read() == data
+            assert int(blob._words[0]) % 2 == 0
+    finally:
+        writer.close()
+        blob.close()

@@ -4,6 +4,7 @@ re-anchored, and neither moves the rider by more per tick than a steady clock do
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import time
@@ -33,15 +34,18 @@ def drive(
     segments: list[dict],
     game: bool,
     stamps: list[float],
+    sent: list[float] | None = None,
 ) -> None:
     """Send a smooth horse at HZ, stamped with ``clock(elapsed)``: a function of that clock
     (``game``: a game's pose follows its clock, and stands still with it) or of real time
     (a producer whose timestamps alone step); collect the segment messages that come back
-    and the stamps sent (``stamps``, in order)."""
+    and the stamps sent (``stamps``, in order; ``sent``: when each send began, perf_counter s)."""
     start = time.perf_counter()
     n = 0
     while (elapsed := time.perf_counter() - start) < seconds:
         t = clock(elapsed)
+        if sent is not None:
+            sent.append(time.perf_counter())  # before the send: no frame can arrive before it
         ws.send(json.dumps({"t": t, "values": {"rearPivot.rz": horse(t if game else elapsed)}}))
         stamps.append(t)
         n += 1
@@ -83,11 +87,11 @@ def steps_back(stamps: list[float]) -> list[tuple[float, float]]:
 
 
 def run(
-    server: LiveServer, seconds: float, clock: Callable[[float], float], game: bool
+    server: LiveServer, seconds: float, clock: Callable[[float], float], game: bool, sent: list[float] | None = None
 ) -> tuple[list[dict], list[dict], list[float]]:
     """0.5 s on a steady clock (to settle), then ``seconds`` on ``clock``, without a break
     in the stream; the follower's frames of the second part, the segment messages and the
-    stamps sent."""
+    stamps sent (``sent``: when each was sent)."""
     follower = Follower(server.ws)
     segments: list[dict] = []
     stamps: list[float] = []
@@ -96,7 +100,13 @@ def run(
             ws.recv(timeout=5)
             begin = time.perf_counter() + 0.5
             drive(
-                ws, 0.5 + seconds, lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5), segments, game, stamps
+                ws,
+                0.5 + seconds,
+                lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5),
+                segments,
+                game,
+                stamps,
+                sent,
             )
             end = time.perf_counter()
         frames = [f for f in follower.frames if begin + 0.05 <= f["at"] <= end]
@@ -134,3 +144,43 @@ def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: 
     assert all(s["jump"] == s["t"] - s["previous_t"] and -0.2 < s["jump"] < 0.0 for s in segments), segments
     assert all(f["driver"] == "input" for f in stepping)
     assert largest_step(stepping) <= 1.5 * bound, (largest_step(stepping), bound)
+
+
+def held_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -> tuple[float, np.ndarray]:
+    """Of the frames from 1.5 s on (the clock's rate estimated): the share that held the newest
+    frame (a frame's ``source_t`` is a stamp itself: not interpolated), and each one's
+    lateness (the newest stamp whose send began before the frame arrived minus its
+    ``source_t``, s: how far behind the producer's clock the rider reads, delivery included)."""
+    later = [f for f in frames if f["at"] >= frames[0]["at"] + 1.5]
+    exact = set(stamps)
+    held = sum(f["source_t"] in exact for f in later) / len(later)
+    lateness = [stamps[bisect.bisect_right(sent, f["at"]) - 1] - f["source_t"] for f in later]
+    return held, np.array(lateness)
+
+
+def test_a_clock_5_percent_slow_or_fast_is_tracked_without_resets(server: LiveServer) -> None:
+    """A producer whose clock runs 5 % slow (a game at a fixed timestep on a busy host) or 5 %
+    fast against ours, over the real websocket at 120 frames a second: no segment (no reset),
+    the producer drives every frame (no lost control), the rider reads between frames about
+    as often as with a steady clock (the old mapping, 5 % slow: it held the newest frame on
+    every frame, up to 0.2 s ahead of the frames' own timing; held share 1.0 against 0.0
+    steady), and its lateness is bounded: never ahead of the producer, its median within
+    20 ms of a steady clock's in the same run, not growing (the last second's median within
+    10 ms of the first's), its largest within 0.1 s of the steady clock's largest (delivery
+    on a loaded host)."""
+    steady_sent: list[float] = []
+    steady, none, steady_stamps = run(server, 4.0, lambda e: e, game=True, sent=steady_sent)
+    assert none == []
+    held_steady, steady_late = held_and_late(steady, steady_stamps, steady_sent)
+    for rate in (0.95, 1.05):
+        sent: list[float] = []
+        frames, segments, stamps = run(server, 6.0, lambda e, r=rate: r * e, game=True, sent=sent)  # type: ignore[misc]
+        assert segments == [], (rate, segments)
+        assert all(f["driver"] == "input" for f in frames), (rate, drivers(frames))
+        held, late = held_and_late(frames, stamps, sent)
+        figures = (rate, held, held_steady, np.median(late), late.max(), np.median(steady_late), steady_late.max())
+        assert held <= held_steady + 0.15, figures
+        assert late.min() >= 0.0, figures
+        assert np.median(late) <= np.median(steady_late) + 0.02 and late.max() <= steady_late.max() + 0.1, figures
+        second = len(late) * 120 // 540  # about one second of frames
+        assert abs(np.median(late[-second:]) - np.median(late[:second])) <= 0.01, figures

@@ -67,7 +67,15 @@ def test_the_hang_threshold_waits_out_a_devices_longest_legitimate_wait() -> Non
     """A tick at 500 Hz waiting out one lost servo reply (30 ms for bench3) is not hung:
     the threshold is the hang periods plus that wait (the floors set to 0 to see the sum)."""
     config = ServiceConfig.model_validate(
-        {"tick": {"rate": 500.0, "hang_ticks": 5.0, "hang_floor": 0.0, "hang_floor_realtime": 0.0}}
+        {
+            "tick": {
+                "rate": 500.0,
+                "hang_ticks": 5.0,
+                "hang_floor": 0.0,
+                "hang_floor_realtime": 0.0,
+                "hang_floor_cold": 0.0,
+            }
+        }
     )
     rig = load_rig("bench3")
     spec = DeviceSpec("dynamixel", "bench3", None, rig.name, 1, 0.002, longest_wait_s=longest_tick_wait_s(rig))
@@ -84,3 +92,25 @@ def test_the_hang_threshold_waits_out_a_devices_longest_legitimate_wait() -> Non
 
 def test_a_setting_that_kills_the_tick_at_start_is_dropped_not_crash_looped() -> None:
     asyncio.run(_crash_then_start_as_configured())
+
+
+def test_without_a_warm_spare_a_tick_nothing_depends_on_gets_the_cold_floor() -> None:
+    """The soak: a 254 ms stall of the tick right after a takeover (its spare still warming)
+    was a hang at the 0.25 s floor, and the cold start that followed cost 26.8 s without a
+    frame at load 25. With no warm spare and no device moving the threshold is at least
+    ``tick.hang_floor_cold``; with a warm spare, or a device moving (the guardian's own
+    ``tick_timeout`` watches it then), the usual floor."""
+    config = ServiceConfig.model_validate({"tick": {"rate": 120.0, "hang_floor": 0.25, "hang_floor_cold": 2.0}})
+    link = TickLink(make_setup(config, load_preset(config.tick.preset)))
+    try:
+        supervisor = TickSupervisor(link, config, link.drain_notify, lambda status: None)
+        supervisor._first_beat = time.perf_counter() - 60.0  # past the start-up grace
+        assert link.spare is None and not supervisor.spares.warm()
+        assert supervisor.hang_threshold() == pytest.approx(2.0)
+        supervisor._a_device_moves = lambda: True  # type: ignore[method-assign]
+        assert supervisor.hang_threshold() == pytest.approx(0.25)
+        supervisor.spares.warm = lambda: True  # type: ignore[method-assign]
+        del supervisor._a_device_moves
+        assert supervisor.hang_threshold() == pytest.approx(0.25)  # the floor of a tick not (yet) at SCHED_FIFO
+    finally:
+        link.close()
