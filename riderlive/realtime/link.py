@@ -45,7 +45,7 @@ EXIT_255 = (
     " (multiprocessing's spawn says nothing then); the log above says which: a 'last words' line"
     " with a traceback, a faulthandler dump, or no 'started' line for that pid"
 )
-"""What ``exit 255`` can mean (the soak saw one once, its log not kept: ``tick_process.last_words``)."""
+"""What ``exit 255`` can mean (the soak saw one once, its log not kept: ``realtime/last_words.py``)."""
 
 
 def exit_reason(code: int | None) -> str:

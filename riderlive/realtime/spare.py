@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import faulthandler
 import gc
 import logging
 import multiprocessing.process
@@ -36,10 +35,11 @@ import pickle
 import signal
 import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
+
+from riderlive.realtime.last_words import last_words
 
 log = logging.getLogger("riderlive.realtime.tick")
 WARM_NICE = 10
@@ -104,26 +104,6 @@ class Spare:
         if self.process.is_alive():
             self.process.kill()
         self.process.join(1.0)
-
-
-@contextlib.contextmanager
-def last_words(who: str) -> Iterator[None]:
-    """A tick or spare process's Python entry: say it started (a process that exits 255 without
-    this line never ran Python: its exec failed), dump the stacks on a fatal signal
-    (``faulthandler``), and log how its Python code ended when not by returning: the
-    exception with its traceback, or ``SystemExit`` with its code (``SystemExit(-1)`` is
-    ``exit 255``, silent otherwise). Nothing is logged for a normal end."""
-    faulthandler.enable()
-    log.info("%s started (pid %d)", who, os.getpid())
-    try:
-        yield
-    except SystemExit as exc:
-        if exc.code not in (None, 0):
-            log.critical("%s (pid %d) ends by SystemExit(%r)", who, os.getpid(), exc.code, exc_info=True)
-        raise
-    except BaseException as exc:
-        log.critical("%s (pid %d) ends by %s: %s", who, os.getpid(), type(exc).__name__, exc, exc_info=True)
-        raise
 
 
 def spare_main(setups: tuple[bytes, ...], commands: Connection, notify: Connection, nice: int = WARM_NICE) -> None:

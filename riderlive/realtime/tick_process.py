@@ -22,9 +22,9 @@ from typing import Any
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.realtime import commands as cmd
+from riderlive.realtime.last_words import last_words
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.setup import TickSetup
-from riderlive.realtime.spare import last_words
 from riderlive.realtime.tick import TickLoop
 from riderlive.sched import normal_priority_thread, try_realtime_priority
 

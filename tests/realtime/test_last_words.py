@@ -2,7 +2,7 @@
 
 Two ways to exit 255 without a word: ``SystemExit(-1)`` (or a C library's ``exit(-1)``),
 and an exec that failed before Python ran (multiprocessing's spawn never reads the
-child's error pipe). ``spare.last_words`` makes the first say how it ended and the second
+child's error pipe). ``last_words.last_words`` makes the first say how it ended and the second
 recognisable by the missing "started" line; ``link.exit_reason`` names both."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from multiprocessing import spawn
 
 import pytest
 
+from riderlive.realtime.last_words import last_words
 from riderlive.realtime.link import exit_reason
-from riderlive.realtime.spare import last_words
 
 
 def exit_minus_one() -> None:
