@@ -381,7 +381,7 @@ def test_the_platform_is_drawn_with_its_actuators_coloured_by_closeness(live_pag
 
     assert live_page.page.locator("#platform").is_hidden()  # no platform attached to this service
     plug = PlatformPlug(PlatformModel.load("stewart_compact"), "/dev/null")
-    plug.positions = [plug.lower[0], *plug.model.home_positions[1:]]
+    plug.positions = [plug.model.geometry.lower[0], *plug.model.home_positions[1:]]
     platform = {"name": plug.name, "state": "running", "detail": "", "fault": None, **plug.status()}
     shown = live_page.page.evaluate(
         """(platform) => {
