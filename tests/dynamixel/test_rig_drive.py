@@ -21,7 +21,7 @@ from riderlive.cli import main
 from riderlive.devices.board import GUARDIAN_HANG_S
 from riderlive.devices.shared import pid_alive
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import load_rig
+from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import Instruction, Item
 from riderlive.rig_drive import drive
@@ -136,15 +136,10 @@ def test_a_killed_driver_is_parked_by_its_guardian(bus_factory: Callable[..., Em
     cli.communicate(timeout=10)
     torque_on = lambda: any(emu.read_item(i, Item.TORQUE_ENABLE) for i in (1, 2, 3))  # noqa: E731
     wait_until(lambda: not torque_on(), 10.0, "the guardian never turned torque off", poll=0.02)
-    emu.settle()
-    writes = [t for t, _ in goal_writes(emu) if t > killed]
-    off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > killed]
-    assert writes and writes[0] - killed <= 0.2, "the guardian's first park goal within 200 ms"
-    assert off and off[0] - killed <= rig.bus.park_s + 2 * rig.bus.tick_s + 0.2  # the wait for arrival is in park_s
+    writes, off = parked_since(emu, rig, killed)
+    assert writes[0] - killed <= 0.2, "the guardian's first park goal within 200 ms"
+    assert off[0] - killed <= rig.bus.park_s + 2 * rig.bus.tick_s + 0.2  # the wait for arrival is in park_s
     assert off[0] - killed >= rig.bus.park_ramp_s  # it eased to park first (category 1)
-    head = rig.servos["head"]
-    assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
-    assert all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
 
 
 def test_an_orphan_guardian_gives_up_on_a_silent_bus(
@@ -197,6 +192,19 @@ def all_torque_off(emu: EmulatedBus) -> bool:
     return all(emu.read_item(i, Item.TORQUE_ENABLE) == 0 for i in (1, 2, 3))
 
 
+def parked_since(emu: EmulatedBus, rig: RigConfig, since: float) -> tuple[list[float], list[float]]:
+    """The goal and torque-off writes after ``since`` (perf_counter s), checked as a category 1
+    stop: park goals, then torque off with no goal after it, torque read back off on every
+    servo, the head at its park pose."""
+    emu.settle()
+    goals = [t for t, _ in goal_writes(emu) if t > since]
+    off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > since]
+    assert goals and off and goals[-1] < off[0], "eased to park, then torque off, no goal after"
+    assert all_torque_off(emu)
+    assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - rig.servos["head"].park) < 0.1
+    return goals, off
+
+
 def reap(*pids: int) -> None:
     for pid in pids:
         if pid <= 0:  # kill(0) would be this process group
@@ -230,14 +238,8 @@ def test_a_killed_guardian_is_replaced_by_its_standby_and_the_tick_parks_the_rig
         assert "parking -> parked" in out and "parked by the tick" in out and "closed; fault: none" in out
         now_watching, new_standby = watchers(lines)
         assert now_watching == standby and new_standby not in (0, guardian, standby), "the watch goes on"
-        emu.settle()
-        goals = [t for t, _ in goal_writes(emu) if t > killed]
-        off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > killed]
-        assert off and goals and goals[-1] < off[0], "eased to park, then torque off, no goal after"
+        _, off = parked_since(emu, rig, killed)
         assert off[0] - killed >= rig.bus.park_ramp_s  # category 1: a park, not a drop
-        assert all_torque_off(emu)
-        head = rig.servos["head"]
-        assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
         wait_until(lambda: not pid_alive(standby) and not pid_alive(new_standby), 10.0, "the guardians stayed")
     finally:
         reap(guardian, standby)
@@ -266,13 +268,9 @@ def test_a_hung_driver_whose_guardian_is_killed_is_parked_by_the_standby(
         hung = time.perf_counter()
         assert cli.wait(timeout=20) == -signal.SIGKILL, "the standby kills the hung driver"
         wait_until(lambda: all_torque_off(emu), 10.0, "the standby never turned torque off", poll=0.02)
-        emu.settle()
-        goals = [t for t, _ in goal_writes(emu) if t > hung]
-        off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > hung]
-        assert goals and off and goals[-1] < off[0] and off[0] - goals[0] >= rig.bus.park_ramp_s
+        goals, off = parked_since(emu, rig, hung)
+        assert off[0] - goals[0] >= rig.bus.park_ramp_s
         assert goals[0] - hung < 2.0, "the standby's first park goal"
-        head = rig.servos["head"]
-        assert abs(pulses_to_deg(emu.read_item(3, Item.GOAL_POSITION)) - head.park) < 0.1
         wait_until(lambda: not pid_alive(standby), 20.0, "the standby stayed after its stop")
     finally:
         reap(guardian, standby)
