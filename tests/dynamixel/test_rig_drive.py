@@ -12,7 +12,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -213,21 +213,37 @@ def reap(*pids: int) -> None:
             os.kill(pid, signal.SIGKILL)
 
 
+@contextlib.contextmanager
+def watched_drive(
+    bus_factory: Callable[..., EmulatedBus], tmp_path: Path
+) -> Iterator[tuple[RigConfig, EmulatedBus, subprocess.Popen[str], list[str]]]:
+    """``rig --drive --arm`` as a process on an emulated rig, writing goals (20 more seen), with
+    the lines it said so far (its guardian and standby pids among them); afterwards the CLI is
+    killed if it still runs and every guardian it named is reaped."""
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
+    seen: list[str] = []
+    cli = start_cli(path, emu.port, seen)
+    try:
+        running = len(goal_writes(emu))
+        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+        yield rig, emu, cli, seen
+    finally:
+        if cli.poll() is None:
+            cli.kill()
+            cli.communicate(timeout=10)
+        reap(*{pid for line in seen for pid in map(int, re.findall(r"(?:guardian|standby) (\d+)", line))})
+
+
 def test_a_killed_guardian_is_replaced_by_its_standby_and_the_tick_parks_the_rig(
     bus_factory: Callable[..., EmulatedBus], tmp_path: Path
 ) -> None:
     """The service's rule, in ``rig --drive``: the guardian that watched is gone (SIGKILL), its
     standby takes over and a new standby follows (the rig keeps its watch); the tick parks
     the armed rig itself (category 1), the CLI says why and exits 1; torque off, read back."""
-    path = rig_file(tmp_path)
-    rig = load_rig(path)
-    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    seen: list[str] = []
-    cli = start_cli(path, emu.port, seen)
-    guardian, standby = watchers(seen)
-    try:
-        running = len(goal_writes(emu))
-        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+    with watched_drive(bus_factory, tmp_path) as (rig, emu, cli, seen):
+        guardian, standby = watchers(seen)
         killed = time.perf_counter()
         os.kill(guardian, signal.SIGKILL)
         out, _ = cli.communicate(timeout=30)
@@ -241,11 +257,6 @@ def test_a_killed_guardian_is_replaced_by_its_standby_and_the_tick_parks_the_rig
         _, off = parked_since(emu, rig, killed)
         assert off[0] - killed >= rig.bus.park_ramp_s  # category 1: a park, not a drop
         wait_until(lambda: not pid_alive(standby) and not pid_alive(new_standby), 10.0, "the guardians stayed")
-    finally:
-        reap(guardian, standby)
-        if cli.poll() is None:
-            cli.kill()
-            cli.communicate(timeout=10)
 
 
 def test_a_hung_driver_whose_guardian_is_killed_is_parked_by_the_standby(
@@ -254,15 +265,8 @@ def test_a_hung_driver_whose_guardian_is_killed_is_parked_by_the_standby(
     """Tick (the CLI, SIGSTOP) and guardian (SIGKILL) both gone: without a standby nobody
     parks (issue 25); with it, the standby becomes the guardian, finds the tick hung, kills
     it and parks the rig from its last published pose; torque off read back."""
-    path = rig_file(tmp_path)
-    rig = load_rig(path)
-    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    seen: list[str] = []
-    cli = start_cli(path, emu.port, seen)
-    guardian, standby = watchers(seen)
-    try:
-        running = len(goal_writes(emu))
-        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+    with watched_drive(bus_factory, tmp_path) as (rig, emu, cli, seen):
+        guardian, standby = watchers(seen)
         cli.send_signal(signal.SIGSTOP)
         os.kill(guardian, signal.SIGKILL)
         hung = time.perf_counter()
@@ -272,11 +276,6 @@ def test_a_hung_driver_whose_guardian_is_killed_is_parked_by_the_standby(
         assert off[0] - goals[0] >= rig.bus.park_ramp_s
         assert goals[0] - hung < 2.0, "the standby's first park goal"
         wait_until(lambda: not pid_alive(standby), 20.0, "the standby stayed after its stop")
-    finally:
-        reap(guardian, standby)
-        if cli.poll() is None:
-            cli.kill()
-        cli.communicate(timeout=10)
 
 
 def test_a_hung_guardian_and_standby_make_the_tick_park_the_rig(
@@ -284,15 +283,8 @@ def test_a_hung_guardian_and_standby_make_the_tick_park_the_rig(
 ) -> None:
     """The tick's guardian watch: no guardian beats (both SIGSTOP) -> after GUARDIAN_HANG_S the
     tick parks the rig itself, says why, and the CLI exits 1; torque off read back."""
-    path = rig_file(tmp_path)
-    rig = load_rig(path)
-    emu = bus_factory(servo_setups(rig), baud=rig.bus.baud)
-    seen: list[str] = []
-    cli = start_cli(path, emu.port, seen)
-    guardian, standby = watchers(seen)
-    try:
-        running = len(goal_writes(emu))
-        wait_until(lambda: len(goal_writes(emu)) >= running + 20, 10.0, "the CLI stopped writing goals")
+    with watched_drive(bus_factory, tmp_path) as (rig, emu, cli, seen):
+        guardian, standby = watchers(seen)
         os.kill(standby, signal.SIGSTOP)  # first: it would kill a hung guardian and take over
         os.kill(guardian, signal.SIGSTOP)
         stopped = time.perf_counter()
@@ -305,8 +297,3 @@ def test_a_hung_guardian_and_standby_make_the_tick_park_the_rig(
         off = [t for t, raw in list(emu.arrivals) if is_torque_off_write(raw) and t > stopped]
         assert off and off[0] - stopped >= GUARDIAN_HANG_S + rig.bus.park_ramp_s
         assert all_torque_off(emu)
-    finally:
-        reap(guardian, standby)
-        if cli.poll() is None:
-            cli.kill()
-            cli.communicate(timeout=10)
