@@ -140,7 +140,7 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
         time.sleep(0.3)
         sup = rig.supervision()
         web, tick, guardian = rig.service().proc.pid, sup["tick_pid"], sup["guardian"]["pid"]
-        rig.emu.ask("arrivals")
+        before = rig.emu.ask("arrivals")
         hit = time.perf_counter()
         hang = case == "stop" or case.endswith("_hang")
         how = signal.SIGSTOP if hang else signal.SIGKILL
@@ -193,6 +193,11 @@ def trial(rig: Rig, case: str) -> dict[str, float]:
             watcher.join()
             nobody["guardian_back"] = back[0] if back else float("inf")
         return nobody
+    moving = any(is_goal_write(raw) and t > hit - 0.1 for t, raw in before)
+    if not goals and not moving:  # no goal in the 100 ms before the signal: it had stopped already
+        print(f"  ({case}: the rig was not moving at the signal (a loaded host): trial again)", flush=True)
+        rig.retries += 1
+        return trial(rig, case)
     if offs and not goals:  # a torque-off with no goal after the signal: the rig had stopped before it
         print(f"  ({case}: the rig was stopping already at the signal (a loaded host): trial again)", flush=True)
         rig.retries += 1
