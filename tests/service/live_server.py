@@ -12,6 +12,7 @@ from pathlib import Path
 
 import httpx
 
+from tests.children import with_parent_death
 from tests.waiting import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,8 +42,20 @@ class LiveServer:
         config = workdir / "service.toml"
         config.write_text(config_text)
         env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+        command = [
+            sys.executable,
+            "-m",
+            "riderlive",
+            "serve",
+            "--config",
+            str(config),
+            "--host",
+            host,
+            "--port",
+            str(port),
+        ]
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--host", host, "--port", str(port)],
+            with_parent_death(command),  # SIGTERM (a clean stop) if the test run dies
             cwd=workdir,
             env=env,
             stdout=subprocess.DEVNULL,
