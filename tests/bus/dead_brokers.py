@@ -19,6 +19,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from tests.children import with_parent_death
+
 ROOT = Path(__file__).resolve().parents[2]
 BAD_URL = "nats://127.0.0.1:99999"
 """nats-py rejects this URL before any connect: the baseline of a start-up."""
@@ -74,7 +76,7 @@ def race_with_baseline(command: list[str], url: str, cwd: Path) -> tuple[Exit, E
     start = time.perf_counter()
     procs = [
         subprocess.Popen(
-            [sys.executable, "-m", "riderlive", *(a.format(url=u) for a in command)],
+            with_parent_death([sys.executable, "-m", "riderlive", *(a.format(url=u) for a in command)]),
             cwd=cwd,
             env=env,
             stdout=subprocess.DEVNULL,

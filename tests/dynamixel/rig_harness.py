@@ -20,6 +20,7 @@ from riderlive.dynamixel.driver import RigPlug
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item
+from tests.children import with_parent_death
 from tests.devices.memory_plug import rider_frame
 
 TORQUE_ENABLE_ADDRESS = 64
@@ -153,7 +154,7 @@ def servo_emulator(rig_file: Path) -> Iterator[str]:
     its pty, stops it on the way out."""
     root = Path(__file__).resolve().parents[2]
     emu = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
+        with_parent_death([sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)]),
         stdout=subprocess.PIPE,
         text=True,
         env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"},

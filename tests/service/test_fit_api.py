@@ -20,7 +20,7 @@ from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from riderlive.rules.params import load_preset
-from tests.service.live_server import LiveServer
+from tests.service.live_server import HTTP, LiveServer
 
 TAKE = "fit-take"
 TRUE = "english"
@@ -68,7 +68,7 @@ def upload(server: LiveServer, name: str, data: bytes, **query: Any) -> httpx.Re
 
 def fit(server: LiveServer, path: str, body: dict[str, Any]) -> httpx.Response:
     """A fit takes seconds (a child process, niced, on a busy host): a long client timeout."""
-    return httpx.post(server.base + path, json=body, timeout=180.0)
+    return HTTP.post(server.base + path, json=body, timeout=180.0)
 
 
 def recovered(report: dict[str, Any], truth: str) -> list[str]:
