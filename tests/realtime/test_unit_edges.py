@@ -64,7 +64,15 @@ def old_outputs(model: RiderModel, horse: list[float], point: SaddlePoint) -> tu
 
 def old_frame(result: TickResult, t: float, scale: float) -> TickFrame:
     return TickFrame.build(
-        3, t, t + 1.0, result.source_time, Flag.INPUT, result.rider, result.horse, result.saddle, result.estimate,
+        3,
+        t,
+        t + 1.0,
+        result.source_time,
+        Flag.INPUT,
+        result.rider,
+        result.horse,
+        result.saddle,
+        result.estimate,
         scale / 25.0,
     )
 
