@@ -44,6 +44,7 @@ from collections.abc import Sequence
 
 from riderlive.devices.board import GUARDIAN_HANG_S, GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
+from riderlive.devices.exiting import hasten_exit, holders
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
 from riderlive.devices.registry import DeviceSpec, make_plug
@@ -180,7 +181,10 @@ class Guardian:
             deadline = time.perf_counter() + KILL_WAIT_S
             while pid_alive(pid) and time.perf_counter() < deadline:
                 time.sleep(0.0005)
-        hasten_exit(pid)
+        if raised := hasten_exit(pid):
+            log.info(
+                "the tick %d exits (its port is released after its memory): %d threads raised to ours", pid, raised
+            )
 
     def _stop_device(self, index: int, spec: DeviceSpec) -> None:
         last = self.board.device(index)
@@ -252,75 +256,6 @@ class Guardian:
             except PortLost as exc:
                 log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
                 return False
-
-
-def hasten_exit(pid: int) -> int:
-    """Lend this process's scheduling to the threads of ``pid``, a killed process still
-    exiting; return how many threads were raised (0: none left, or this process runs at
-    normal scheduling, or the host refused).
-
-    A SIGKILLed process keeps its files, and so its port lock, until its last thread has
-    freed the whole address space (the kernel's ``exit_mmap`` runs before ``exit_files``):
-    the tick's 170 MB took 40-120 ms quiet, while the leader already showed as a zombie,
-    and the last thread, at normal priority, waits behind every busy process on a loaded
-    host (docs/performance.md, "A killed driver's port"). At this process's SCHED_FIFO
-    priority that teardown is not starved. Only a process that is exiting is touched
-    (its leader a zombie or every thread flagged ``PF_EXITING``): a live pid is left alone.
-    """
-    if not hasattr(os, "sched_getscheduler") or pid <= 0:
-        return 0
-    try:
-        policy = os.sched_getscheduler(0)
-        param = os.sched_getparam(0)
-    except OSError:
-        return 0
-    if policy != os.SCHED_FIFO:
-        return 0
-    raised = 0
-    for tid in exiting_threads(pid):
-        with contextlib.suppress(OSError):  # gone meanwhile, or not permitted
-            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
-            raised += 1
-    return raised
-
-
-_PF_EXITING = 0x4
-"""``/proc/PID/stat`` flags: the task is in ``do_exit`` (Linux ``include/linux/sched.h``)."""
-
-
-def exiting_threads(pid: int) -> list[int]:
-    """The threads of ``pid`` when every one of them is exiting (a zombie leader, or the
-    kernel's ``PF_EXITING`` flag), else [] (a live process, or no /proc)."""
-    tids: list[int] = []
-    try:
-        for name in os.listdir(f"/proc/{pid}/task"):
-            with open(f"/proc/{pid}/task/{name}/stat") as f:
-                fields = f.read().rsplit(")", 1)[-1].split()
-            state, flags = fields[0], int(fields[6])
-            if state not in ("Z", "X") and not flags & _PF_EXITING:
-                return []
-            tids.append(int(name))
-    except (OSError, ValueError, IndexError):
-        return []
-    return tids
-
-
-def holders(port: str | None) -> str:
-    """Which processes hold ``port`` open ("pid 123 (python)", ...; "" if none found or no /proc)."""
-    if not port:
-        return ""
-    try:
-        target = os.path.realpath(port)
-        found = []
-        for pid in filter(str.isdigit, os.listdir("/proc")):
-            with contextlib.suppress(OSError):
-                fds = os.listdir(f"/proc/{pid}/fd")
-                if any(os.path.realpath(f"/proc/{pid}/fd/{fd}") == target for fd in fds):
-                    with open(f"/proc/{pid}/comm") as comm:
-                        found.append(f"pid {pid} ({comm.read().strip()})")
-        return ", ".join(found)
-    except OSError:
-        return ""
 
 
 def launch(
