@@ -12,8 +12,10 @@ It watches (every ``POLL_S``, and at once through pidfds when a process exits):
 - the web process (when there is one): gone, or its heartbeat older than ``web_timeout_s``.
 
 On either it performs a category 1 stop (IEC 60204-1) for the tick generation that
-failed: SIGKILL the tick if it still runs (so two writers never share a bus), take each
-device's transport (an exclusive lock that the dead tick released with its file), and
+failed: SIGKILL the tick if it still runs (so two writers never share a bus), lend its
+exiting threads this process's priority (a killed process drops its port lock only after
+freeing its memory: ``devices/exiting.py``), take each device's transport (an exclusive
+lock that the dead tick released with its file), and
 per device in parallel: if it was moving, ease from its last published goal pose to
 park over the plug's park time, then outputs off; in any case read the outputs back
 and repeat outputs-off until every unit reports off, or the port is gone. An e-stop
