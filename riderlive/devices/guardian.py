@@ -12,8 +12,10 @@ It watches (every ``POLL_S``, and at once through pidfds when a process exits):
 - the web process (when there is one): gone, or its heartbeat older than ``web_timeout_s``.
 
 On either it performs a category 1 stop (IEC 60204-1) for the tick generation that
-failed: SIGKILL the tick if it still runs (so two writers never share a bus), take each
-device's transport (an exclusive lock that the dead tick released with its file), and
+failed: SIGKILL the tick if it still runs (so two writers never share a bus), lend its
+exiting threads this process's priority (a killed process drops its port lock only after
+freeing its memory: ``devices/exiting.py``), take each device's transport (an exclusive
+lock that the dead tick released with its file), and
 per device in parallel: if it was moving, ease from its last published goal pose to
 park over the plug's park time, then outputs off; in any case read the outputs back
 and repeat outputs-off until every unit reports off, or the port is gone. An e-stop
@@ -44,6 +46,7 @@ from collections.abc import Sequence
 
 from riderlive.devices.board import GUARDIAN_HANG_S, GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
+from riderlive.devices.exiting import hasten_exit, holders
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
 from riderlive.devices.registry import DeviceSpec, make_plug
@@ -174,13 +177,16 @@ class Guardian:
 
     def _kill_tick(self) -> None:
         pid = int(self.board.tick_pid)
-        if not pid_alive(pid):
-            return
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        deadline = time.perf_counter() + KILL_WAIT_S
-        while pid_alive(pid) and time.perf_counter() < deadline:
-            time.sleep(0.0005)
+        if pid_alive(pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            deadline = time.perf_counter() + KILL_WAIT_S
+            while pid_alive(pid) and time.perf_counter() < deadline:
+                time.sleep(0.0005)
+        if raised := hasten_exit(pid):
+            log.info(
+                "the tick %d exits (its port is released after its memory): %d threads raised to ours", pid, raised
+            )
 
     def _stop_device(self, index: int, spec: DeviceSpec) -> None:
         last = self.board.device(index)
@@ -252,24 +258,6 @@ class Guardian:
             except PortLost as exc:
                 log.error("%s: %s: the port is gone (the servos' own watchdog is all that is left)", spec.name, exc)
                 return False
-
-
-def holders(port: str | None) -> str:
-    """Which processes hold ``port`` open ("pid 123 (python)", ...; "" if none found or no /proc)."""
-    if not port:
-        return ""
-    try:
-        target = os.path.realpath(port)
-        found = []
-        for pid in filter(str.isdigit, os.listdir("/proc")):
-            with contextlib.suppress(OSError):
-                fds = os.listdir(f"/proc/{pid}/fd")
-                if any(os.path.realpath(f"/proc/{pid}/fd/{fd}") == target for fd in fds):
-                    with open(f"/proc/{pid}/comm") as comm:
-                        found.append(f"pid {pid} ({comm.read().strip()})")
-        return ", ".join(found)
-    except OSError:
-        return ""
 
 
 def launch(

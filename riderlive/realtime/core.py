@@ -23,9 +23,16 @@ blends too, over ``Timing.param_blend``: at the next tick the difference between
 old and the new model on the current horse is added to the new model's output and
 fades out with a smoothstep, so the rider keeps moving while it changes.
 
-Whatever drives, each tick's result carries the saddle pose of its horse
-(:func:`~riderlive.realtime.saddle_input.saddle_pose`, computed once per tick for
-``/ws/rider``, takes and devices) and, while a saddle input drives, its estimate.
+Whatever drives, each tick's result carries the saddle pose of its horse at the
+configured point (:meth:`~riderlive.realtime.edges.UnitEdges.saddle`, computed once per
+tick for ``/ws/rider``, takes and devices) and, while a saddle input drives, its estimate.
+
+Units: the core computes in the service length unit, the unit of the input ring it reads
+and of the record it writes (the wire); it holds no unit factor. Whatever crosses into
+metres or out of them goes through its :class:`~riderlive.realtime.edges.UnitEdges` (the
+procedural horse in, the saddle pose at a point in metres, the rider parts on metric
+skeletons, a saddle stream's estimator); the rules keep the thesis' units behind their own
+adapter (``RiderModel.scale``).
 
 Outputs are finite and bounded: every rider value is clamped to its plausible range
 (:mod:`riderlive.ranges`, counted in ``clamped``) before and after the stateful
@@ -44,16 +51,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from riderlive.channels import HORSE, HORSE_NAMES, Kind
+from riderlive.channels import HORSE_NAMES
 from riderlive.horse import ProceduralHorse
+from riderlive.realtime.edges import UnitEdges
 from riderlive.realtime.layout import InputKind
 from riderlive.realtime.resample import Resampler
-from riderlive.realtime.saddle_input import NO_ESTIMATE, make_saddle_input, saddle_pose
+from riderlive.realtime.saddle_input import NO_ESTIMATE
 from riderlive.rules.animator import DamperState, SpringState, damper_start, damper_step, spring_step
 from riderlive.rules.engine import RiderModel
-from riderlive.rules.parts import PART_OUTPUTS, RiderParts
+from riderlive.rules.parts import PART_OUTPUTS
 from riderlive.saddle.pose import SaddlePoint
-from riderlive.units import metres_per_unit, units_per_metre
 
 
 class Driver(enum.IntEnum):
@@ -95,14 +102,11 @@ class TickResult:
     horse: list[float]
     rider: list[float]
     saddle: list[float] = field(default_factory=lambda: [0.0] * 6)
-    """``channels.SADDLE`` of ``horse`` (service length units, degrees): the platform's input."""
+    """``channels.SADDLE`` of ``horse`` at the configured point (service length unit, degrees)."""
     estimate: tuple[float, ...] = NO_ESTIMATE
     """The saddle estimate (``record.ESTIMATE_FIELDS``) while a saddle input drives, else NaN."""
     parts: list[float] = field(default_factory=list)
     """The rider parts (``channels.RIDER_PARTS``) of the published rider; empty when the step failed."""
-
-
-_TRANSLATION = tuple(i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION)
 
 
 def _smoothstep(x: float) -> float:
@@ -136,7 +140,9 @@ class TickCore:
         self.mode = mode
         self.resampler = Resampler(delay=timing.delay, hold=timing.hold)
         self.saddle_point = saddle_point or SaddlePoint()
-        self.saddle = make_saddle_input(model.scale, self.saddle_point, timing.delay)
+        self.edges = UnitEdges(model.scale, self.saddle_point)
+        """Where lengths cross to metres and back (built once: the model's scale is the setup's)."""
+        self.saddle = self.edges.saddle_input(timing.delay)
         """The saddle producer's stream, while the producer is one (``input_kind``)."""
         self.input_kind = InputKind.HORSE
         self.producer = -1
@@ -180,10 +186,7 @@ class TickCore:
         self.model = model
         self.neutral_horse = [0.0] * len(HORSE_NAMES)
         self.neutral_rider = model.evaluate(self.neutral_horse)
-        # The procedural horse speaks metres; inputs are in the model's length unit.
-        self._procedural_gain = units_per_metre(model.scale)
-        self._to_metres = metres_per_unit(model.scale)
-        self.parts = RiderParts(model.params, self._to_metres)
+        self.parts = self.edges.rider_parts(model.params)
 
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
@@ -220,12 +223,8 @@ class TickCore:
             self.saddle.clear()
 
     def procedural_frame(self, now: float) -> list[float]:
-        frame = self.horse.sample(now)
-        gain = self._procedural_gain
-        if gain != 1.0:
-            for i in _TRANSLATION:
-                frame[i] *= gain
-        return frame
+        """The procedural horse at ``now`` in the service unit (it speaks metres)."""
+        return self.edges.procedural(self.horse.sample(now))
 
     def _start_blend(self, now: float, duration: float) -> None:
         self._blend_from = self.last_rider
@@ -266,7 +265,7 @@ class TickCore:
         else:
             source_time, horse = now, self.neutral_horse
         producer = self.producer if driver is Driver.INPUT else -1
-        saddle = saddle_pose(horse, self._to_metres, self.saddle_point)
+        saddle = self.edges.saddle(horse)
         by_saddle = driver is Driver.INPUT and self.input_kind is InputKind.SADDLE
         estimate = self.saddle.estimate_row(now) if by_saddle else NO_ESTIMATE
         rider = self._rules(driver, horse, now)

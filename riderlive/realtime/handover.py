@@ -114,7 +114,7 @@ CORE_FIELDS = {
 CORE_REBUILT = frozenset(
     {
         "timing", "horse", "resampler", "saddle_point", "saddle", "model", "_previous_model", "neutral_horse",
-        "neutral_rider", "_procedural_gain", "_to_metres", "parts", "low", "high", "_last_reset", "faults",
+        "neutral_rider", "edges", "parts", "low", "high", "_last_reset", "faults",
         "_no_parts",
     }
 )  # fmt: skip

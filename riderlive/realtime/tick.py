@@ -43,7 +43,6 @@ from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedCounters, SharedRing
 from riderlive.realtime.tick_control import TickControl
 from riderlive.rules.engine import RiderModel
-from riderlive.units import metres_per_unit
 
 if TYPE_CHECKING:
     from riderlive.realtime.tail import TickPhysics
@@ -122,7 +121,6 @@ class TickLoop(TickControl):
         self._last_good: TickResult | None = None
         self._held = False
         """The last ``_step`` repeated the last good result (flagged in the tick's frame)."""
-        self.metres_per_unit = metres_per_unit(setup.length_scale)
         self.physics: TickPhysics | None = None
         if setup.tail:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
@@ -256,7 +254,7 @@ class TickLoop(TickControl):
         devices = self.devices
         if devices is None:
             return
-        changed = devices.tick(frame_of(result, tick, now, deadline, self.metres_per_unit, self._held))
+        changed = devices.tick(frame_of(result, tick, now, deadline, self.core.edges.metres_per_unit, self._held))
         self._unsent_rx = max(self._unsent_rx, newest_rx)
         if devices.goal_written_at is not None and self._unsent_rx >= 0.0:
             wire = devices.goal_written_at - self.setup.start - self._unsent_rx
