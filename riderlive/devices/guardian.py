@@ -12,14 +12,16 @@ It watches (every ``POLL_S``, and at once through pidfds when a process exits):
 - the web process (when there is one): gone, or its heartbeat older than ``web_timeout_s``.
 
 On either it performs a category 1 stop (IEC 60204-1) for the tick generation that
-failed: SIGKILL the tick if it still runs (so two writers never share a bus), take each
+failed: SIGKILL the tick if it still runs (so two writers never share a bus), read each
+device's last published state and pose, mark the stop begun (``guardian_taking``: the web
+process may now start the next generation, whose devices wait for the hand-back), take each
 device's transport (an exclusive lock that the dead tick released with its file), and
 per device in parallel: if it was moving, ease from its last published goal pose to
 park over the plug's park time, then outputs off; in any case read the outputs back
 and repeat outputs-off until every unit reports off, or the port is gone. An e-stop
 requested meanwhile cuts the park short (outputs off at once). Then it releases the
-transports and marks the generation stopped, so the web process may start a new tick
-(which connects and stays disarmed). With the web process gone there is nothing to
+transports and marks the generation stopped (``guardian_done``): the hand-back, after which
+the new generation's devices connect (and stay disarmed). With the web process gone there is nothing to
 hand back to: it repeats outputs-off until confirmed or for ``GIVE_UP_AFTER_S``, then exits.
 
 What it cannot do is in docs/hardware.md (the guardian dying too, a pulled USB cable,
@@ -45,7 +47,7 @@ from collections.abc import Sequence
 from riderlive.devices.board import GUARDIAN_HANG_S, GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
-from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
+from riderlive.devices.lifecycle import DeviceState, FaultKind, PortBusy, PortLost
 from riderlive.devices.registry import DeviceSpec, make_plug
 from riderlive.devices.shared import pid_alive
 from riderlive.sched import try_realtime_priority
@@ -157,9 +159,11 @@ class Guardian:
         board.guardian_busy = 1.0
         try:
             self._kill_tick()
+            lasts = [board.device(i) for i in range(len(self.specs))]
+            board.guardian_taking = generation  # the next generation may tick: its devices wait for guardian_done
             threads = [
-                threading.Thread(target=self._stop_device, args=(i, spec), name=f"guardian {spec.name}")
-                for i, spec in enumerate(self.specs)
+                threading.Thread(target=self._stop_device, args=(i, spec, last), name=f"guardian {spec.name}")
+                for i, (spec, last) in enumerate(zip(self.specs, lasts, strict=True))
             ]
             for thread in threads:
                 thread.start()
@@ -182,8 +186,7 @@ class Guardian:
         while pid_alive(pid) and time.perf_counter() < deadline:
             time.sleep(0.0005)
 
-    def _stop_device(self, index: int, spec: DeviceSpec) -> None:
-        last = self.board.device(index)
+    def _stop_device(self, index: int, spec: DeviceSpec, last: tuple[DeviceState, list[float]] | None) -> None:
         if last is None:
             self.board.report(index, GuardianReport.NOT_CONNECTED)
             return  # never connected by that tick: nothing of ours on its bus

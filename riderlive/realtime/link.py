@@ -153,7 +153,9 @@ class TickLink(TickMemory):
     def mark_down(self, reason: str) -> None:
         """No generation serves from now (a death, a hang): :meth:`status` says so."""
         self.down_reason = reason
-        self.board.clear_reports()
+        board = self.board
+        if max(board.guardian_taking, board.guardian_done) < self.generation:  # not yet this failure's reports
+            board.clear_reports()
 
     def mark_up(self) -> None:
         """The serving generation has beaten."""
