@@ -110,7 +110,10 @@ class Guardian:
             generation = int(board.tick_generation)
             web_why = self._web_failed(now)
             pending = generation > board.guardian_done and board.tick_clean_exit != generation
-            if pending:
+            begun = int(board.guardian_taking)
+            if generation > begun > board.guardian_done:  # a stop begun by a guardian that died: finish it
+                self.stop(begun, f"generation {begun}'s stop was not finished", kill=False)
+            elif pending:
                 why = self._tick_failed(now) or web_why
                 if why:
                     self.stop(generation, why)
@@ -152,13 +155,16 @@ class Guardian:
 
     # -- the stop ---------------------------------------------------------------------------
 
-    def stop(self, generation: int, why: str) -> None:
-        """Category 1 stop of every device of tick ``generation``."""
+    def stop(self, generation: int, why: str, kill: bool = True) -> None:
+        """Category 1 stop of every device of tick ``generation`` (``kill``: SIGKILL the
+        board's tick first; False when finishing a dead guardian's stop: the board's tick is
+        then the next generation, its devices waiting for this stop's hand-back)."""
         board = self.board
         log.critical("%s: category 1 stop of %s", why, ", ".join(s.name for s in self.specs))
         board.guardian_busy = 1.0
         try:
-            self._kill_tick()
+            if kill:
+                self._kill_tick()
             lasts = [board.device(i) for i in range(len(self.specs))]
             board.guardian_taking = generation  # the next generation may tick: its devices wait for guardian_done
             threads = [

@@ -147,7 +147,8 @@ class TickLink(TickMemory):
     def _next_generation(self) -> None:
         self.generation += 1
         self.setup = dataclasses.replace(self.base_setup, generation=self.generation)
-        self.board.forget_devices()
+        if not self.board.guardian_busy:  # else the guardian's park progress (a successor of it goes on from there)
+            self.board.forget_devices()
         self.board.tick_beat = 0.0
 
     def mark_down(self, reason: str) -> None:

@@ -11,6 +11,9 @@ never handed back -> a fault at the bound, the transport untouched, a reset conn
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import threading
 import time
 from collections.abc import Iterator
 
@@ -18,6 +21,7 @@ import pytest
 
 from riderlive.devices import registry
 from riderlive.devices.board import GuardianReport, SafetyBoard
+from riderlive.devices.guardian import Guardian
 from riderlive.devices.guardians import Guardians, GuardianTimes, handback_pending, stop_wait_s
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, FaultKind
@@ -25,7 +29,7 @@ from riderlive.devices.registry import plan
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import TickDevices
 from tests.devices.memory_plug import MemoryPlug, rider_frame
-from tests.waiting import Pacer
+from tests.waiting import Pacer, wait_until
 
 S = DeviceState
 
@@ -154,3 +158,34 @@ def test_never_handed_back_faults_at_the_bound_untouched_and_a_reset_connects(
     tick_for(devices, board, 0.1, tick)
     assert devices.states() == {"left": "disarmed"} and plug.outputs == [False] * 3 and device.counters["arms"] == 0
     devices.close()
+
+
+def test_a_stop_left_unfinished_by_a_dead_guardian_is_finished_without_killing_the_next_tick(
+    monkeypatch: pytest.MonkeyPatch, board: SafetyBoard
+) -> None:
+    """The guardian died in the middle of generation 1's park after the next generation was
+    promoted (its devices waiting for the hand-back): its successor finishes that park from
+    the progress on the board, and does not kill the serving tick."""
+    monkeypatch.setitem(registry.KINDS, "memory", "tests.devices.memory_plug")
+    latch = StopLatch()
+    serving = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])  # generation 2's tick
+    try:
+        now = time.perf_counter()
+        board.web_pid, board.web_beat = os.getpid(), now
+        board.tick_pid, board.tick_generation, board.tick_beat = serving.pid, 2, now
+        board.guardian_taking, board.guardian_done, board.handback_from = 1, 0, 1
+        board.publish(0, S.PARKING, [0.3, 0.3, 0.3])  # where the dead guardian's park had got
+        spec = plan("memory", "left", None, tick_hz=100.0)[0]
+        guardian = Guardian(board, latch, [spec], tick_timeout_s=60.0, web_timeout_s=60.0)
+        runner = threading.Thread(target=guardian.run)
+        runner.start()
+        wait_until(lambda: board.guardian_done == 1, 10.0, "the unfinished stop was not finished")
+        board.shutdown = 1.0
+        runner.join(5.0)
+        assert board.reported(0) is GuardianReport.OUTPUTS_OFF and handback_pending(board, 0) is None
+        assert serving.poll() is None, "the serving tick was not killed"
+        assert board.guardian_takeovers == 1
+    finally:
+        serving.kill()
+        serving.wait()
+        latch.close()
