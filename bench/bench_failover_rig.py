@@ -22,6 +22,7 @@ import argparse
 import multiprocessing
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -29,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+import httpx
 
 from bench.bench_failover import Bench, produce, quantiles
 from bench.serving import ROOT, burn, start_server
@@ -49,9 +52,11 @@ def rig_file(workdir: Path) -> Path:
 
 
 def emulator(rig: Path, root: Path) -> tuple[subprocess.Popen[str], str]:
-    """``riderlive servo-emu --rig RIG`` of ``root`` in its own process, and its pty."""
+    """``riderlive servo-emu --rig RIG`` of ``root`` in its own process (SCHED_FIFO 30 where
+    ``chrt`` may: real servos answer whatever the host's load), and its pty."""
+    fifo = ["chrt", "-f", "30"] if shutil.which("chrt") else []  # hardware is not starved by the host's load
     emu = subprocess.Popen(
-        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig)],
+        [*fifo, sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig)],
         stdout=subprocess.PIPE,
         text=True,
         cwd=root,
@@ -94,11 +99,20 @@ def run(root: Path, kills: int) -> tuple[list[float], list[float]]:
             return str(bench.http.get("/api/devices").json()["devices"][0]["state"])
 
         for _ in range(kills):
-            wait(lambda: rig_state() == "disarmed", 120.0, 0.05)
-            bench.http.post("/api/arm", json={"device": "bench3"}).raise_for_status()
-            wait(lambda: rig_state() == "running", 60.0, 0.05)
-            s = bench.settle()
-            if rig_state() != "running":  # a failover of the host's own since (counted in the log)
+            try:
+                wait(lambda: rig_state() not in ("connecting", "parking", "unknown"), 120.0, 0.05)
+                if rig_state() in ("fault", "estop"):  # a loaded host's own fault since (counted, shown)
+                    print(f"{root}: the rig was {rig_state()}: reset", flush=True)
+                    bench.http.post("/api/reset", json={"device": "bench3"}).raise_for_status()
+                wait(lambda: rig_state() in ("disarmed", "parked"), 120.0, 0.05)
+                bench.http.post("/api/arm", json={"device": "bench3"}).raise_for_status()
+                wait(lambda: rig_state() == "running", 60.0, 0.05)
+                s = bench.settle()
+            except (RuntimeError, httpx.HTTPError) as exc:
+                print(f"{root}: not armed ({exc}; rig {rig_state()}): trial skipped", flush=True)
+                continue
+            if rig_state() != "running":  # a failover or fault of the host's own since
+                print(f"{root}: the rig stopped by itself ({rig_state()}): trial skipped", flush=True)
                 continue
             at = time.perf_counter()
             os.kill(s["tick_pid"], signal.SIGKILL)
