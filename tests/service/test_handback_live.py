@@ -130,13 +130,17 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
 ) -> None:
     live, emu, rig = armed_rig
     rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
-    wait_until(lambda: rig_state() == "disarmed", 60.0, lambda: devices(live))
-    assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
-    wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
     client = RiderClient(live)
-    # A spare's warm-up (imports, compiled kernels) took minutes at load 19 on the 2 shared cores.
-    wait_until(lambda: devices(live)["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
-    wait_until(lambda: rig_state() == "running", 5.0, lambda: devices(live))  # still this generation's
+    for _ in range(3):  # a loaded host may fail the tick over by itself (a hang): then arm again
+        wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+        assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
+        wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
+        # A spare's warm-up (imports, compiled kernels) took minutes at load 19 on the 2 shared cores.
+        wait_until(lambda: devices(live)["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
+        if rig_state() == "running":
+            break
+    else:
+        pytest.fail(f"the host failed the tick over before every kill: {devices(live)}")
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")
 
