@@ -43,13 +43,18 @@ class Handback:
     bound_s: float
 
 
+class HandbackTimeout(SetupTimeout):
+    """The guardian did not hand the devices back within the bound (a ``setup_timeout`` fault)."""
+
+
 class SetupRun:
     """One run of ``plug.setup``; ``say`` gets each step's detail (the device's status).
 
     With ``handback``, the transport is not touched until ``handback.pending()`` is None:
     the device stays ``connecting`` with the guardian's reason as its detail (counted once
-    in ``handback_waits``); past ``handback.bound_s`` it raises ``SetupTimeout`` (the
-    device faults, counted in ``handback_timeouts``; a reset connects without waiting).
+    in ``handback_waits``); past ``handback.bound_s`` it raises ``HandbackTimeout`` (the
+    device faults ``setup_timeout``, counted in ``handback_timeouts``; the device drops its
+    hand-back then, so a reset connects without waiting).
     ``SETUP_TIMEOUT_S`` counts from the hand-back."""
 
     def __init__(
@@ -81,7 +86,7 @@ class SetupRun:
         if now - self.since > handback.bound_s:
             self._handback = None
             self._counters["handback_timeouts"] += 1
-            raise SetupTimeout(
+            raise HandbackTimeout(
                 f"not connected: {why} for {now - self.since:.1f} s (bound {handback.bound_s:g} s); "
                 "the transport was not touched (a reset connects)"
             )

@@ -23,7 +23,7 @@ from riderlive.devices import registry
 from riderlive.devices.board import GuardianReport, SafetyBoard
 from riderlive.devices.guardian import Guardian
 from riderlive.devices.guardians import Guardians, GuardianTimes, handback_pending, stop_wait_s
-from riderlive.devices.latch import StopLatch
+from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.lifecycle import DeviceState, FaultKind
 from riderlive.devices.registry import plan
 from riderlive.realtime import commands as cmd
@@ -120,6 +120,12 @@ def test_held_waits_untouched_then_connects_disarmed_and_never_arms(
     assert board.device(1) is None
     reply = devices.request(cmd.Arm("left", "test", 1))
     assert not reply.ok and reply.refusal == "not_ready"  # nothing arms while connecting
+    latch.request(StopSource.REST)  # an e-stop and a reset meanwhile: still no transport touched
+    assert devices.act_on_stop(time.perf_counter()) and devices.states()["left"] == "estop"
+    assert devices.request(cmd.Reset(None, "test", 2)).ok
+    tick = tick_for(devices, board, 0.05, tick)
+    assert devices.states() == {"left": "connecting", "right": "connecting"}
+    assert all(not p.open and "setup" not in p.log for p in plugs(devices))
 
     board.report(0, GuardianReport.OUTPUTS_OFF)
     board.guardian_done = 1  # handed back
@@ -152,7 +158,7 @@ def test_never_handed_back_faults_at_the_bound_untouched_and_a_reset_connects(
     assert device.counters["handback_timeouts"] == 1
     plug = plugs(devices)[0]
     # never opened: no outputs-off in the middle of a park (the lifecycle's first-aid hook saw the fault, no transport)
-    assert not plug.open and plug.log == ["first aid: SetupTimeout"] and plug.outputs == [True] * 3
+    assert not plug.open and plug.log == ["first aid: HandbackTimeout"] and plug.outputs == [True] * 3
     reply = devices.request(cmd.Reset("left", "test", 1))  # the operator's call: connect without waiting
     assert reply.ok
     tick_for(devices, board, 0.1, tick)
