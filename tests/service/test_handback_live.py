@@ -130,7 +130,6 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
 ) -> None:
     live, emu, rig = armed_rig
     rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
-    client = RiderClient(live)
     for _ in range(3):  # a loaded host may fail the tick over by itself (a hang): then arm again
         wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
         assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
@@ -141,6 +140,8 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
             break
     else:
         pytest.fail(f"the host failed the tick over before every kill: {devices(live)}")
+    client = RiderClient(live)  # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
+    wait_until(lambda: len(client.frames) >= 50, 10.0, "no rider frames at the client")
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")
 
@@ -158,7 +159,8 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
     first_frame = client.first_ticked_after(killed)
     goals, off = parked_since(emu, rig, killed)  # eased to park, torque off, no goal after, read back off
     park_ended = off[0]
-    assert first_frame is not None, "no rider frame before the park ended"
+    last = client.frames[-1] if client.frames else None
+    assert first_frame is not None, ("no rider frame before the park ended", len(client.frames), last, killed)
     frames_after, park_after = first_frame - killed, park_ended - killed
     print(f"kill -> first new frame at the client {frames_after * 1e3:.0f} ms; -> park ended {park_after * 1e3:.0f} ms")
     supervision = samples[-1][1]["supervision"]
