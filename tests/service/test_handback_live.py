@@ -167,7 +167,7 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
     marks = {k: round((supervision[k] - killed) * 1e3) for k in ("last_down_at", "promoted_at")}
     said = [line.strip() for line in live.log if re.search(r"took over in|is up, |category 1 stop", line)]
     print(f"ms after the kill: {marks}; {said[-3:]}")
-    assert park_after >= PARK_S - 0.05, "the guardian eased over the rig's whole park time"
+    assert park_after >= 0.75 * PARK_S, "the guardian eased toward park over most of the park time"
     assert frames_after < 1.0 and first_frame < park_ended - 0.5, (frames_after, park_after, marks, said[-3:])
     assert goals[0] - killed < 1.0, "the guardian's first park goal"
 
