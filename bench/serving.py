@@ -51,15 +51,18 @@ def busy_cores(count: int, seconds: float = 7200.0) -> Iterator[str]:
             proc.join()
 
 
-def start_server(config: Path, min_ticks: float = 20.0, timeout: float = 60.0) -> tuple[subprocess.Popen[str], int]:
-    """``riderlive serve --config CONFIG --port 0`` in ``config``'s directory; returns once it has ticked.
+def start_server(
+    config: Path, min_ticks: float = 20.0, timeout: float = 60.0, root: Path = ROOT
+) -> tuple[subprocess.Popen[str], int]:
+    """``riderlive serve --config CONFIG --port 0`` of the checkout ``root`` (a baseline: main's)
+    in ``config``'s directory; returns once it has ticked.
 
     Its stderr stays a pipe (read it with ``communicate`` after stopping it).
     """
     proc = subprocess.Popen(
         [sys.executable, "-m", "riderlive", "serve", "--config", str(config), "--port", "0"],
         cwd=config.parent,
-        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        env=dict(os.environ, PYTHONPATH=str(root)),
         stderr=subprocess.PIPE,
         text=True,
     )

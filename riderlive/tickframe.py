@@ -3,8 +3,8 @@
 The tick (:class:`riderlive.realtime.core.TickCore`) works in the service's length unit;
 its consumers (the devices, the tail physics, the poses) want metres. :class:`TickFrame`
 is built once per tick from the tick's result (:meth:`TickFrame.build` with the factor of
-``realtime/edges.UnitEdges``, the only place lengths are converted on that path) and is frozen: a consumer cannot change what the
-next one sees.
+``realtime/edges.UnitEdges``, the only place lengths are converted on that path) and is
+frozen: a consumer cannot change what the next one sees.
 
 Frames and units (``riderlive.channels``): right-handed, +X forward, +Y up, +Z right;
 lengths in **metres**, rotations in **degrees**, attributes unitless.

@@ -6,11 +6,11 @@ metre, so one service unit is ``length_scale / 25`` metres (:func:`metres_per_un
 ``length_scale = 25``, the default, is metres). Rotations are degrees and attributes
 unitless everywhere, so only lengths (``Kind.TRANSLATION`` channels) convert.
 
-The conversion happens at the edges only: frames entering the tick's consumers
-(devices, physics, poses) are turned into metres once (:class:`Lengths`), files and
-wires keep their recorded unit. In the tick, every such crossing goes through one adapter,
-``realtime/edges.UnitEdges`` (the core itself computes in the service unit). A leaf: it imports nothing of the project but
-``channels``.
+The conversion happens at the edges only: frames entering the tick's consumers (devices,
+physics, poses) are turned into metres once (:class:`Lengths`), files and wires keep
+their recorded unit. In the tick, every such crossing goes through one adapter,
+``realtime/edges.UnitEdges`` (the core itself computes in the service unit). A leaf: it
+imports nothing of the project but ``channels``.
 """
 
 from __future__ import annotations

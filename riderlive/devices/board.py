@@ -4,7 +4,8 @@ One shared-memory segment of float64 slots, written by several processes, each s
 by exactly one of them:
 
 - the web process: its pid and heartbeat, the tick's pid and generation (a new
-  generation per spawn), ``shutdown``;
+  generation per spawn), the generation whose devices the guardian must hand back
+  before the serving one's devices open their transports (``handback_from``), ``shutdown``;
 - the tick: its heartbeat (every tick), a clean-exit mark, and per device its state
   and its last goal pose (seqlock'd: the guardian never reads a torn pose); while a
   guardian stops a dead tick's devices, the guardian (so a successor, should it die
@@ -13,7 +14,10 @@ by exactly one of them:
   ``ready`` once its plugs are built, the last generation it has stopped, ``busy``
   while it holds a bus, takeovers done, and per device what it did in its last stop
   (:class:`GuardianReport`: what the web process shows for a device while no tick
-  generation is serving); a standby guardian its pid (``guardian_standby``) once its
+  generation is serving), and the last generation whose stop it has begun
+  (``guardian_taking``: from then the next generation may tick while the park goes on,
+  its devices waiting for ``guardian_done`` to reach the web's ``handback_from``
+  before they open a transport; ``devices/guardians.py``); a standby guardian its pid (``guardian_standby``) once its
   plugs are built, until it becomes the guardian (the beat, then the pid).
 
 The tick watches the guardian as the guardian watches the tick (:func:`guardian_watching`).
@@ -91,11 +95,17 @@ class SafetyBoard(Slots, SlotBlock):
     guardian_pid = Slot(int, GUARDIAN, "the watching guardian's pid (a standby writes it when it takes over)")
     guardian_beat = Slot(float, GUARDIAN, "perf_counter s of the guardian's last beat (every 5 ms)")
     guardian_ready = Slot(float, GUARDIAN, "1 once the guardian's plugs are built")
-    guardian_done = Slot(int, GUARDIAN, "the last generation the guardian stopped")
+    guardian_done = Slot(int, GUARDIAN, "the last generation the guardian stopped (its buses handed back)")
+    guardian_taking = Slot(
+        int, GUARDIAN, "the last generation whose stop the guardian began (its tick killed, its devices' poses read)"
+    )
     guardian_busy = Slot(float, GUARDIAN, "1 while the guardian holds a bus")
     guardian_takeovers = Slot(int, GUARDIAN, "stops the guardian made")
     guardian_standby = Slot(int, "the standby guardian", "the standby's pid once its plugs are built (0: none)")
     shutdown = Slot(float, WEB, "1: the service stops (the guardians exit)")
+    handback_from = Slot(
+        int, WEB, "the generation the guardian must hand back before the serving one opens a transport (0: none)"
+    )
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(_names(), name)

@@ -43,7 +43,7 @@ from riderlive.devices.lifecycle import (
     arm_refusal,
 )
 from riderlive.devices.plug import Motion, Move, Plug
-from riderlive.devices.setup_run import SetupRun
+from riderlive.devices.setup_run import Handback, HandbackTimeout, SetupRun
 from riderlive.devices.status import DeviceStatus, StopRecord
 from riderlive.tickframe import TickFrame
 
@@ -76,6 +76,7 @@ class Device:
         self.armed_by: str | None = None
         self.last_stop: StopRecord | None = None
         self._setup: SetupRun | None = None
+        self.handback: Handback | None = None  # after a failover: every connect waits (``setup_run.py``)
         self._move_t0: float | None = None
         self._last_now: float | None = None
         self._off_confirmed = True
@@ -257,8 +258,12 @@ class Device:
     def _begin_setup(self, reason: str, by: str) -> None:
         self.fault = None
         self._configured = False
-        self._setup = SetupRun(self.plug, self._say, self.counters)
+        self._setup = SetupRun(self.plug, self._say, self.counters, self.handback)  # a reset waits too
         self._go(S.CONNECTING, reason, by)
+
+    @property
+    def waiting_for_handback(self) -> bool:  # connecting, transport untouched: the guardian holds the last one's
+        return self._setup is not None and self._setup.waiting
 
     def _say(self, detail: str) -> None:
         self.detail = detail
@@ -369,6 +374,8 @@ class Device:
                 if state is not S.ESTOP:
                     self._go(S.FAULT, fault.message, "device", now)
                 return
+            if isinstance(error, HandbackTimeout):
+                self.handback = None  # given up: a reset connects at once
             self._quietly(lambda: self.plug.on_fault(error))
             if state.armed:
                 self.fault = fault

@@ -14,14 +14,16 @@ It watches (every ``POLL_S``, and at once through pidfds when a process exits):
 On either it performs a category 1 stop (IEC 60204-1) for the tick generation that
 failed: SIGKILL the tick if it still runs (so two writers never share a bus), lend its
 exiting threads this process's priority (a killed process drops its port lock only after
-freeing its memory: ``devices/exiting.py``), take each device's transport (an exclusive
-lock that the dead tick released with its file), and
+freeing its memory: ``devices/exiting.py``), read each device's last published state and
+pose, mark the stop begun (``guardian_taking``: the web process may now start the next
+generation, whose devices wait for the hand-back), take each device's transport (an
+exclusive lock that the dead tick released with its file), and
 per device in parallel: if it was moving, ease from its last published goal pose to
 park over the plug's park time, then outputs off; in any case read the outputs back
 and repeat outputs-off until every unit reports off, or the port is gone. An e-stop
 requested meanwhile cuts the park short (outputs off at once). Then it releases the
-transports and marks the generation stopped, so the web process may start a new tick
-(which connects and stays disarmed). With the web process gone there is nothing to
+transports and marks the generation stopped (``guardian_done``): the hand-back, after which
+the new generation's devices connect (and stay disarmed). With the web process gone there is nothing to
 hand back to: it repeats outputs-off until confirmed or for ``GIVE_UP_AFTER_S``, then exits.
 
 What it cannot do is in docs/hardware.md (the guardian dying too, a pulled USB cable,
@@ -48,7 +50,7 @@ from riderlive.devices.board import GUARDIAN_HANG_S, GuardianReport, SafetyBoard
 from riderlive.devices.device import Device
 from riderlive.devices.exiting import hasten_exit, holders
 from riderlive.devices.latch import StopLatch
-from riderlive.devices.lifecycle import FaultKind, PortBusy, PortLost
+from riderlive.devices.lifecycle import DeviceState, FaultKind, PortBusy, PortLost
 from riderlive.devices.registry import DeviceSpec, make_plug
 from riderlive.devices.shared import pid_alive
 from riderlive.sched import try_realtime_priority
@@ -111,7 +113,10 @@ class Guardian:
             generation = int(board.tick_generation)
             web_why = self._web_failed(now)
             pending = generation > board.guardian_done and board.tick_clean_exit != generation
-            if pending:
+            begun = int(board.guardian_taking)
+            if generation > begun > board.guardian_done:  # a stop begun by a guardian that died: finish it
+                self.stop(begun, f"generation {begun}'s stop was not finished", kill=False)
+            elif pending:
                 why = self._tick_failed(now) or web_why
                 if why:
                     self.stop(generation, why)
@@ -153,16 +158,21 @@ class Guardian:
 
     # -- the stop ---------------------------------------------------------------------------
 
-    def stop(self, generation: int, why: str) -> None:
-        """Category 1 stop of every device of tick ``generation``."""
+    def stop(self, generation: int, why: str, kill: bool = True) -> None:
+        """Category 1 stop of every device of tick ``generation`` (``kill``: SIGKILL the
+        board's tick first; False when finishing a dead guardian's stop: the board's tick is
+        then the next generation, its devices waiting for this stop's hand-back)."""
         board = self.board
         log.critical("%s: category 1 stop of %s", why, ", ".join(s.name for s in self.specs))
         board.guardian_busy = 1.0
         try:
-            self._kill_tick()
+            if kill:
+                self._kill_tick()
+            lasts = [board.device(i) for i in range(len(self.specs))]
+            board.guardian_taking = generation  # the next generation may tick: its devices wait for guardian_done
             threads = [
-                threading.Thread(target=self._stop_device, args=(i, spec), name=f"guardian {spec.name}")
-                for i, spec in enumerate(self.specs)
+                threading.Thread(target=self._stop_device, args=(i, spec, last), name=f"guardian {spec.name}")
+                for i, (spec, last) in enumerate(zip(self.specs, lasts, strict=True))
             ]
             for thread in threads:
                 thread.start()
@@ -188,8 +198,7 @@ class Guardian:
                 "the tick %d exits (its port is released after its memory): %d threads raised to ours", pid, raised
             )
 
-    def _stop_device(self, index: int, spec: DeviceSpec) -> None:
-        last = self.board.device(index)
+    def _stop_device(self, index: int, spec: DeviceSpec, last: tuple[DeviceState, list[float]] | None) -> None:
         if last is None:
             self.board.report(index, GuardianReport.NOT_CONNECTED)
             return  # never connected by that tick: nothing of ours on its bus

@@ -5,8 +5,11 @@ outside the tick so that it survives it. A **standby** guardian (imports paid, p
 built) becomes the guardian within a few ms of its death: a relaunch would cost a
 Python start and the imports. :class:`Guardians` launches both, relaunches what died
 (at most one launch a second), reports their state and says when the guardian has
-stopped a generation's devices. Kept by the web process's supervisor
-(``service/supervisor.py``) and by ``riderlive rig --drive`` (``riderlive/rig_drive.py``).
+begun (:meth:`Guardians.taken`) and ended (:meth:`Guardians.stopped`) the stop of a
+generation's devices; :func:`handback_pending` tells the next generation's devices
+(in the tick) whether they must wait for that stop's end before opening a transport.
+Kept by the web process's supervisor (``service/supervisor.py``) and by
+``riderlive rig --drive`` (``riderlive/rig_drive.py``).
 """
 
 from __future__ import annotations
@@ -114,9 +117,15 @@ class Guardians:
         """The guardian has stopped the devices of tick ``generation`` (or none is kept)."""
         return self.guardian is None or self.board.guardian_done >= generation
 
+    def taken(self, generation: int) -> bool:
+        """The guardian has begun the stop of tick ``generation`` (killed it, read its devices'
+        last poses) or ended it, or none is kept: the next generation may start ticking."""
+        board = self.board
+        return self.guardian is None or max(board.guardian_taking, board.guardian_done) >= generation
+
     def stop_wait_s(self, park_timeout: float) -> float:
-        """How long a failover waits for :meth:`stopped` (s): a park, its read-back, and a relaunch."""
-        return park_timeout + 3.0 + START_S
+        """How long a failover waits for :meth:`taken` (s): see :func:`stop_wait_s`."""
+        return stop_wait_s(park_timeout)
 
     def stop(self) -> None:
         """After the tick has stopped (its devices are closed): the guardians may go."""
@@ -140,3 +149,22 @@ class Guardians:
             "restarts": self.restarts,
             "takeovers": self.board.guardian_takeovers,
         }
+
+
+def stop_wait_s(park_timeout: float) -> float:
+    """The longest a guardian's stop may take to begin or to end (s): a park
+    (``park_timeout`` s), its read-back, and a relaunch of the guardian meanwhile."""
+    return park_timeout + 3.0 + START_S
+
+
+def handback_pending(board: SafetyBoard, device: int) -> str | None:
+    """For device ``device`` of the serving tick: why it must not open its transport yet
+    (the guardian has not handed back generation ``board.handback_from``'s devices: it may
+    still be parking them, or not have taken them yet); None once it may. The flock on the
+    port is not enough: a dead tick's lock can be released before the guardian takes the
+    port, and a connect's outputs-off in the middle of a park would drop the rig."""
+    wanted = int(board.handback_from)
+    if not wanted or board.guardian_done >= wanted:
+        return None
+    doing = board.reported(device).name.lower().replace("_", " ")
+    return f"waiting for the guardian to park and hand back generation {wanted} (guardian: {doing})"

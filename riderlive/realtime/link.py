@@ -147,13 +147,16 @@ class TickLink(TickMemory):
     def _next_generation(self) -> None:
         self.generation += 1
         self.setup = dataclasses.replace(self.base_setup, generation=self.generation)
-        self.board.forget_devices()
+        if not self.board.guardian_busy:  # else the guardian's park progress (a successor of it goes on from there)
+            self.board.forget_devices()
         self.board.tick_beat = 0.0
 
     def mark_down(self, reason: str) -> None:
         """No generation serves from now (a death, a hang): :meth:`status` says so."""
         self.down_reason = reason
-        self.board.clear_reports()
+        board = self.board
+        if max(board.guardian_taking, board.guardian_done) < self.generation:  # not yet this failure's reports
+            board.clear_reports()
 
     def mark_up(self) -> None:
         """The serving generation has beaten."""

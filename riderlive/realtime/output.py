@@ -12,6 +12,7 @@ dividers.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Sequence
@@ -19,10 +20,12 @@ from typing import Any
 
 from riderlive.devices.board import SafetyBoard, guardian_watching
 from riderlive.devices.device import Device
+from riderlive.devices.guardians import handback_pending
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
 from riderlive.devices.plug import NotTunable
 from riderlive.devices.registry import DeviceSpec, make_plug
+from riderlive.devices.setup_run import Handback
 from riderlive.devices.status import DeviceStatus
 from riderlive.realtime import commands as cmd
 from riderlive.tickframe import TickFrame
@@ -70,8 +73,13 @@ class TickDevices:
         self._guardian_pid = 0
         """The guardian last seen watching (a new pid means the one that watched is gone)."""
 
-    def open(self) -> None:
-        for device in self.devices:
+    def open(self, handback_bound_s: float = 0.0) -> None:
+        """Connect every device; with a board naming a generation the guardian must hand back
+        first (a failover), each waits for it up to ``handback_bound_s`` without touching its
+        transport (``devices/guardians.py`` :func:`handback_pending`)."""
+        for i, device in enumerate(self.devices):
+            if self.board is not None and self.board.handback_from:
+                device.handback = Handback(functools.partial(handback_pending, self.board, i), handback_bound_s)
             device.connect("tick")
 
     # -- e-stop --------------------------------------------------------------------------
@@ -105,7 +113,7 @@ class TickDevices:
                 self.goal_written_at = device.plug.goal_written_at or time.perf_counter()
             self.statuses[i] = status
             changed |= status.state is not before or bool(status.transitions)
-            if self.board is not None:
+            if self.board is not None and not device.waiting_for_handback:  # the guardian's slot until then
                 self.board.publish(i, device.state, device.plug.pose)
             if self.arm_on_start and device.state is DeviceState.DISARMED and device.name not in self._auto_armed:
                 self._auto_armed.add(device.name)

@@ -20,6 +20,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from riderlive.devices.board import SafetyBoard
+from riderlive.devices.guardians import stop_wait_s
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.last_words import last_words
@@ -100,7 +101,7 @@ def serve(loop: TickLoop, warmed: bool = False, signals: Signals = Signals.SERVI
                 gc.freeze()
                 gc.disable()
             if devices is not None:
-                devices.open()
+                devices.open(stop_wait_s(setup.park_timeout))
             loop.run()
     finally:
         loop.close()

@@ -18,9 +18,15 @@ The web process supervises the tick process it spawned:
   (CPU time or run-queue wait growing); only one stuck for ``stall.Model.start_stuck``.
 
 Then the guardian (when devices are configured) parks the devices and releases their
-buses; the supervisor waits for that, then promotes the warm spare
+buses. The supervisor waits only until the guardian has *begun* that stop (the dead tick
+killed, its devices' last poses read: ``Guardians.taken``), names the generation to be
+handed back on the board (``handback_from``) and promotes the warm spare
 (:meth:`TickLink.promote`): it takes over with the settings as the service reports them
-and the dead generation's state, at its first deadline. A new spare warms up in the
+and the dead generation's state, at its first deadline, so rider frames flow again while
+the park goes on. The new generation's devices stay ``connecting`` ("waiting for the
+guardian to park and hand back generation N"), their transports untouched, until the
+guardian reports the stop ended (``guardian_done``), or fault at ``Guardians.stop_wait_s``
+(``devices/setup_run.py``). A new spare warms up in the
 background once the new generation beats. Failures in a row (a generation that dies
 before its first heartbeat or within ``STABLE_S`` of it) wait ``tick.restart_backoff``,
 doubling, from the second on: a kill costs no backoff. The new tick connects its devices
@@ -291,14 +297,19 @@ class TickSupervisor:
         self._recovery = asyncio.get_running_loop().create_task(self._recover(died))
 
     async def _wait_for_the_guardian(self, generation: int) -> None:
-        """Until the guardian has stopped that generation's devices (bounded: a guardian that
-        dies meanwhile is relaunched and goes on)."""
-        deadline = time.perf_counter() + self.guardians.stop_wait_s(self.config.rig.park_timeout)
-        while not self.guardians.stopped(generation):
+        """Until the guardian has begun the stop of that generation's devices (killed the tick,
+        read their last poses: milliseconds), not until it ends; the next generation's devices
+        wait for the hand-back (``board.handback_from``). Bounded: a guardian that dies
+        meanwhile is relaunched and takes the stop; one that never does leaves those devices
+        to fault at their own bound, untouched."""
+        guardians, board = self.guardians, self.link.board
+        deadline = time.perf_counter() + guardians.stop_wait_s(self.config.rig.park_timeout)
+        while not guardians.taken(generation):
             if time.perf_counter() > deadline:
-                log.error("the guardian did not report the stop of generation %d in time", generation)
-                return
-            await asyncio.sleep(0.01)
+                log.error("the guardian did not begin the stop of generation %d in time", generation)
+                break
+            await asyncio.sleep(0.002)
+        board.handback_from = 0 if guardians.stopped(generation) else generation
 
     async def _recover(self, died: bool) -> None:
         link = self.link

@@ -22,13 +22,16 @@ OLD_HEADER = (
     "guardian_beat",
     "guardian_ready",
     "guardian_done",
+    "guardian_taking",
     "guardian_busy",
     "guardian_takeovers",
     "guardian_standby",
     "shutdown",
+    "handback_from",
     *(f"guardian_d{d}" for d in range(MAX_DEVICES)),
 )
-"""The board's header before the typed slots (the segment every process of a service shares)."""
+"""The board's header (the segment every process of a service shares): the slots before the
+typed slots, with the hand-back's two (``guardian_taking``, ``handback_from``) since."""
 
 
 @pytest.fixture
