@@ -157,6 +157,16 @@ def stop_wait_s(park_timeout: float) -> float:
     return park_timeout + 3.0 + START_S
 
 
+def handback_wanted(generation: int, taken: bool, stopped: bool) -> int:
+    """What the web process writes to ``board.handback_from`` when it promotes the next tick
+    after generation ``generation`` failed: that generation while a guardian has begun its
+    stop and not ended it (the new devices wait for the hand-back); 0 once it has ended, or
+    when no guardian began it in time (nobody parks then: the new devices connect at once
+    and their setup turns the outputs off, a category 0 stop, rather than leave the rig
+    holding its last goal with torque on)."""
+    return generation if taken and not stopped else 0
+
+
 def handback_pending(board: SafetyBoard, device: int) -> str | None:
     """For device ``device`` of the serving tick: why it must not open its transport yet
     (the guardian has not handed back generation ``board.handback_from``'s devices: it may

@@ -57,7 +57,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from riderlive.devices.guardians import Guardians, GuardianTimes
+from riderlive.devices.guardians import Guardians, GuardianTimes, handback_wanted
 from riderlive.devices.latch import StopSource
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.link import TickLink, exit_reason
@@ -300,16 +300,22 @@ class TickSupervisor:
         """Until the guardian has begun the stop of that generation's devices (killed the tick,
         read their last poses: milliseconds), not until it ends; the next generation's devices
         wait for the hand-back (``board.handback_from``). Bounded: a guardian that dies
-        meanwhile is relaunched and takes the stop; one that never does leaves those devices
-        to fault at their own bound, untouched."""
+        meanwhile is relaunched and takes the stop. When no guardian has begun it by the
+        bound, nobody will park those devices: the next generation connects them at once,
+        and its setup turns their outputs off (a category 0 stop, not a rig left holding its
+        last goal with torque on)."""
         guardians, board = self.guardians, self.link.board
         deadline = time.perf_counter() + guardians.stop_wait_s(self.config.rig.park_timeout)
-        while not guardians.taken(generation):
+        while not (taken := guardians.taken(generation)):
             if time.perf_counter() > deadline:
-                log.error("the guardian did not begin the stop of generation %d in time", generation)
+                log.error(
+                    "no guardian began the stop of generation %d in time: the next generation connects its "
+                    "devices at once and turns their outputs off",
+                    generation,
+                )
                 break
             await asyncio.sleep(0.002)
-        board.handback_from = 0 if guardians.stopped(generation) else generation
+        board.handback_from = handback_wanted(generation, taken, guardians.stopped(generation))
 
     async def _recover(self, died: bool) -> None:
         link = self.link

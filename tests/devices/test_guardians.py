@@ -22,7 +22,7 @@ import pytest
 from riderlive.devices import registry
 from riderlive.devices.board import GuardianReport, SafetyBoard
 from riderlive.devices.guardian import Guardian
-from riderlive.devices.guardians import Guardians, GuardianTimes, handback_pending, stop_wait_s
+from riderlive.devices.guardians import Guardians, GuardianTimes, handback_pending, handback_wanted, stop_wait_s
 from riderlive.devices.latch import StopLatch, StopSource
 from riderlive.devices.lifecycle import DeviceState, FaultKind
 from riderlive.devices.registry import plan
@@ -72,6 +72,14 @@ def test_the_supervisor_waits_for_the_stop_to_begin_not_to_end(board: SafetyBoar
     board.guardian_done = 5
     assert guardians.taken(5) and guardians.stopped(5)
     assert guardians.stop_wait_s(5.0) == stop_wait_s(5.0) == 5.0 + 3.0 + 5.0
+
+
+def test_the_hand_back_is_awaited_only_while_a_guardian_parks() -> None:
+    assert handback_wanted(7, taken=True, stopped=False) == 7  # parking: the new devices wait
+    assert handback_wanted(7, taken=True, stopped=True) == 0  # handed back already
+    # nobody began the stop by the bound: nobody will park; waiting would leave the rig
+    # holding its last goal with torque on, so the new devices connect and turn it off
+    assert handback_wanted(7, taken=False, stopped=False) == 0
 
 
 @pytest.fixture
