@@ -1,13 +1,11 @@
 """One device's lifecycle, run from the tick: arming, e-stop, faults, parking, counters.
 
 :class:`Device` wraps a :class:`~riderlive.devices.plug.Plug` and owns its
-:class:`~riderlive.devices.lifecycle.Lifecycle`. The thread that ticks calls
-:meth:`Device.tick` once per tick and the operator requests (:meth:`arm`,
-:meth:`disarm`, :meth:`reset`, :meth:`reconnect`, :meth:`close`) between ticks;
-e-stops arrive through the shared :class:`~riderlive.devices.latch.StopLatch`, from
-any thread or process, and are acted on at the next check: the start of a tick,
-before every goal write (the gate), while waiting for a reply (the plug gives up), or
-at once when the tick loop is woken (:meth:`poll_stop`).
+:class:`~riderlive.devices.lifecycle.Lifecycle`. The ticking thread calls :meth:`tick`
+once per tick, and operator requests (:meth:`arm`, :meth:`disarm`, :meth:`reset`,
+:meth:`reconnect`, :meth:`close`) between ticks; e-stops come through the shared
+:class:`~riderlive.devices.latch.StopLatch` and are acted on at the next check (a tick's
+start, before every goal write, while waiting for a reply, or at a wake: :meth:`poll_stop`).
 
 Safety rules, whatever the device:
 

@@ -18,25 +18,17 @@ The web process supervises the tick process it spawned:
   (CPU time or run-queue wait growing); only one stuck for ``stall.Model.start_stuck``.
 
 Then the guardian (when devices are configured) parks the devices and releases their
-buses. The supervisor waits only until the guardian has *begun* that stop (the dead tick
-killed, its devices' last poses read: ``Guardians.taken``), names the generation to be
-handed back on the board (``handback_from``) and promotes the warm spare
-(:meth:`TickLink.promote`): it takes over with the settings as the service reports them
-and the dead generation's state, at its first deadline, so rider frames flow again while
-the park goes on. The new generation's devices stay ``connecting`` ("waiting for the
-guardian to park and hand back generation N"), their transports untouched, until the
-guardian reports the stop ended (``guardian_done``), or fault at ``Guardians.stop_wait_s``
-(``devices/setup_run.py``). A new spare warms up in the
-background once the new generation beats. Failures in a row (a generation that dies
-before its first heartbeat or within ``STABLE_S`` of it) wait ``tick.restart_backoff``,
-doubling, from the second on: a kill costs no backoff. The new tick connects its devices
-and leaves them ``disarmed`` (or ``estop`` while the latch is set): nothing is re-armed.
-It starts with the settings applied since start (preset, animator layer, mode, gait,
-terrain, platform cueing: :meth:`TickLink.apply`), whatever ended the last one, unless
-the last one failed by itself (an exit status or a crash signal, not a kill) before its
-first heartbeat: then the next starts as configured (``setups_dropped``; the service
-reports the configured settings again), so a setting that kills a tick at start cannot
-make a crash loop.
+buses. The supervisor waits only until it has *begun* that stop (``Guardians.taken``),
+names the generation to hand back on the board (``handback_from``) and promotes the warm
+spare (:meth:`TickLink.promote`) with the settings and the dead generation's state, so
+rider frames flow while the park goes on; the new devices stay ``connecting``, transports
+untouched, until the guardian reports the stop ended (``devices/setup_run.py``). A new
+spare warms once the new generation beats. Failures in a row (death before the first
+heartbeat or within ``STABLE_S`` of it) wait ``tick.restart_backoff``, doubling, from the
+second on. The new tick leaves its devices ``disarmed`` (or ``estop``): nothing re-arms.
+It starts with the settings applied since start (:meth:`TickLink.apply`), unless the last
+one failed by itself before its first heartbeat: then as configured (``setups_dropped``),
+so a setting that kills a tick at start cannot make a crash loop.
 
 Status: ``up`` (``riderlive_tick_up``, ``/readyz``) only from the serving generation's
 first heartbeat; from a failure until then the status says the tick is down and shows each
