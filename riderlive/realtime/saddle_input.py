@@ -5,10 +5,12 @@ Pure (no clocks, no I/O); every time argument is seconds, engine or producer as 
 - :class:`SaddleInput`: the driving saddle producer's stream. Each received sample is
   stepped through the estimator (:func:`riderlive.saddle.step`) in source-time order,
   so a 1000 Hz stream is seen sample by sample, not once per tick. The tick reads the
-  stream at the producer's time that corresponds to its own (the clock mapping of the
-  least-delayed sample, as the resampler's) less a **delay**: ``input.delay``, raised
-  by the stream's recent lateness (the latest arrival against the least-delayed
-  sample's, over the last 256 samples) up to :data:`MAX_DELAY`, and changed
+  stream at the producer's time that corresponds to its own (the horse resampler's
+  clock mapping, :class:`~riderlive.realtime.resample.ClockMap`: the least-delayed
+  sample of the last 256, then the producer's clock rate tracked, docs/protocol.md
+  "Clocks that drift") less a **delay**: ``input.delay``, raised by the stream's recent
+  lateness (the latest arrival against the mapping, over the last 256 samples, each
+  taken against the mapping when it arrived) up to :data:`MAX_DELAY`, and changed
   by at most :data:`DELAY_SLEW` seconds per second (the stream slowed or sped up by
   that fraction, never stepped). Within the samples received the frame is the one an
   offline bake of the same samples rebuilds (:func:`riderlive.saddle.rebuild`: the
@@ -37,6 +39,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from riderlive.horse.gaits import Gait
+from riderlive.realtime.resample import ClockMap
 from riderlive.saddle import Lock, Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
 from riderlive.saddle.pose import BEND_COLUMN, SCALAR, TRUNK_COLUMNS, saddle_from_trunk
 from riderlive.units import horse_lengths, metres_per_unit, saddle_lengths
@@ -50,7 +53,7 @@ NO_ESTIMATE: tuple[float, ...] = (math.nan,) * 5
 COUNTERS: tuple[str, ...] = ("samples", "missing", "empty", "gaps", "glitches", "rebases", "locks", "losses")
 """Estimator counters summed over every saddle stream the tick has seen (``saddle_<name>``)."""
 _OFFSETS = 256
-"""Samples whose clock offset the mapping takes the least of (as the resampler's buffer)."""
+"""Samples whose clock offset the mapping takes the least of, and whose lateness the delay follows."""
 _HISTORY = 512
 """Estimator states kept to read between samples (0.5 s at 1000 Hz: more than :data:`MAX_DELAY`)."""
 MAX_DELAY = 0.25
@@ -92,8 +95,10 @@ class SaddleInput:
         self._frames_out = horse_lengths(self.to_metres)
         """A rebuilt horse frame's lengths back to the service unit."""
         self.state = State()
-        self.offsets: deque[float] = deque(maxlen=_OFFSETS)
-        self.offset: float | None = None
+        self.clock = ClockMap(_OFFSETS)
+        """The producer's clock mapped onto the engine's (rate tracked)."""
+        self.lateness: deque[float] = deque(maxlen=_OFFSETS)
+        """Each recent sample's arrival after the mapping of its time, when it arrived (s)."""
         self.history: deque[State] = deque(maxlen=_HISTORY)
         """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
         self.times: deque[float] = deque(maxlen=_HISTORY)
@@ -114,8 +119,8 @@ class SaddleInput:
         for name, value in self._current().items():
             self.finished[name] += value
         self.state = State()
-        self.offsets.clear()
-        self.offset = None
+        self.clock.clear()
+        self.lateness.clear()
         self.history.clear()
         self.times.clear()
         self._frames.clear()
@@ -144,27 +149,23 @@ class SaddleInput:
         if self.state.t == t:  # taken (an empty sample is counted and leaves the pose as it was)
             self.history.append(self.state)
             self.times.append(t)
-        offset = received - t
-        if len(self.offsets) == self.offsets.maxlen and self.offsets[0] == self.offset:
-            self.offsets.append(offset)
-            self.offset = min(self.offsets)
-        else:
-            self.offsets.append(offset)
-            self.offset = offset if self.offset is None else min(self.offset, offset)
+        clock = self.clock
+        clock.push(t, received)
+        mapped = clock.engine_time(t)
+        assert mapped is not None  # a sample was pushed
+        self.lateness.append(received - mapped)
         self.stale = False
         return True
 
     def source_time(self, now: float) -> float | None:
         """The producer time shown at engine time ``now``: ``delay`` behind the clock mapping."""
-        if self.offset is None:
-            return None
-        return now - self.offset - self.delay
+        return self.clock.source_time(now, self.delay)
 
     def _move_delay(self, now: float) -> None:
-        """Toward the base delay plus the newest sample's lateness (see the module docstring)."""
-        if self.offset is None or not self.offsets:
+        """Toward the base delay plus the recent samples' lateness (see the module docstring)."""
+        if not self.lateness:
             return
-        target = min(max(self.base_delay, self.base_delay + max(self.offsets) - self.offset), MAX_DELAY)
+        target = min(self.base_delay + max(0.0, *self.lateness), MAX_DELAY)
         if self._delay_at is None:
             self.delay = target
         else:

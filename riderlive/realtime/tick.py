@@ -248,6 +248,8 @@ class TickLoop(TickControl):
         counter.state_resets = core.resets
         counter.outputs_clamped = core.clamped
         self._count_saddle(result)
+        counter.input_clock_rate = core.resampler.rate
+        counter.saddle_clock_rate = core.saddle.clock.rate
         counter.hands_full_reach = core.full_reach
         return result
 

@@ -151,6 +151,7 @@ class TickControl:
             "saddle": self._saddle_status(),
             "phase_lock": self.phase.status(),
             "input_clock_rate": core.resampler.rate,
+            "saddle_clock_rate": core.saddle.clock.rate,
             "events": list(self.events),
         }
 

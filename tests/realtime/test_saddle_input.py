@@ -10,7 +10,15 @@ from riderlive.horse import ProceduralHorse
 from riderlive.horse.script import gait_script
 from riderlive.realtime.core import Driver, Mode, TickCore, Timing
 from riderlive.realtime.layout import InputKind
-from riderlive.realtime.saddle_input import GAITS, LOCKS, NO_ESTIMATE, make_saddle_input, saddle_pose
+from riderlive.realtime.saddle_input import (
+    DELAY_SLEW,
+    GAITS,
+    LOCKS,
+    NO_ESTIMATE,
+    SaddleInput,
+    make_saddle_input,
+    saddle_pose,
+)
 from riderlive.rules import RiderModel
 from riderlive.saddle import Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
 from riderlive.saddle.rebuild import rebuild
@@ -161,3 +169,49 @@ def test_the_live_rider_of_late_bursty_samples_is_the_bakes(bursty: bool) -> Non
             continue
         r = np.corrcoef(truth, live_a[inside, i])[0, 1]
         assert r >= 0.95, f"{name}: r {r:.3f}"
+
+
+def _ride_drifting(rate: float, seconds: float = 12.0) -> tuple[SaddleInput, np.ndarray]:
+    """A 200 Hz trot whose producer clock runs ``rate`` x ours (engine = t / rate, each sample
+    2 ms late plus an exponential jitter of mean 3 ms), ticked at 120 Hz by a fake clock from
+    3 s on (the rate estimated): per tick (source time read, newest sample's time, delay)."""
+    trot = record(gait_script("trot", seconds, seed=6), 200.0, seed=6)
+    times, values = trot.saddle.t.tolist(), trot.saddle.values.tolist()
+    rng = np.random.default_rng(6)
+    received = np.maximum.accumulate(np.array(times) / rate + 0.002 + rng.exponential(0.003, len(times)))
+    live = make_saddle_input(25.0, SaddlePoint(), 0.01)
+    out, k = [], 0
+    for n in range(int(received[-1] * 120.0)):
+        now = n / 120.0
+        while k < len(times) and received[k] <= now:
+            assert live.push(times[k], float(received[k]), values[k])
+            k += 1
+        sample = live.sample(now)
+        if now >= 3.0:
+            assert sample is not None, f"stale at {now:.3f}"
+            out.append((sample[0], live.state.t, live.delay))
+    return live, np.array(out)
+
+
+@pytest.mark.parametrize("rate", [0.95, 1.05])
+def test_a_drifting_saddle_clock_is_tracked_by_the_horse_resamplers_clock_map(rate: float) -> None:
+    """A saddle producer's clock 5 % slow or fast (the horse path's case, docs/protocol.md
+    "Clocks that drift"), against a steady clock in the same run: the rate within 0.5 % of
+    1 / rate (the same ``ClockMap``); never stale; the source time never goes back and
+    advances in each 0.1 s by rate x 0.1 s within 10 % (the mapping's catch-up) plus the
+    delay's slew; from 5 s on the read delay no more than a steady clock's + 5 ms (untracked,
+    the spread of 256 samples' offsets, 1.28 s x 5 %, went into the delay: 82-95 ms against
+    the steady 35 ms, old code); the read past the newest sample (extrapolated) on no more
+    ticks than a steady clock's share + 5 %."""
+    live, ticks = _ride_drifting(rate)
+    _, steady = _ride_drifting(1.0)
+    assert abs(live.clock.rate * rate - 1.0) < 0.005, live.clock.rate
+    shown, newest, delay = ticks[:, 0], ticks[:, 1], ticks[:, 2]
+    assert np.diff(shown).min() >= 0.0
+    window = np.convolve(np.diff(shown), np.ones(12), "valid")
+    slack = 0.1 * rate * 0.1 + DELAY_SLEW * 0.1 + 1e-9
+    assert np.all(np.abs(window - rate * 0.1) <= slack), (window.min(), window.max())
+    settled = 2 * 120  # from 5 s on: the lateness of the first second, before any estimate, has aged out
+    assert delay[settled:].max() <= steady[settled:, 2].max() + 0.005, (delay[settled:].max(), steady[:, 2].max())
+    ahead, steady_ahead = np.mean(shown > newest), np.mean(steady[:, 0] > steady[:, 1])
+    assert ahead <= steady_ahead + 0.05, (ahead, steady_ahead)
