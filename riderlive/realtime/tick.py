@@ -110,6 +110,8 @@ class TickLoop(TickControl):
             model, setup.timing, self.horse, setup.mode, setup.rider_bounds, saddle_point=setup.saddle_point
         )
         self._saddle_seen = (-1, -1)
+        self._rates_seen = (0.0, 0.0)
+        """The horse and saddle clock rates of the last status (a new estimate refreshes it)."""
         """Lock and gait codes of the last status (a change makes the status dirty)."""
         self._horse_seen: tuple[str, str | None] = ("", None)
         """The procedural horse's gait and move in the last status (a change makes it dirty: the page's header)."""
@@ -248,8 +250,7 @@ class TickLoop(TickControl):
         counter.state_resets = core.resets
         counter.outputs_clamped = core.clamped
         self._count_saddle(result)
-        counter.input_clock_rate = core.resampler.rate
-        counter.saddle_clock_rate = core.saddle.clock.rate
+        self._count_rates(core.resampler.rate, core.saddle.clock.rate)
         counter.hands_full_reach = core.full_reach
         return result
 
@@ -342,6 +343,15 @@ class TickLoop(TickControl):
             self._status_dirty = True
         if self.core.input_kind is L.InputKind.SADDLE:
             self.counter.set_saddle(self.core.saddle.counters())
+
+    def _count_rates(self, horse: float, saddle: float) -> None:
+        """The producer clock rates in use into shared memory; a new estimate (at most 4 a
+        second per stream) updates the status (``input_clock_rate``, ``saddle_clock_rate``)."""
+        self.counter.input_clock_rate = horse
+        self.counter.saddle_clock_rate = saddle
+        if (horse, saddle) != self._rates_seen:
+            self._rates_seen = (horse, saddle)
+            self._status_dirty = True
 
     def _drain_wake_fds(self) -> None:
         for fd in self.wake_fds[1:]:  # the signal pipe (the command pipe is read by _poll_commands)
