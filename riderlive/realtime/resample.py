@@ -27,6 +27,10 @@ toward the line (at that rate) through the least-delayed frame of the last secon
 by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
 tick's reading never steps, it runs at most 10 % slower or faster while it catches up.
 Cost: a few comparisons per frame, ~40 per window.
+
+The mapping is :class:`ClockMap`, one per stream: the horse :class:`Resampler`'s, and the
+saddle input's (``realtime/saddle_input.py``), which steps its estimator per sample
+instead of buffering frames.
 """
 
 from __future__ import annotations
