@@ -142,6 +142,14 @@ class ClockMap:
             return None
         return t + self.offset
 
+    def line_time(self, t: float) -> float | None:
+        """The engine time producer time ``t`` maps to on the line the mapping moves toward
+        (``target``; ``engine_time`` while no rate is estimated): a frame's lateness against
+        it is the stream's, not the mapping's catching up."""
+        if self.anchor is not None:
+            return self.target + self.rate * t
+        return self.engine_time(t)
+
     def source_time(self, now: float, delay: float) -> float | None:
         """The producer time the tick at engine time ``now`` shows, ``delay`` (s) behind the mapping."""
         if self.anchor is not None:

@@ -9,8 +9,9 @@ Pure (no clocks, no I/O); every time argument is seconds, engine or producer as 
   clock mapping, :class:`~riderlive.realtime.resample.ClockMap`: the least-delayed
   sample of the last 256, then the producer's clock rate tracked, docs/protocol.md
   "Clocks that drift") less a **delay**: ``input.delay``, raised by the stream's recent
-  lateness (the latest arrival against the mapping, over the last 256 samples, each
-  taken against the mapping when it arrived) up to :data:`MAX_DELAY`, and changed
+  lateness (the latest arrival against the mapping, each taken against the mapping when
+  it arrived, over the last :data:`LATE_MEMORY_S` of the stream: :class:`Lateness`) up
+  to :data:`MAX_DELAY`, and changed
   by at most :data:`DELAY_SLEW` seconds per second (the stream slowed or sped up by
   that fraction, never stepped). Within the samples received the frame is the one an
   offline bake of the same samples rebuilds (:func:`riderlive.saddle.rebuild`: the
@@ -36,7 +37,7 @@ import bisect
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from riderlive.horse.gaits import Gait
 from riderlive.realtime.resample import ClockMap
@@ -53,7 +54,15 @@ NO_ESTIMATE: tuple[float, ...] = (math.nan,) * 5
 COUNTERS: tuple[str, ...] = ("samples", "missing", "empty", "gaps", "glitches", "rebases", "locks", "losses")
 """Estimator counters summed over every saddle stream the tick has seen (``saddle_<name>``)."""
 _OFFSETS = 256
-"""Samples whose clock offset the mapping takes the least of, and whose lateness the delay follows."""
+"""Samples whose clock offset the mapping takes the least of."""
+LATE_WINDOW_S = 0.25
+"""Source seconds per window of :class:`Lateness` (its latest arrival kept)."""
+LATE_MEMORY_S = 10.0
+"""Source seconds of lateness the delay follows: a busy host stalls a producer or the service
+every few seconds, so the delay stays at the stalls' lateness between them instead of decaying
+(a memory of 256 samples, 1.28 s at 200 Hz, let it fall between stalls: each stall then read
+past the newest sample, and stepped back to the bake's frames when the samples came, the
+one-tick steps of 0.5-1.2 deg on ``lower_back.rz``; docs/performance.md)."""
 _HISTORY = 512
 """Estimator states kept to read between samples (0.5 s at 1000 Hz: more than :data:`MAX_DELAY`)."""
 MAX_DELAY = 0.25
@@ -80,6 +89,38 @@ def estimate_row(state: State, t: float) -> tuple[float, ...]:
 
 
 @dataclass
+class Lateness:
+    """The latest arrival of a stream's samples over its last :data:`LATE_MEMORY_S` (s of
+    source time): the maximum of each :data:`LATE_WINDOW_S` window, a few comparisons a sample."""
+
+    windows: deque[float] = field(default_factory=lambda: deque(maxlen=round(LATE_MEMORY_S / LATE_WINDOW_S)))
+    current: float = -math.inf
+    """The latest arrival in the window under way (s)."""
+    started: float | None = None
+    """Source time the window under way started at (None: no sample yet)."""
+
+    def clear(self) -> None:
+        self.windows.clear()
+        self.current = -math.inf
+        self.started = None
+
+    def add(self, t: float, late: float) -> None:
+        """A sample at source time ``t`` arrived ``late`` s after its mapped time."""
+        if self.started is None:
+            self.started = t
+        elif t - self.started >= LATE_WINDOW_S:
+            self.windows.append(self.current)
+            self.current, self.started = -math.inf, t
+        self.current = max(self.current, late)
+
+    def latest(self) -> float | None:
+        """The latest arrival remembered (s), None before the first sample."""
+        if self.started is None:
+            return None
+        return max(self.current, *self.windows) if self.windows else self.current
+
+
+@dataclass
 class SaddleInput:
     """The driving saddle stream in the tick: the estimator's state and the clock mapping."""
 
@@ -97,8 +138,12 @@ class SaddleInput:
         self.state = State()
         self.clock = ClockMap(_OFFSETS)
         """The producer's clock mapped onto the engine's (rate tracked)."""
-        self.lateness: deque[float] = deque(maxlen=_OFFSETS)
-        """Each recent sample's arrival after the mapping of its time, when it arrived (s)."""
+        self.lateness = Lateness()
+        """The recent samples' arrival after the mapping's line at their time, when each arrived (s)."""
+        self._rate_known = False
+        """Whether ``lateness`` was measured with the clock's rate estimated (the first estimate
+        forgets what was measured before it: a drifting clock's error, not the stream's lateness,
+        which would hold the delay up for LATE_MEMORY_S)."""
         self.history: deque[State] = deque(maxlen=_HISTORY)
         """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
         self.times: deque[float] = deque(maxlen=_HISTORY)
@@ -121,6 +166,7 @@ class SaddleInput:
         self.state = State()
         self.clock.clear()
         self.lateness.clear()
+        self._rate_known = False
         self.history.clear()
         self.times.clear()
         self._frames.clear()
@@ -151,9 +197,12 @@ class SaddleInput:
             self.times.append(t)
         clock = self.clock
         clock.push(t, received)
-        mapped = clock.engine_time(t)
+        if clock.anchor is not None and not self._rate_known:
+            self.lateness.clear()  # measured against a mapping that did not know the rate yet
+            self._rate_known = True
+        mapped = clock.line_time(t)
         assert mapped is not None  # a sample was pushed
-        self.lateness.append(received - mapped)
+        self.lateness.add(t, received - mapped)
         self.stale = False
         return True
 
@@ -163,9 +212,10 @@ class SaddleInput:
 
     def _move_delay(self, now: float) -> None:
         """Toward the base delay plus the recent samples' lateness (see the module docstring)."""
-        if not self.lateness:
+        late = self.lateness.latest()
+        if late is None:
             return
-        target = min(self.base_delay + max(0.0, *self.lateness), MAX_DELAY)
+        target = min(self.base_delay + max(0.0, late), MAX_DELAY)
         if self._delay_at is None:
             self.delay = target
         else:
