@@ -153,7 +153,7 @@ def measure(port: int, args: argparse.Namespace) -> None:
             f"a {args.sample_rate:g} Hz trot of {args.seconds:g} s per run"
         )
         print(
-            "run  frames  missed  past newest  min r (channel)          lower_back.rz r  its 1-tick step max  send late max"
+            "run  frames  missed  past newest  min r (channel)          lower_back.rz r  1-tick step max  send late"
         )
         results = []
         for run in range(args.runs):
@@ -162,7 +162,7 @@ def measure(port: int, args: argparse.Namespace) -> None:
             print(
                 f"{run + 1:>3}  {res['frames']:>6}  {res['missed']:>6.1%}  {res['past']:>11.1%}  {res['min_r']:.4f} "
                 f"({res['worst']:<18})  {res['back_r']:.4f}           {res['back_step_max']:.3f} deg"
-                f"            {res['send_late_max'] * 1000:.1f} ms"
+                f"        {res['send_late_max'] * 1000:.1f} ms"
             )
         print(f"min r over runs: {min(float(r['min_r']) for r in results):.4f} (goal >= 0.95), {load}")
 
