@@ -152,9 +152,7 @@ def measure(port: int, args: argparse.Namespace) -> None:
             f"{load}; tick {args.rate:g} Hz (realtime {state['tick'].get('realtime')}), "
             f"a {args.sample_rate:g} Hz trot of {args.seconds:g} s per run"
         )
-        print(
-            "run  frames  missed  past newest  min r (channel)          lower_back.rz r  1-tick step max  send late"
-        )
+        print("run  frames  missed  past newest  min r (channel)          lower_back.rz r  1-tick step max  send late")
         results = []
         for run in range(args.runs):
             res = one_run(port, 11 + run, args, rules)

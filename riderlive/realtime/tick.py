@@ -51,6 +51,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 _PARTS_AT_REST = (0.0,) * len(PART_NAMES)
 """The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
+RATE_SHOWN = 0.001
+"""A producer clock rate the status shows is refreshed once the rate in use moved more than this."""
 
 
 class TickLoop(TickControl):
@@ -345,11 +347,13 @@ class TickLoop(TickControl):
             self.counter.set_saddle(self.core.saddle.counters())
 
     def _count_rates(self, horse: float, saddle: float) -> None:
-        """The producer clock rates in use into shared memory; a new estimate (at most 4 a
+        """The producer clock rates in use into shared memory; an estimate that moved either by
+        more than :data:`RATE_SHOWN` since the status last showed them (at most 4 estimates a
         second per stream) updates the status (``input_clock_rate``, ``saddle_clock_rate``)."""
         self.counter.input_clock_rate = horse
         self.counter.saddle_clock_rate = saddle
-        if (horse, saddle) != self._rates_seen:
+        shown_horse, shown_saddle = self._rates_seen
+        if abs(horse - shown_horse) > RATE_SHOWN or abs(saddle - shown_saddle) > RATE_SHOWN:
             self._rates_seen = (horse, saddle)
             self._status_dirty = True
 

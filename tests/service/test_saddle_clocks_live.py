@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from riderlive.realtime.tick import RATE_SHOWN
 from tests.service.live_server import LiveServer
 from tests.service.test_clocks_live import drivers, largest_step, run, steps_back
 from tests.service.test_saddle_live import _trot_saddle
@@ -64,12 +65,12 @@ def ahead_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -
 def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server: LiveServer) -> None:
     """As the horse's (``test_clocks_live``): 6 s of a saddle clock at 0.95 and 1.05 x ours,
     120 samples a second, against a steady clock in the same run: no segment, every frame
-    driven by the saddle, every sample stepped (none refused), the rate shown the same in
-    /api/state and /metrics and at least half way from 1 to 1 / rate, the read past the
-    newest sample on at most 5 % more frames than the steady clock's, the lateness never
-    growing: median and last second's median within 20 ms of the steady clock's, largest
-    within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest lateness
-    248 ms against the steady 52 ms (the drift went into the read delay)."""
+    driven by the saddle, every sample stepped (none refused), the rate the same in
+    /api/state (within 0.1 %) and /metrics, at least half way from 1 to 1 / rate; the read
+    past the newest sample on at most 5 % more frames than the steady clock's, the lateness
+    never growing: median and last second's median within 20 ms of the steady clock's,
+    largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
+    lateness 248 ms against the steady 52 ms (the drift went into the read delay)."""
     steady_sent: list[float] = []
     wait, _ = every_sample_taken(server)
     steady, none, steady_stamps = run(
@@ -94,9 +95,9 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
             wait(stamps)  # every sample stepped: the rate is final
             rates.append(server.metric("riderlive_input_clock_rate", 'kind="saddle"'))
             wait_until(
-                lambda: server.get("/api/state").json()["tick"]["saddle_clock_rate"] == rates[0],
+                lambda: abs(server.get("/api/state").json()["tick"]["saddle_clock_rate"] - rates[0]) <= RATE_SHOWN,
                 5.0,
-                "/api/state never showed the rate /metrics shows",
+                "/api/state never showed the rate /metrics shows (within tick.RATE_SHOWN)",
             )
 
         frames, segments, stamps = run(
