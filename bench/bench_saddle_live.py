@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import tempfile
 import threading
 import time
@@ -58,8 +59,12 @@ def collect(ws_url: str, frames: list[dict], stop: threading.Event) -> None:
                 frames.append(message)
 
 
-def send(ws_url: str, times: np.ndarray, rows: np.ndarray) -> float:
-    """The samples at their own timing (JSON ``{"t", "v"}``); the largest lateness of a send (s)."""
+def send(ws_url: str, times: np.ndarray, rows: np.ndarray, fifo: int = 0) -> float:
+    """The samples at their own timing (JSON ``{"t", "v"}``), this thread at SCHED_FIFO ``fifo``
+    if > 0 (a producer whose samples come on time: the service's own handling measured);
+    the largest lateness of a send (s)."""
+    if fifo > 0:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo))  # this thread only (Linux)
     late = 0.0
     with connect(ws_url + "/ws/saddle") as ws:
         json.loads(ws.recv(timeout=5))
@@ -84,7 +89,11 @@ def one_run(port: int, seed: int, args: argparse.Namespace, rules: RiderModel) -
     follower = threading.Thread(target=collect, args=(url, frames, stop), daemon=True)
     follower.start()
     time.sleep(0.5)  # subscribed before the first sample (a connect, not a measured wait)
-    send_late = send(url, times, values)
+    sender: list[float] = []
+    thread = threading.Thread(target=lambda: sender.append(send(url, times, values, args.producer_fifo)))
+    thread.start()
+    thread.join()
+    send_late = sender[0]
     stop.set()
     follower.join()
     baked_horse = rebuild(Model(point=SaddlePoint()), times, values).horse
@@ -130,6 +139,9 @@ def main() -> None:
     parser.add_argument("--sample-rate", type=float, default=200.0)
     parser.add_argument("--rate", type=float, default=120.0, help="the tick's rate (Hz)")
     parser.add_argument("--burners", type=int, default=0, help="normal-priority busy loops (2: both cores)")
+    parser.add_argument(
+        "--producer-fifo", type=int, default=0, help="the sender at SCHED_FIFO N (its samples on time under load)"
+    )
     parser.add_argument("--dump", action="store_true", help="print the largest lower_back.rz errors of each run")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -148,8 +160,9 @@ def measure(port: int, args: argparse.Namespace) -> None:
     with serving.busy_cores(args.burners) as load:
         state = httpx.get(f"http://127.0.0.1:{port}/api/state", timeout=5).json()
         rules = RiderModel(params=load_preset(state["tick"]["preset"]), scale=25.0)
+        producer = f"producer at SCHED_FIFO {args.producer_fifo}" if args.producer_fifo else "producer normal"
         print(
-            f"{load}; tick {args.rate:g} Hz (realtime {state['tick'].get('realtime')}), "
+            f"{load}, {producer}; tick {args.rate:g} Hz (realtime {state['tick'].get('realtime')}), "
             f"a {args.sample_rate:g} Hz trot of {args.seconds:g} s per run"
         )
         print("run  frames  missed  past newest  min r (channel)          lower_back.rz r  1-tick step max  send late")
