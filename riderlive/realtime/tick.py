@@ -51,8 +51,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 _PARTS_AT_REST = (0.0,) * len(PART_NAMES)
 """The rider parts of a frame that has none (the neutral stand-in before the first good step)."""
-RATE_SHOWN = 0.001
-"""A producer clock rate the status shows is refreshed once the rate in use moved more than this."""
 
 
 class TickLoop(TickControl):
@@ -112,8 +110,6 @@ class TickLoop(TickControl):
             model, setup.timing, self.horse, setup.mode, setup.rider_bounds, saddle_point=setup.saddle_point
         )
         self._saddle_seen = (-1, -1)
-        self._rates_seen = (0.0, 0.0)
-        """The horse and saddle clock rates of the last status (a new estimate refreshes it)."""
         """Lock and gait codes of the last status (a change makes the status dirty)."""
         self._horse_seen: tuple[str, str | None] = ("", None)
         """The procedural horse's gait and move in the last status (a change makes it dirty: the page's header)."""
@@ -345,17 +341,6 @@ class TickLoop(TickControl):
             self._status_dirty = True
         if self.core.input_kind is L.InputKind.SADDLE:
             self.counter.set_saddle(self.core.saddle.counters())
-
-    def _count_rates(self, horse: float, saddle: float) -> None:
-        """The producer clock rates in use into shared memory; an estimate that moved either by
-        more than :data:`RATE_SHOWN` since the status last showed them (at most 4 estimates a
-        second per stream) updates the status (``input_clock_rate``, ``saddle_clock_rate``)."""
-        self.counter.input_clock_rate = horse
-        self.counter.saddle_clock_rate = saddle
-        shown_horse, shown_saddle = self._rates_seen
-        if abs(horse - shown_horse) > RATE_SHOWN or abs(saddle - shown_saddle) > RATE_SHOWN:
-            self._rates_seen = (horse, saddle)
-            self._status_dirty = True
 
     def _drain_wake_fds(self) -> None:
         for fd in self.wake_fds[1:]:  # the signal pipe (the command pipe is read by _poll_commands)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from riderlive.realtime.tick import RATE_SHOWN
+from riderlive.realtime.tick_control import RATE_SHOWN
 from tests.service.live_server import LiveServer
 from tests.service.test_clocks_live import drivers, largest_step, run, steps_back
 from tests.service.test_saddle_live import _trot_saddle
