@@ -91,33 +91,45 @@ def estimate_row(state: State, t: float) -> tuple[float, ...]:
 @dataclass
 class Lateness:
     """The latest arrival of a stream's samples over its last :data:`LATE_MEMORY_S` (s of
-    source time): the maximum of each :data:`LATE_WINDOW_S` window, a few comparisons a sample."""
+    source time), each against the least-delayed of its own :data:`LATE_WINDOW_S` window and
+    the one before (so a clock rate still being tracked adds at most its residual over 0.5 s,
+    while a stall's burst is measured against the on-time samples before it); a few
+    comparisons a sample."""
 
     windows: deque[float] = field(default_factory=lambda: deque(maxlen=round(LATE_MEMORY_S / LATE_WINDOW_S)))
-    current: float = -math.inf
-    """The latest arrival in the window under way (s)."""
+    """The latest arrival of each closed window (s)."""
+    least: float = math.inf
+    """The least offset of the window under way (s)."""
+    most: float = -math.inf
+    """The largest offset of the window under way (s)."""
+    least_before: float = math.inf
+    """The least offset of the window before it (s)."""
     started: float | None = None
     """Source time the window under way started at (None: no sample yet)."""
 
     def clear(self) -> None:
         self.windows.clear()
-        self.current = -math.inf
+        self.least, self.most, self.least_before = math.inf, -math.inf, math.inf
         self.started = None
 
-    def add(self, t: float, late: float) -> None:
-        """A sample at source time ``t`` arrived ``late`` s after its mapped time."""
+    def add(self, t: float, offset: float) -> None:
+        """A sample at source time ``t`` arrived ``offset`` s after the mapping's line at ``t``."""
         if self.started is None:
             self.started = t
         elif t - self.started >= LATE_WINDOW_S:
-            self.windows.append(self.current)
-            self.current, self.started = -math.inf, t
-        self.current = max(self.current, late)
+            self.windows.append(self._current())
+            self.least_before, self.least, self.most, self.started = self.least, math.inf, -math.inf, t
+        self.least = min(self.least, offset)
+        self.most = max(self.most, offset)
+
+    def _current(self) -> float:
+        return self.most - min(self.least, self.least_before)
 
     def latest(self) -> float | None:
         """The latest arrival remembered (s), None before the first sample."""
         if self.started is None:
             return None
-        return max(self.current, *self.windows) if self.windows else self.current
+        return max(self._current(), *self.windows) if self.windows else self._current()
 
 
 @dataclass
