@@ -49,6 +49,8 @@ class TickCounters(SlotBlock):
     saddle_locks = Slot(int, TICK, "saddle gait locks taken")
     saddle_losses = Slot(int, TICK, "saddle gait locks lost")
     saddle_stale = Slot(int, TICK, "episodes of a stale saddle stream")
+    input_clock_rate = Slot(float, TICK, "the horse stream's producer clock rate (resample.ClockMap; 0: no tick yet)")
+    saddle_clock_rate = Slot(float, TICK, "the saddle stream's producer clock rate in use (the same ClockMap)")
     phase_locked = Slot(float, TICK, "1 while the deadlines are phase locked to the producer")
     phase_lead = Slot(float, TICK, "s, the deadline's lead over the expected arrival (-1: none)")
     phase_margin = Slot(float, TICK, "s, the margin kept (-1: none)")

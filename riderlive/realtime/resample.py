@@ -27,6 +27,10 @@ toward the line (at that rate) through the least-delayed frame of the last secon
 by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
 tick's reading never steps, it runs at most 10 % slower or faster while it catches up.
 Cost: a few comparisons per frame, ~40 per window.
+
+The mapping is :class:`ClockMap`, one per stream: the horse :class:`Resampler`'s, and the
+saddle input's (``realtime/saddle_input.py``), which steps its estimator per sample
+instead of buffering frames.
 """
 
 from __future__ import annotations
@@ -47,25 +51,28 @@ RATE_WINDOWS = 40
 
 
 @dataclass
-class Resampler:
-    """The buffered frames of one producer."""
+class ClockMap:
+    """A producer's clock mapped onto the engine's (see the module docstring): the offset of
+    the least-delayed of the last ``capacity`` frames, then, once estimated, the line
+    ``engine = anchor + rate * t``. One per stream: the horse resampler's and the saddle
+    input's (``realtime/saddle_input.py``). Times in seconds (``t`` producer, ``received``
+    engine)."""
 
-    delay: float = 0.01
-    hold: float = 0.25
     capacity: int = 512
-    times: deque[float] = field(default_factory=deque)
-    frames: deque[list[float]] = field(default_factory=deque)
     offsets: deque[float] = field(default_factory=deque)
+    """``received - t`` of the last ``capacity`` frames."""
     offset: float | None = None
-    """Engine time minus producer time of the least-delayed buffered frame (the mapping
-    while no rate is estimated)."""
+    """Engine time minus producer time of the least-delayed of them (the mapping while no
+    rate is estimated)."""
     rate: float = 1.0
     """Engine seconds per producer second (1 until estimated; within 1 +- MAX_SKEW)."""
     anchor: float | None = None
     """With a rate estimated: engine time of producer time 0 on the mapping line (None: none yet)."""
     target: float = 0.0
-    """The anchor of the line under the buffered frames at ``rate``: ``anchor`` moves to it
+    """The anchor of the line under the recent frames at ``rate``: ``anchor`` moves to it
     by at most ``MAX_SKEW`` of each frame's source time step."""
+    newest: float | None = None
+    """Producer time of the newest frame (None: none yet)."""
     estimated_at: float = 0.0
     """Producer time of the newest frame at the last rate estimate."""
     windows: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=RATE_WINDOWS))
@@ -75,35 +82,28 @@ class Resampler:
     """The least-delayed frame of the window under way."""
 
     def clear(self) -> None:
-        self.times.clear()
-        self.frames.clear()
         self.offsets.clear()
         self.offset = None
         self.rate = 1.0
         self.anchor = None
         self.target = 0.0
+        self.newest = None
         self.estimated_at = 0.0
         self.windows.clear()
         self.least = None
 
-    def push(self, t: float, received: float, values: list[float]) -> bool:
-        """Add a frame; a frame not newer than the newest is dropped (returns False)."""
-        if self.times and t <= self.times[-1]:
-            return False
-        self.times.append(t)
-        self.frames.append(values)
+    def push(self, t: float, received: float) -> None:
+        """Map one more frame (``t`` after every frame pushed before: the caller drops the others)."""
+        previous, self.newest = self.newest, t
         offset = received - t
         self.offsets.append(offset)
         if self.offset is None or offset < self.offset:
             self.offset = offset
-        if len(self.times) > self.capacity:
-            self.times.popleft()
-            self.frames.popleft()
-            if self.offsets.popleft() == self.offset:
-                self.offset = min(self.offsets)
-        if self.anchor is not None:
+        if len(self.offsets) > self.capacity and self.offsets.popleft() == self.offset:
+            self.offset = min(self.offsets)
+        if self.anchor is not None and previous is not None:
             self.target = min(self.target, received - self.rate * t)  # a less-delayed frame
-            step = MAX_SKEW * (t - self.times[-2])  # the read runs at most 10 % slower or faster
+            step = MAX_SKEW * (t - previous)  # the read runs at most 10 % slower or faster
             self.anchor += min(step, max(-step, self.target - self.anchor))
         if self.least is None or offset < self.least[1]:
             self.least = (t, offset)
@@ -113,7 +113,6 @@ class Resampler:
             self.estimated_at = t
             if self.windows[-1][0] - self.windows[0][0] >= RATE_SPAN_S:
                 self._estimate_rate(t)
-        return True
 
     def _estimate_rate(self, newest: float) -> None:
         """A new rate from the least-delayed frames of the oldest and the newest third of the
@@ -135,13 +134,79 @@ class Resampler:
         self.target = min(o + t - rate * t for t, o in recent)  # receive - rate * t
         self.rate = rate
 
-    def source_time(self, now: float) -> float | None:
-        """The producer time the tick at engine time ``now`` should show."""
+    def engine_time(self, t: float) -> float | None:
+        """The engine time producer time ``t`` maps to (None before the first frame)."""
         if self.anchor is not None:
-            return (now - self.anchor) / self.rate - self.delay
+            return self.anchor + self.rate * t
         if self.offset is None:
             return None
-        return now - self.offset - self.delay
+        return t + self.offset
+
+    def line_time(self, t: float) -> float | None:
+        """The engine time producer time ``t`` maps to on the line the mapping moves toward
+        (``target``; ``engine_time`` while no rate is estimated): a frame's lateness against
+        it is the stream's, not the mapping's catching up."""
+        if self.anchor is not None:
+            return self.target + self.rate * t
+        return self.engine_time(t)
+
+    def source_time(self, now: float, delay: float) -> float | None:
+        """The producer time the tick at engine time ``now`` shows, ``delay`` (s) behind the mapping."""
+        if self.anchor is not None:
+            return (now - self.anchor) / self.rate - delay
+        if self.offset is None:
+            return None
+        return now - self.offset - delay
+
+
+@dataclass
+class Resampler:
+    """The buffered frames of one producer, and its :class:`ClockMap`."""
+
+    delay: float = 0.01
+    hold: float = 0.25
+    capacity: int = 512
+    times: deque[float] = field(default_factory=deque)
+    frames: deque[list[float]] = field(default_factory=deque)
+    clock: ClockMap = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.clock = ClockMap(self.capacity)
+
+    @property
+    def rate(self) -> float:
+        """The producer's clock rate in use (engine seconds per producer second)."""
+        return self.clock.rate
+
+    @property
+    def offset(self) -> float | None:
+        """The least-delayed buffered frame's engine minus producer time (``ClockMap.offset``)."""
+        return self.clock.offset
+
+    @property
+    def anchor(self) -> float | None:
+        return self.clock.anchor
+
+    def clear(self) -> None:
+        self.times.clear()
+        self.frames.clear()
+        self.clock.clear()
+
+    def push(self, t: float, received: float, values: list[float]) -> bool:
+        """Add a frame; a frame not newer than the newest is dropped (returns False)."""
+        if self.times and t <= self.times[-1]:
+            return False
+        self.times.append(t)
+        self.frames.append(values)
+        if len(self.times) > self.capacity:
+            self.times.popleft()
+            self.frames.popleft()
+        self.clock.push(t, received)
+        return True
+
+    def source_time(self, now: float) -> float | None:
+        """The producer time the tick at engine time ``now`` should show."""
+        return self.clock.source_time(now, self.delay)
 
     def sample(self, now: float) -> tuple[float, list[float]] | None:
         """``(source time, frame)`` for engine time ``now``, or None when stale or empty."""

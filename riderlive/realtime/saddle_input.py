@@ -5,10 +5,13 @@ Pure (no clocks, no I/O); every time argument is seconds, engine or producer as 
 - :class:`SaddleInput`: the driving saddle producer's stream. Each received sample is
   stepped through the estimator (:func:`riderlive.saddle.step`) in source-time order,
   so a 1000 Hz stream is seen sample by sample, not once per tick. The tick reads the
-  stream at the producer's time that corresponds to its own (the clock mapping of the
-  least-delayed sample, as the resampler's) less a **delay**: ``input.delay``, raised
-  by the stream's recent lateness (the latest arrival against the least-delayed
-  sample's, over the last 256 samples) up to :data:`MAX_DELAY`, and changed
+  stream at the producer's time that corresponds to its own (the horse resampler's
+  clock mapping, :class:`~riderlive.realtime.resample.ClockMap`: the least-delayed
+  sample of the last 256, then the producer's clock rate tracked, docs/protocol.md
+  "Clocks that drift") less a **delay**: ``input.delay``, raised by the stream's recent
+  lateness (the latest arrival against the mapping, each taken against the mapping when
+  it arrived, over the last :data:`LATE_MEMORY_S` of the stream: :class:`Lateness`) up
+  to :data:`MAX_DELAY`, and changed
   by at most :data:`DELAY_SLEW` seconds per second (the stream slowed or sped up by
   that fraction, never stepped). Within the samples received the frame is the one an
   offline bake of the same samples rebuilds (:func:`riderlive.saddle.rebuild`: the
@@ -34,9 +37,10 @@ import bisect
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from riderlive.horse.gaits import Gait
+from riderlive.realtime.resample import ClockMap
 from riderlive.saddle import Lock, Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
 from riderlive.saddle.pose import BEND_COLUMN, SCALAR, TRUNK_COLUMNS, saddle_from_trunk
 from riderlive.units import horse_lengths, metres_per_unit, saddle_lengths
@@ -50,7 +54,15 @@ NO_ESTIMATE: tuple[float, ...] = (math.nan,) * 5
 COUNTERS: tuple[str, ...] = ("samples", "missing", "empty", "gaps", "glitches", "rebases", "locks", "losses")
 """Estimator counters summed over every saddle stream the tick has seen (``saddle_<name>``)."""
 _OFFSETS = 256
-"""Samples whose clock offset the mapping takes the least of (as the resampler's buffer)."""
+"""Samples whose clock offset the mapping takes the least of."""
+LATE_WINDOW_S = 0.25
+"""Source seconds per window of :class:`Lateness` (its latest arrival kept)."""
+LATE_MEMORY_S = 10.0
+"""Source seconds of lateness the delay follows: a busy host stalls a producer or the service
+every few seconds, so the delay stays at the stalls' lateness between them instead of decaying
+(a memory of 256 samples, 1.28 s at 200 Hz, let it fall between stalls: each stall then read
+past the newest sample, and stepped back to the bake's frames when the samples came, the
+one-tick steps of 0.5-1.2 deg on ``lower_back.rz``; docs/performance.md)."""
 _HISTORY = 512
 """Estimator states kept to read between samples (0.5 s at 1000 Hz: more than :data:`MAX_DELAY`)."""
 MAX_DELAY = 0.25
@@ -77,6 +89,50 @@ def estimate_row(state: State, t: float) -> tuple[float, ...]:
 
 
 @dataclass
+class Lateness:
+    """The latest arrival of a stream's samples over its last :data:`LATE_MEMORY_S` (s of
+    source time), each against the least-delayed of its own :data:`LATE_WINDOW_S` window and
+    the one before (so a clock rate still being tracked adds at most its residual over 0.5 s,
+    while a stall's burst is measured against the on-time samples before it); a few
+    comparisons a sample."""
+
+    windows: deque[float] = field(default_factory=lambda: deque(maxlen=round(LATE_MEMORY_S / LATE_WINDOW_S)))
+    """The latest arrival of each closed window (s)."""
+    least: float = math.inf
+    """The least offset of the window under way (s)."""
+    most: float = -math.inf
+    """The largest offset of the window under way (s)."""
+    least_before: float = math.inf
+    """The least offset of the window before it (s)."""
+    started: float | None = None
+    """Source time the window under way started at (None: no sample yet)."""
+
+    def clear(self) -> None:
+        self.windows.clear()
+        self.least, self.most, self.least_before = math.inf, -math.inf, math.inf
+        self.started = None
+
+    def add(self, t: float, offset: float) -> None:
+        """A sample at source time ``t`` arrived ``offset`` s after the mapping's line at ``t``."""
+        if self.started is None:
+            self.started = t
+        elif t - self.started >= LATE_WINDOW_S:
+            self.windows.append(self._current())
+            self.least_before, self.least, self.most, self.started = self.least, math.inf, -math.inf, t
+        self.least = min(self.least, offset)
+        self.most = max(self.most, offset)
+
+    def _current(self) -> float:
+        return self.most - min(self.least, self.least_before)
+
+    def latest(self) -> float | None:
+        """The latest arrival remembered (s), None before the first sample."""
+        if self.started is None:
+            return None
+        return max(self._current(), *self.windows) if self.windows else self._current()
+
+
+@dataclass
 class SaddleInput:
     """The driving saddle stream in the tick: the estimator's state and the clock mapping."""
 
@@ -92,8 +148,14 @@ class SaddleInput:
         self._frames_out = horse_lengths(self.to_metres)
         """A rebuilt horse frame's lengths back to the service unit."""
         self.state = State()
-        self.offsets: deque[float] = deque(maxlen=_OFFSETS)
-        self.offset: float | None = None
+        self.clock = ClockMap(_OFFSETS)
+        """The producer's clock mapped onto the engine's (rate tracked)."""
+        self.lateness = Lateness()
+        """The recent samples' arrival after the mapping's line at their time, when each arrived (s)."""
+        self._rate_known = False
+        """Whether ``lateness`` was measured with the clock's rate estimated (the first estimate
+        forgets what was measured before it: a drifting clock's error, not the stream's lateness,
+        which would hold the delay up for LATE_MEMORY_S)."""
         self.history: deque[State] = deque(maxlen=_HISTORY)
         """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
         self.times: deque[float] = deque(maxlen=_HISTORY)
@@ -114,8 +176,9 @@ class SaddleInput:
         for name, value in self._current().items():
             self.finished[name] += value
         self.state = State()
-        self.offsets.clear()
-        self.offset = None
+        self.clock.clear()
+        self.lateness.clear()
+        self._rate_known = False
         self.history.clear()
         self.times.clear()
         self._frames.clear()
@@ -144,27 +207,27 @@ class SaddleInput:
         if self.state.t == t:  # taken (an empty sample is counted and leaves the pose as it was)
             self.history.append(self.state)
             self.times.append(t)
-        offset = received - t
-        if len(self.offsets) == self.offsets.maxlen and self.offsets[0] == self.offset:
-            self.offsets.append(offset)
-            self.offset = min(self.offsets)
-        else:
-            self.offsets.append(offset)
-            self.offset = offset if self.offset is None else min(self.offset, offset)
+        clock = self.clock
+        clock.push(t, received)
+        if clock.anchor is not None and not self._rate_known:
+            self.lateness.clear()  # measured against a mapping that did not know the rate yet
+            self._rate_known = True
+        mapped = clock.line_time(t)
+        assert mapped is not None  # a sample was pushed
+        self.lateness.add(t, received - mapped)
         self.stale = False
         return True
 
     def source_time(self, now: float) -> float | None:
         """The producer time shown at engine time ``now``: ``delay`` behind the clock mapping."""
-        if self.offset is None:
-            return None
-        return now - self.offset - self.delay
+        return self.clock.source_time(now, self.delay)
 
     def _move_delay(self, now: float) -> None:
-        """Toward the base delay plus the newest sample's lateness (see the module docstring)."""
-        if self.offset is None or not self.offsets:
+        """Toward the base delay plus the recent samples' lateness (see the module docstring)."""
+        late = self.lateness.latest()
+        if late is None:
             return
-        target = min(max(self.base_delay, self.base_delay + max(self.offsets) - self.offset), MAX_DELAY)
+        target = min(self.base_delay + max(0.0, late), MAX_DELAY)
         if self._delay_at is None:
             self.delay = target
         else:

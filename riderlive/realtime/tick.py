@@ -246,6 +246,7 @@ class TickLoop(TickControl):
         counter.state_resets = core.resets
         counter.outputs_clamped = core.clamped
         self._count_saddle(result)
+        self._count_rates(core.resampler.rate, core.saddle.clock.rate)
         counter.hands_full_reach = core.full_reach
         return result
 

@@ -26,6 +26,7 @@ from riderlive.realtime import commands as cmd
 from riderlive.realtime import handover
 from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, TickCore
+from riderlive.realtime.counters import TickCounters
 from riderlive.realtime.output import TickDevices
 from riderlive.realtime.pacing import DeadlineClock
 from riderlive.realtime.phase_follow import PhaseFollower
@@ -34,6 +35,9 @@ from riderlive.realtime.setup import TickSetup
 from riderlive.realtime.shm import SharedBlob, SharedRing
 from riderlive.rules.engine import RiderModel
 from riderlive.saddle import estimate as saddle_estimate
+
+RATE_SHOWN = 0.001
+"""A producer clock rate the status shows is refreshed once the rate in use moved more than this."""
 
 
 class TickControl:
@@ -59,6 +63,20 @@ class TickControl:
     outputs: SharedRing
     resume: handover.TickSnapshot | None
     _status_dirty: bool
+    counter: TickCounters
+    _rates_seen: tuple[float, float] = (0.0, 0.0)
+    """The horse and saddle clock rates the status last showed."""
+
+    def _count_rates(self, horse: float, saddle: float) -> None:
+        """The producer clock rates in use (``resample.ClockMap.rate``) into shared memory; one
+        that moved more than :data:`RATE_SHOWN` since the status showed it (at most 4 estimates
+        a second per stream) refreshes the status (``input_clock_rate``, ``saddle_clock_rate``)."""
+        self.counter.input_clock_rate = horse
+        self.counter.saddle_clock_rate = saddle
+        shown_horse, shown_saddle = self._rates_seen
+        if abs(horse - shown_horse) > RATE_SHOWN or abs(saddle - shown_saddle) > RATE_SHOWN:
+            self._rates_seen = (horse, saddle)
+            self._status_dirty = True
 
     def _publish_status(self) -> None:
         """The status into the shared blob (the web process reads it when its version moves)."""
@@ -151,6 +169,7 @@ class TickControl:
             "saddle": self._saddle_status(),
             "phase_lock": self.phase.status(),
             "input_clock_rate": core.resampler.rate,
+            "saddle_clock_rate": core.saddle.clock.rate,
             "events": list(self.events),
         }
 

@@ -79,6 +79,8 @@ SADDLE_COUNTERS: tuple[tuple[str, str], ...] = (
     ("stale", "Driving saddle streams that stopped: the rider eased to neutral."),
 )
 """The tick's ``saddle_*`` counters (``riderlive.realtime.saddle_input``), as ``riderlive_saddle_*_total``."""
+CLOCK_RATES: tuple[tuple[str, str], ...] = (("horse", "input_clock_rate"), ("saddle", "saddle_clock_rate"))
+"""``riderlive_input_clock_rate``'s ``kind`` label -> the tick's counter slot (``resample.ClockMap.rate``)."""
 
 PHASE_GAUGES: tuple[tuple[str, str], ...] = (
     ("locked", "1 while the tick's deadlines are phase-locked to the driving producer's frames."),
@@ -171,6 +173,12 @@ def render(
     for key, help_text in SADDLE_COUNTERS:
         name = f"riderlive_saddle_{key}_total"
         metric(name, "counter", help_text, [f"{name} {int(tick.get(f'saddle_{key}', 0))}"])
+    metric(
+        "riderlive_input_clock_rate",
+        "gauge",
+        "The producer clock rate in use per input kind (engine s per producer s, 0.9-1.1; 0 before the first tick).",
+        [f'riderlive_input_clock_rate{{kind="{kind}"}} {tick.get(key, 0.0)}' for kind, key in CLOCK_RATES],
+    )
     metric(
         "riderlive_frames_out_total",
         "counter",

@@ -9,6 +9,7 @@ import json
 import math
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from websockets.sync.client import ClientConnection, connect
@@ -27,6 +28,11 @@ def horse(t: float) -> float:
     return 3.0 * math.sin(2.0 * math.pi * 1.5 * t)
 
 
+def horse_frame(t: float, at: float) -> dict[str, Any]:
+    """A /ws/horse frame stamped ``t`` showing the horse at time ``at``."""
+    return {"t": t, "values": {"rearPivot.rz": horse(at)}}
+
+
 def drive(
     ws: ClientConnection,
     seconds: float,
@@ -35,18 +41,20 @@ def drive(
     game: bool,
     stamps: list[float],
     sent: list[float] | None = None,
+    make: Callable[[float, float], dict[str, Any]] = horse_frame,
 ) -> None:
-    """Send a smooth horse at HZ, stamped with ``clock(elapsed)``: a function of that clock
-    (``game``: a game's pose follows its clock, and stands still with it) or of real time
-    (a producer whose timestamps alone step); collect the segment messages that come back
-    and the stamps sent (``stamps``, in order; ``sent``: when each send began, perf_counter s)."""
+    """Send a smooth horse (or ``make(stamp, time shown)``'s frames) at HZ, stamped with
+    ``clock(elapsed)``: a function of that clock (``game``: a game's pose follows its clock,
+    and stands still with it) or of real time (a producer whose timestamps alone step);
+    collect the segment messages that come back and the stamps sent (``stamps``, in order;
+    ``sent``: when each send began, perf_counter s)."""
     start = time.perf_counter()
     n = 0
     while (elapsed := time.perf_counter() - start) < seconds:
         t = clock(elapsed)
         if sent is not None:
             sent.append(time.perf_counter())  # before the send: no frame can arrive before it
-        ws.send(json.dumps({"t": t, "values": {"rearPivot.rz": horse(t if game else elapsed)}}))
+        ws.send(json.dumps(make(t, t if game else elapsed)))
         stamps.append(t)
         n += 1
         time.sleep(max(0.0, start + n / HZ - time.perf_counter()))
@@ -87,28 +95,41 @@ def steps_back(stamps: list[float]) -> list[tuple[float, float]]:
 
 
 def run(
-    server: LiveServer, seconds: float, clock: Callable[[float], float], game: bool, sent: list[float] | None = None
+    server: LiveServer,
+    seconds: float,
+    clock: Callable[[float], float],
+    game: bool,
+    sent: list[float] | None = None,
+    *,
+    path: str = "/ws/horse",
+    make: Callable[[float, float], dict[str, Any]] = horse_frame,
+    settle: float = 0.5,
+    before_close: Callable[[list[float]], None] | None = None,
 ) -> tuple[list[dict], list[dict], list[float]]:
-    """0.5 s on a steady clock (to settle), then ``seconds`` on ``clock``, without a break
-    in the stream; the follower's frames of the second part, the segment messages and the
-    stamps sent (``sent``: when each was sent)."""
+    """``settle`` s on a steady clock, then ``seconds`` on ``clock``, without a break in the
+    stream to ``path``; the follower's frames of the second part, the segment messages and
+    the stamps sent (``sent``: when each was sent). ``before_close(stamps)`` runs after the
+    last send, while the producer is still connected."""
     follower = Follower(server.ws)
     segments: list[dict] = []
     stamps: list[float] = []
     try:
-        with connect(server.ws + "/ws/horse") as ws:
+        with connect(server.ws + path) as ws:
             ws.recv(timeout=5)
-            begin = time.perf_counter() + 0.5
+            begin = time.perf_counter() + settle
             drive(
                 ws,
-                0.5 + seconds,
-                lambda e: 1000.0 + e if e < 0.5 else 1000.5 + clock(e - 0.5),
+                settle + seconds,
+                lambda e: 1000.0 + e if e < settle else 1000.0 + settle + clock(e - settle),
                 segments,
                 game,
                 stamps,
                 sent,
+                make,
             )
             end = time.perf_counter()
+            if before_close is not None:
+                before_close(stamps)
         frames = [f for f in follower.frames if begin + 0.05 <= f["at"] <= end]
         assert frames and any(f["driver"] == "input" for f in follower.frames if f["at"] < begin), "it drove at once"
         return frames, segments, stamps

@@ -1,0 +1,162 @@
+"""A saddle producer's clock against the real server (uvicorn, a real websocket producer on
+``/ws/saddle``, a ``/ws/rider`` follower): the same cases as the horse path
+(``test_clocks_live.py``, docs/protocol.md "Clocks that jump" and "Clocks that drift"): a
+clock 5 % slow or fast is tracked without resets, every sample stepped and driving, the
+lateness bounded; a frozen timestamp and small steps back keep the producer in control."""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from riderlive.realtime.tick_control import RATE_SHOWN
+from tests.service.live_server import LiveServer
+from tests.service.test_clocks_live import drivers, largest_step, run, steps_back
+from tests.service.test_saddle_live import _trot_saddle
+from tests.waiting import wait_until
+
+SETTLE = 2.0
+"""Seconds of a steady clock first: the estimator locks the trot (2 strides of 1.4 Hz) before the case."""
+
+
+def saddle_frame(t: float, at: float) -> dict[str, Any]:
+    """A /ws/saddle sample stamped ``t`` showing the trotting saddle at time ``at``."""
+    return {**_trot_saddle(at), "t": t}
+
+
+def driven(frame: dict[str, Any]) -> bool:
+    """Driven by the input: the test's saddle producer, the only one connected."""
+    return frame["driver"] == "input"
+
+
+def every_sample_taken(server: LiveServer) -> tuple[Callable[[list[float]], None], list[float]]:
+    """A ``before_close`` that waits (producer still connected) until the tick has stepped
+    the estimator with every sample sent since it was made (``riderlive_saddle_samples_total``),
+    and the tick's refused-as-older count then (``[refused]``)."""
+    samples = server.metric("riderlive_saddle_samples_total")
+    refused = server.metric("riderlive_tick_input_out_of_order_total")
+    out: list[float] = []
+
+    def wait(stamps: list[float]) -> None:
+        wait_until(
+            lambda: server.metric("riderlive_saddle_samples_total") - samples >= len(stamps),
+            10.0,
+            "the tick never stepped every sample sent",
+        )
+        out.append(server.metric("riderlive_saddle_samples_total") - samples - len(stamps))
+        out.append(server.metric("riderlive_tick_input_out_of_order_total") - refused)
+
+    return wait, out
+
+
+def ahead_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -> tuple[float, np.ndarray]:
+    """Of the frames from 1.5 s on (the rate estimated): the share read past the newest sample
+    sent before the frame arrived (extrapolated), and each one's lateness (that sample's stamp
+    minus the frame's ``source_t``, s; delivery included)."""
+    later = [f for f in frames if f["at"] >= frames[0]["at"] + 1.5]
+    lateness = np.array([stamps[bisect.bisect_right(sent, f["at"]) - 1] - f["source_t"] for f in later])
+    return float(np.mean(lateness < 0.0)), lateness
+
+
+def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server: LiveServer) -> None:
+    """As the horse's (``test_clocks_live``): 6 s of a saddle clock at 0.95 and 1.05 x ours,
+    120 samples a second, against a steady clock in the same run: no segment, every frame
+    driven by the saddle, every sample stepped (none refused), the rate the same in
+    /api/state (within 0.1 %) and /metrics, at least half way from 1 to 1 / rate; the read
+    past the newest sample on at most 5 % more frames than the steady clock's, the lateness
+    never growing: median and last second's median within 20 ms of the steady clock's,
+    largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
+    lateness 248 ms against the steady 52 ms (the drift went into the read delay)."""
+    steady_sent: list[float] = []
+    wait, _ = every_sample_taken(server)
+    steady, none, steady_stamps = run(
+        server,
+        4.0,
+        lambda e: e,
+        True,
+        steady_sent,
+        path="/ws/saddle",
+        make=saddle_frame,
+        settle=SETTLE,
+        before_close=wait,
+    )
+    assert none == [] and all(driven(f) for f in steady), drivers(steady)
+    steady_ahead, steady_late = ahead_and_late(steady, steady_stamps, steady_sent)
+    for rate in (0.95, 1.05):
+        sent: list[float] = []
+        wait, taken = every_sample_taken(server)
+        rates: list[float] = []
+
+        def shown(stamps: list[float], wait: Callable[[list[float]], None] = wait, rates: list[float] = rates) -> None:
+            wait(stamps)  # every sample stepped: the rate is final
+            rates.append(server.metric("riderlive_input_clock_rate", 'kind="saddle"'))
+            wait_until(
+                lambda: abs(server.get("/api/state").json()["tick"]["saddle_clock_rate"] - rates[0]) <= RATE_SHOWN,
+                5.0,
+                "/api/state never showed the rate /metrics shows (within tick.RATE_SHOWN)",
+            )
+
+        frames, segments, stamps = run(
+            server,
+            6.0,
+            lambda e, r=rate: r * e,  # type: ignore[misc]
+            True,
+            sent,
+            path="/ws/saddle",
+            make=saddle_frame,
+            settle=SETTLE,
+            before_close=shown,
+        )
+        assert segments == [], (rate, segments)
+        assert all(driven(f) for f in frames), (rate, drivers(frames))
+        assert taken == [0.0, 0.0], ("every sample stepped once, none refused", rate, taken)
+        # the 10 s baseline still holds the steady clock's first 2 s: at least half way to 1 / rate
+        assert 0.5 <= (rates[0] - 1.0) / (1.0 / rate - 1.0) <= 1.1, (rate, rates)
+        ahead, late = ahead_and_late(frames, stamps, sent)
+        figures = (rate, ahead, steady_ahead, np.median(late), late.max(), np.median(steady_late), steady_late.max())
+        assert ahead <= steady_ahead + 0.05, figures
+        assert np.median(late) <= np.median(steady_late) + 0.02 and late.max() <= steady_late.max() + 0.1, figures
+        second = len(late) * 120 // 540  # about one second of frames
+        assert np.median(late[-second:]) <= np.median(steady_late) + 0.02, figures
+
+
+def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(server: LiveServer) -> None:
+    """A saddle sensor whose timestamp freezes for 1.5 s while its samples keep coming, then
+    moves on; and one whose stamps step back 0.2 s every second: the horse path's behaviour
+    (docs/protocol.md "Clocks that jump"): ``clock_paused`` within 0.5 s of the freeze then
+    ``clock_resumed``, each step back one ``clock_backward`` re-anchored; the saddle drives
+    every frame (never neutral, never the procedural horse) and the rider's per-tick step
+    stays within 1.5 x a steady clock's."""
+    baseline, none, _ = run(server, 2.0, lambda e: e, False, path="/ws/saddle", make=saddle_frame, settle=SETTLE)
+    assert none == [] and all(driven(f) for f in baseline), drivers(baseline)
+    bound = largest_step(baseline)
+
+    paused_before = server.metric("riderlive_clock_jumps_total", 'direction="paused"')
+    paused, segments, _ = run(
+        server,
+        3.0,
+        lambda e: min(e, 0.5) + max(0.0, e - 2.0),
+        False,
+        path="/ws/saddle",
+        make=saddle_frame,
+        settle=SETTLE,
+    )
+    assert [s["reason"] for s in segments] == ["clock_paused", "clock_resumed"], segments
+    assert -0.5 <= segments[0]["jump"] < 0.0, segments  # a segment within 0.5 s of the freeze
+    assert all(driven(f) for f in paused), ("the saddle kept control throughout", drivers(paused))
+    assert largest_step(paused) <= 1.5 * bound, (largest_step(paused), bound)
+    assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
+
+    stepping, segments, stamps = run(
+        server, 3.5, lambda e: e - 0.2 * math.floor(e), False, path="/ws/saddle", make=saddle_frame, settle=SETTLE
+    )
+    sent = steps_back(stamps)
+    assert len(sent) >= 2, ("the sender was late across more than one step", sent)
+    assert [s["reason"] for s in segments] == ["clock_backward"] * len(sent), (segments, sent)
+    assert [(s["previous_t"], s["t"]) for s in segments] == sent, (segments, sent)
+    assert all(driven(f) for f in stepping), drivers(stepping)
+    assert largest_step(stepping) <= 1.5 * bound, (largest_step(stepping), bound)
