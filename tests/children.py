@@ -22,8 +22,11 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import subprocess
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 from tests.waiting import wait_until
 
@@ -43,10 +46,23 @@ def mark_run() -> str:
 def with_parent_death(command: Sequence[str], sig: signal.Signals = signal.SIGTERM) -> list[str]:
     """``command`` run through util-linux ``setpriv --pdeathsig``: it execs the command in
     the same process (same pid) after ``prctl(PR_SET_PDEATHSIG, sig)``, so the command gets
-    ``sig`` when the thread that started it ends (start it from a thread that lives as long
-    as it should: the main thread, as fixtures do). An exec wrapper, not a ``preexec_fn``:
+    ``sig`` when the thread that started it ends (:func:`popen` starts it from a thread that
+    lives as long as the run). An exec wrapper, not a ``preexec_fn``:
     Python code between fork and exec is unsafe with threads (Playwright's, readers')."""
     return [SETPRIV, "--pdeathsig", sig.name.removeprefix("SIG"), "--", *command]
+
+
+_SPAWNER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="children-spawner")
+"""One thread that lives as long as the test run starts every child: the parent-death
+signal follows the *thread* that forked, and a fixture that starts its servers from
+short-lived threads (tests/bus/test_stage_safety.py) would have them SIGTERMed the
+moment those threads ended."""
+
+
+def popen(command: Sequence[str], **kwargs: Any) -> subprocess.Popen[Any]:
+    """``subprocess.Popen(with_parent_death(command), **kwargs)``, forked from the run's one
+    long-lived spawner thread (from any thread of the test run)."""
+    return _SPAWNER.submit(subprocess.Popen, with_parent_death(command), **kwargs).result()
 
 
 def marked(run: str) -> list[int]:

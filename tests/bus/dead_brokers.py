@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from tests.children import with_parent_death
+from tests.children import popen
 
 ROOT = Path(__file__).resolve().parents[2]
 BAD_URL = "nats://127.0.0.1:99999"
@@ -75,8 +75,8 @@ def race_with_baseline(command: list[str], url: str, cwd: Path) -> tuple[Exit, E
     env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
     start = time.perf_counter()
     procs = [
-        subprocess.Popen(
-            with_parent_death([sys.executable, "-m", "riderlive", *(a.format(url=u) for a in command)]),
+        popen(
+            [sys.executable, "-m", "riderlive", *(a.format(url=u) for a in command)],
             cwd=cwd,
             env=env,
             stdout=subprocess.DEVNULL,

@@ -17,7 +17,7 @@ from riderlive.bus.broker import Broker
 from riderlive.bus.subjects import Kind, Stage
 from riderlive.timecode import Rate
 from tests.bus.harness import RIG_TICK, NatsProbe, start_rig, wait_for
-from tests.children import with_parent_death
+from tests.children import popen
 from tests.service.live_server import ROOT, LiveServer
 
 STAGE = "tc"
@@ -39,9 +39,9 @@ def _timecode(live: LiveServer) -> dict[str, object]:
 def test_every_rig_follows_the_stage_heartbeat(broker: Broker, rigs: list[LiveServer]) -> None:
     for live in rigs:
         assert _timecode(live)["source"] == "host"
-    beat = subprocess.Popen(
-        with_parent_death([sys.executable, "-m", "riderlive", "stage", "--nats", broker.url, "--stage", STAGE,
-                           "heartbeat", "--tc-rate", "29.97df", "--tc-clock", "utc"]),
+    beat = popen(
+        [sys.executable, "-m", "riderlive", "stage", "--nats", broker.url, "--stage", STAGE,
+         "heartbeat", "--tc-rate", "29.97df", "--tc-clock", "utc"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )  # fmt: skip
     try:

@@ -20,7 +20,7 @@ from riderlive.dynamixel.driver import RigPlug
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item
-from tests.children import with_parent_death
+from tests.children import popen
 from tests.devices.memory_plug import rider_frame
 
 TORQUE_ENABLE_ADDRESS = 64
@@ -153,8 +153,8 @@ def servo_emulator(rig_file: Path) -> Iterator[str]:
     """``riderlive servo-emu --rig FILE`` in its own process (as a user would start it); yields
     its pty, stops it on the way out."""
     root = Path(__file__).resolve().parents[2]
-    emu = subprocess.Popen(
-        with_parent_death([sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)]),
+    emu = popen(
+        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
         stdout=subprocess.PIPE,
         text=True,
         env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"},

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.children import with_parent_death
+from tests.children import popen
 from tests.waiting import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -61,8 +61,8 @@ class LiveServer:
             "--port",
             str(port),
         ]
-        self.proc = subprocess.Popen(
-            with_parent_death(command),  # SIGTERM (a clean stop) if the test run dies
+        self.proc = popen(
+            command,  # SIGTERM (a clean stop) if the test run dies (tests/children.py)
             cwd=workdir,
             env=env,
             stdout=subprocess.DEVNULL,

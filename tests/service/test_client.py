@@ -12,7 +12,7 @@ import numpy as np
 from riderlive.channels import HORSE_NAMES
 from riderlive.client import HorseProducer, RiderSubscriber
 from riderlive.framefile import FrameTable, read_frames, write_frames
-from tests.children import with_parent_death
+from tests.children import popen
 from tests.service.conftest import BASE_CONFIG
 from tests.service.live_server import ROOT, LiveServer
 
@@ -75,10 +75,8 @@ def test_examples_stream_a_csv_in_and_record_rider_frames_out(server: LiveServer
     horse_csv = tmp_path / "horse.csv"
     write_frames(str(horse_csv), FrameTable(HORSE_NAMES, values, t))
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
-    streamer = subprocess.Popen(
-        with_parent_death(
-            [sys.executable, str(ROOT / "examples/stream_horse_csv.py"), str(horse_csv), "--url", server.ws]
-        ),
+    streamer = popen(
+        [sys.executable, str(ROOT / "examples/stream_horse_csv.py"), str(horse_csv), "--url", server.ws],
         env=env,
     )
     out = tmp_path / "rider.csv"

@@ -19,7 +19,7 @@ import pytest
 
 import riderlive
 from riderlive.web import CHROMIUM, CHROMIUM_ARGS
-from tests.children import with_parent_death
+from tests.children import popen
 from tests.waiting import wait_until
 
 PACKAGE_ROOT = Path(riderlive.__file__).resolve().parents[1]
@@ -56,8 +56,8 @@ class Server:
         self.log.append(log)
         env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")])}
         with log.open("wb") as out:
-            self.process = subprocess.Popen(
-                with_parent_death([sys.executable, "-m", "riderlive", "serve", "--config", str(config)]),
+            self.process = popen(
+                [sys.executable, "-m", "riderlive", "serve", "--config", str(config)],
                 cwd=self.workdir,
                 stdout=out,
                 stderr=subprocess.STDOUT,
