@@ -173,8 +173,9 @@ def soak_run(client: httpx.Client, emu: Emulator, name: str, seconds: float) -> 
         if d["supervision"]["restarts"] != restarts:  # the tick restarted: the rig was parked by the guardian
             restarts = d["supervision"]["restarts"]
             faults.append(f"tick restarted: {d['supervision']['last_exit']}")
-            recover(client)
-            arm(client, name)
+            if d["state"] != "running":  # else already armed again (below, after the same restart's stop)
+                recover(client)
+                arm(client, name)
         elif d["state"] != "running":
             faults.append(f"{d['state']}: {(d.get('fault') or {}).get('message')}")
             recover(client)
