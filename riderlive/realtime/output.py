@@ -107,12 +107,14 @@ class TickDevices:
         for i, (spec, device) in enumerate(zip(self.specs, self.devices, strict=True)):
             if frame.tick % spec.divider:
                 continue
-            before = device.state
+            before, last = device.state, self.statuses[i]
+            said = last.detail if last is not None else None
             status = device.tick(frame, now)
             if status.wrote:
                 self.goal_written_at = device.plug.goal_written_at or time.perf_counter()
             self.statuses[i] = status
-            changed |= status.state is not before or bool(status.transitions)
+            # a new detail too (e.g. what the guardian reports while a connect waits for it)
+            changed |= status.state is not before or bool(status.transitions) or status.detail != said
             if self.board is not None and not device.waiting_for_handback:  # the guardian's slot until then
                 self.board.publish(i, device.state, device.plug.pose)
             if self.arm_on_start and device.state is DeviceState.DISARMED and device.name not in self._auto_armed:
