@@ -16,12 +16,12 @@ the conversions sit here, built once from the configuration:
 - **physical quantities**: the saddle pose of the tick's horse at the configured point
   (metres; :meth:`UnitEdges.saddle`, for the record in the service unit), the rider parts
   on the skeletons' metres (:meth:`UnitEdges.rider_parts`);
+- **the strands**: the tail physics (``realtime/tail.py``) speaks metres: the tick's horse
+  and rider rows go in through :meth:`UnitEdges.strands_in`, the tail and braid channels
+  come back to the service unit through :meth:`UnitEdges.strands_out` (a take replays
+  through the same two to the bit);
 - **out**: the devices' :class:`~riderlive.tickframe.TickFrame` in metres and degrees,
   built once per tick (``realtime/frame.frame_of`` with :attr:`UnitEdges.metres_per_unit`).
-
-The tail physics (``realtime/tail.py``) keeps its own edge: the service-unit rows of the
-record in, metres inside, the tail channels back in the service unit (a take replays
-through it to the bit).
 """
 
 from __future__ import annotations
@@ -29,11 +29,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+import numpy.typing as npt
+
 from riderlive.realtime.saddle_input import SaddleInput, make_saddle_input, saddle_pose
 from riderlive.rules.params import RuleParams
 from riderlive.rules.parts import RiderParts
 from riderlive.saddle.pose import SaddlePoint
-from riderlive.units import HORSE_LENGTHS, metres_per_unit, units_per_metre
+from riderlive.units import HORSE_LENGTHS, RIDER_LENGTHS, metres_per_unit, units_per_metre
+
+FloatArray = npt.NDArray[np.float64]
+_HORSE_LENGTHS = list(HORSE_LENGTHS)
+_RIDER_LENGTHS = list(RIDER_LENGTHS)
 
 
 @dataclass(frozen=True)
@@ -72,3 +79,23 @@ class UnitEdges:
     def rider_parts(self, params: RuleParams) -> RiderParts:
         """The rider parts of ``params`` for frames in the service unit (the skeletons speak metres)."""
         return RiderParts(params, self.metres_per_unit)
+
+    def strands_in(self, horse: Sequence[float], rider: Sequence[float]) -> tuple[FloatArray, FloatArray]:
+        """A tick's horse and rider rows (service unit, degrees) as the strands take them: new
+        arrays in metres and degrees."""
+        h = np.array(horse, dtype=np.float64)
+        r = np.array(rider, dtype=np.float64)
+        to_metres = self.metres_per_unit
+        if to_metres != 1.0:
+            h[_HORSE_LENGTHS] *= to_metres
+            r[_RIDER_LENGTHS] *= to_metres
+        return h, r
+
+    def strands_out(self, values: FloatArray, lengths: npt.NDArray[np.bool_]) -> list[float]:
+        """The strands' published channels (metres where ``lengths``, else degrees) in the
+        service unit, as a list (``values`` is changed in place)."""
+        to_metres = self.metres_per_unit
+        if to_metres != 1.0:
+            values[lengths] /= to_metres
+        out: list[float] = values.tolist()
+        return out

@@ -9,9 +9,10 @@ exactly what :class:`~riderlive.physics.drive.TakeSource` does on a recorded tak
 so an offline run on the take gives the same values). Publishing stays outside the
 step and is done only when a step was taken.
 
-Units: the tick's frames are in service length units; the physics speaks metres
-(``units.metres_per_unit`` converts the lengths of ``units``' column tables), and the published
-positions and ``fan`` go back to service units. Pure apart from the kernels' compile-on-first-use:
+Units: the tick's frames are in service length units; the physics speaks metres. Both
+crossings are the tick's :class:`~riderlive.realtime.edges.UnitEdges` (``strands_in``: the
+frames' lengths to metres; ``strands_out``: the published positions and ``fan`` back to the
+service unit); nothing here converts. Pure apart from the kernels' compile-on-first-use:
 :meth:`TickPhysics.warm` makes that happen before the loop starts.
 """
 
@@ -30,14 +31,11 @@ from riderlive.physics.config import load_physics
 from riderlive.physics.drive import Drive, FixedStepper
 from riderlive.physics.outputs import channel_names, publish
 from riderlive.physics.skinned import SkinnedModel, SkinnedState
-from riderlive.units import HORSE_LENGTHS, RIDER_LENGTHS, metres_per_unit
+from riderlive.realtime.edges import UnitEdges
 
 FloatArray = npt.NDArray[np.float64]
 MAX_CATCH_UP = 48
 """Internal steps one tick may take (0.2 s at 240 Hz); a longer stall skips the excess time."""
-
-_HORSE_LENGTHS = list(HORSE_LENGTHS)
-_RIDER_LENGTHS = list(RIDER_LENGTHS)
 
 
 def physics_channels(file: str | Path | None = None) -> tuple[str, ...]:
@@ -91,11 +89,11 @@ class TailState:
 class TickPhysics:
     """The skinned tail and braid as the tick runs them; :meth:`tick` once per tick."""
 
-    def __init__(self, file: str | Path | None, length_scale: float) -> None:
+    def __init__(self, file: str | Path | None, edges: UnitEdges) -> None:
         self.config = load_physics(file)
         self.model = SkinnedModel.build(self.config)
         self.names = channel_names(self.model)
-        self.to_metres = metres_per_unit(length_scale)
+        self.edges = edges
         self._lengths = np.array([lookup(n).kind is Kind.TRANSLATION for n in self.names])
         self.frames = TickFrames()
         self.stepper: FixedStepper[SkinnedState] | None = None
@@ -109,12 +107,7 @@ class TickPhysics:
 
     def drive(self, horse: Sequence[float], rider: Sequence[float]) -> Drive:
         """A tick's frames in the physics' units (metres, degrees)."""
-        h = np.array(horse, dtype=np.float64)
-        r = np.array(rider, dtype=np.float64)
-        if self.to_metres != 1.0:
-            h[_HORSE_LENGTHS] *= self.to_metres
-            r[_RIDER_LENGTHS] *= self.to_metres
-        return Drive(h, r)
+        return Drive(*self.edges.strands_in(horse, rider))
 
     def warm(self, horse: Sequence[float], rider: Sequence[float]) -> None:
         """Compile (or load) the kernels and run publishing once, so no tick pays for it."""
@@ -125,11 +118,7 @@ class TickPhysics:
         self._publish(state)
 
     def _publish(self, state: SkinnedState) -> list[float]:
-        values = publish(self.model, state)
-        if self.to_metres != 1.0:
-            values[self._lengths] /= self.to_metres
-        out: list[float] = values.tolist()
-        return out
+        return self.edges.strands_out(publish(self.model, state), self._lengths)
 
     def restart(self, now: float, drive: Drive) -> None:
         """Start from rest at ``now``: the bones along the dock, as at the first tick."""

@@ -125,7 +125,7 @@ class TickLoop(TickControl):
         if setup.tail:
             from riderlive.realtime.tail import TickPhysics  # numba: imported only when on
 
-            self.physics = TickPhysics(setup.physics_file, setup.length_scale)
+            self.physics = TickPhysics(setup.physics_file, self.core.edges)
         self.layout = RecordLayout(self.physics.names if self.physics else (), PART_NAMES)
         """The output record as this tick packs it: the setup's, or the tick refuses to start."""
         setup.layout.require_same(self.layout, "the web process's setup", "the tick")

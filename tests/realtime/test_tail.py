@@ -12,6 +12,7 @@ from riderlive.horse import ProceduralHorse
 from riderlive.physics.drive import FixedStepper, TakeSource
 from riderlive.physics.outputs import channel_names, publish
 from riderlive.physics.skinned import SkinnedModel
+from riderlive.realtime.edges import UnitEdges
 from riderlive.realtime.tail import TickPhysics, physics_channels
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import load_preset
@@ -48,13 +49,13 @@ def run_live(physics: TickPhysics, times: np.ndarray, h: np.ndarray, r: np.ndarr
 
 def test_channels_are_the_physics_outputs() -> None:
     names = physics_channels()
-    assert names == channel_names(SkinnedModel.build(TickPhysics(None, 25.0).config))
+    assert names == channel_names(SkinnedModel.build(TickPhysics(None, UnitEdges(25.0)).config))
     assert any(n.startswith("tail_10.") for n in names) and any(n.startswith("braid_10.") for n in names)
 
 
 def test_tick_equals_an_offline_run_on_the_same_frames() -> None:
     times, h, r = tick_frames(120.0, 2.0)
-    physics = TickPhysics(None, 25.0)
+    physics = TickPhysics(None, UnitEdges(25.0))
     live = run_live(physics, times, h, r)
     model = physics.model
     source = TakeSource(times - times[0], h, r)  # as a take records it: t from 0 at the first tick
@@ -71,7 +72,7 @@ def test_tick_equals_an_offline_run_on_the_same_frames() -> None:
 @pytest.mark.parametrize("rate", [120.0, 500.0])
 def test_the_internal_step_is_fixed_whatever_the_tick_rate(rate: float) -> None:
     times, h, r = tick_frames(rate, 1.0)
-    physics = TickPhysics(None, 25.0)
+    physics = TickPhysics(None, UnitEdges(25.0))
     run_live(physics, times, h, r)
     assert physics.stepper is not None
     assert physics.stepper.steps == int(np.floor((times[-1] - times[0]) * 240.0 + 1e-6))
@@ -80,14 +81,14 @@ def test_the_internal_step_is_fixed_whatever_the_tick_rate(rate: float) -> None:
 
 def test_service_length_units_scale_positions_not_rotations() -> None:
     times, h, r = tick_frames(120.0, 0.5)
-    metres = run_live(TickPhysics(None, 25.0), times, h, r)
+    metres = run_live(TickPhysics(None, UnitEdges(25.0)), times, h, r)
     scale = 2.5  # the service speaks decimetres: lengths are 10x the metre values
     lengths = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
     rider_lengths = [i for i, c in enumerate(RIDER) if c.kind is Kind.TRANSLATION]
     h10, r10 = h.copy(), r.copy()
     h10[:, lengths] *= 10.0
     r10[:, rider_lengths] *= 10.0
-    physics = TickPhysics(None, scale)
+    physics = TickPhysics(None, UnitEdges(scale))
     decimetres = run_live(physics, times, h10, r10)
     is_length = np.array([n.split(".")[1] in ("tx", "ty", "tz", "fan") for n in physics.names])
     np.testing.assert_allclose(decimetres[:, is_length], 10.0 * metres[:, is_length], rtol=1e-9, atol=1e-9)
@@ -98,7 +99,7 @@ def test_bad_frames_never_reach_the_output() -> None:
     times, h, r = tick_frames(120.0, 0.5)
     h[20:30, HORSE_INDEX["root.ty"]] = np.inf  # the tick guards its frames; the physics holds anyway
     h[40, HORSE_INDEX["rearPivot.rz"]] = 1e300  # absurd but finite: the strands may blow up
-    physics = TickPhysics(None, 25.0)
+    physics = TickPhysics(None, UnitEdges(25.0))
     out = run_live(physics, times, h, r)
     assert np.isfinite(out).all()
     assert physics.stepper is not None
@@ -116,13 +117,13 @@ def test_strands_handed_over_go_on_as_if_uninterrupted() -> None:
     """A spare restoring the dead tick's strands (pickled, as in the snapshot) and ticking the
     same frames gives the values of a tick that never stopped."""
     times, h, r = tick_frames(120.0, 3.0)
-    whole = run_live(TickPhysics(None, 25.0), times, h, r)
-    dead = TickPhysics(None, 25.0)
+    whole = run_live(TickPhysics(None, UnitEdges(25.0)), times, h, r)
+    dead = TickPhysics(None, UnitEdges(25.0))
     k = 240
     run_live(dead, times[:k], h[:k], r[:k])
     tail = dead.capture()
     assert tail is not None
-    spare = TickPhysics(None, 25.0)
+    spare = TickPhysics(None, UnitEdges(25.0))
     assert spare.restore(pickle.loads(pickle.dumps(tail)))
     after = run_live(spare, times[k:], h[k:], r[k:])
     assert_matches_offline(after, whole[k:], spare.names)
@@ -138,7 +139,7 @@ def test_a_takeover_moves_the_tail_as_the_uninterrupted_one(gap: int, bound: flo
     ticked), so there is no jump larger than one tick's; restarted from rest (before the
     hand-over) it differs by many ticks' motion."""
     times, h, r = tick_frames(120.0, 3.0)
-    dead = TickPhysics(None, 25.0)
+    dead = TickPhysics(None, UnitEdges(25.0))
     k = 240
     values = run_live(dead, times[: k - 1], h[: k - 1], r[: k - 1])
     tail = dead.capture()
@@ -147,21 +148,23 @@ def test_a_takeover_moves_the_tail_as_the_uninterrupted_one(gap: int, bound: flo
     values = np.vstack([values, run_live(dead, times[k - 1 : first + 1], h[k - 1 : first + 1], r[k - 1 : first + 1])])
     slew = np.abs(np.diff(values[k - 121 : k], axis=0)).max(axis=0)
     moving = slew > 1e-9
-    spare = TickPhysics(None, 25.0)
+    spare = TickPhysics(None, UnitEdges(25.0))
     assert spare.restore(tail)
     resumed = np.array(spare.tick(float(times[first]), h[first].tolist(), r[first].tolist()))
     error = (np.abs(resumed - values[first]) / np.where(moving, slew, 1.0))[moving].max()
     assert error <= bound, f"the handed-over tail is {error:.2f} ticks' motion off"
-    from_rest = np.array(TickPhysics(None, 25.0).tick(float(times[first]), h[first].tolist(), r[first].tolist()))
+    from_rest = np.array(
+        TickPhysics(None, UnitEdges(25.0)).tick(float(times[first]), h[first].tolist(), r[first].tolist())
+    )
     assert (np.abs(from_rest - values[first]) / np.where(moving, slew, 1.0))[moving].max() > 5.0
 
 
 def test_strands_of_another_physics_file_are_not_restored() -> None:
-    dead = TickPhysics(None, 25.0)
+    dead = TickPhysics(None, UnitEdges(25.0))
     times, h, r = tick_frames(120.0, 0.2)
     run_live(dead, times, h, r)
     tail = dead.capture()
     assert tail is not None
-    spare = TickPhysics(None, 25.0)
+    spare = TickPhysics(None, UnitEdges(25.0))
     spare.names = spare.names[:-1]  # another file's channels
     assert not spare.restore(tail) and spare.stepper is None

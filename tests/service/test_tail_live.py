@@ -18,6 +18,7 @@ from riderlive.physics.config import load_physics
 from riderlive.physics.drive import FixedStepper, TakeSource
 from riderlive.physics.outputs import publish
 from riderlive.physics.skinned import SkinnedModel
+from riderlive.realtime.edges import UnitEdges
 from riderlive.realtime.tail import MAX_CATCH_UP, TickPhysics, physics_channels
 from tests.realtime.test_tail import assert_matches_offline
 from tests.service.conftest import BASE_CONFIG
@@ -108,7 +109,7 @@ def test_take_records_the_tail_and_equals_an_offline_run(tail_server: tuple[Live
     # Replayed as the tick saw it (each row known only from its own tick on, stalls
     # skipped past MAX_CATCH_UP steps as the take's times show), the take is the
     # physics to the bit: nothing lost, reordered or rounded between the tick and the file.
-    replay = TickPhysics(None, DEFAULT_SCALE)
+    replay = TickPhysics(None, UnitEdges(DEFAULT_SCALE))
     replayed = np.array([replay.tick(float(t), horse[i].tolist(), rider[i].tolist()) for i, t in enumerate(times)])
     assert replay.errors == 0
     assert np.array_equal(recorded, replayed), f"differs by {np.abs(recorded - replayed).max():.2e}"
