@@ -108,8 +108,9 @@ def advise(facts: HostFacts, tick_realtime: bool, web_priority: int, kernel_work
         out.append(
             Advice(
                 HostIssue.SHARED_CORES,
-                f"{facts.cpus} CPUs shared with everything else: the kernel's tty worker that carries the "
-                "servo replies runs at normal priority and was measured up to 60 ms late with both cores busy",
+                f"{facts.cpus} CPUs shared with everything else: the tick, the web process and the kernel's tty "
+                "worker that carries the servo replies compete with it (that worker, at normal priority, was "
+                "measured up to 60 ms late with both cores busy; a hypervisor's steal stops all of them)",
                 "keep other heavy work (render engine, browser) off one core, e.g. systemd AllowedCPUs= or "
                 "`taskset -c 1`, or run it at a lower weight (nice 10, CPUWeight=20); or boot with isolcpus",
             )
