@@ -42,6 +42,7 @@ import httpx
 
 from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write, other_core_busy, torque_offs
 from riderlive.dynamixel.servo_map import deg_to_pulses
+from riderlive.service.kworkers import census
 from tests.service.live_server import LiveServer
 
 START_TIMEOUT_S = 120.0
@@ -237,6 +238,7 @@ def main() -> int:
                 f"{args.web_priority or 'off'}, kernel workers {args.kernel_workers or 'as the host has them'} "
                 f"(target: max <= {limit:.2f} ms)"
             )
+            print(f"  unbound kernel workers at the end: {dict(census())} (service/kworkers.py)")
             print(f"  handler -> torque off on the wire  {summary(r['handler'])}")
             print(f"  latched -> torque off on the wire  {summary(r['latch'])}")
             print(f"  client  -> torque off on the wire  {summary(r['client'])}   (HTTP included)")

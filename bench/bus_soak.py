@@ -45,6 +45,7 @@ from websockets.sync.client import connect
 
 from bench.rig_fixtures import Emulator, bench_rig, other_core_busy
 from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec
+from riderlive.service.kworkers import census
 from tests.service.live_server import LiveServer
 
 TOKEN = "soak-token-1"
@@ -226,6 +227,7 @@ def service_soak(
             f"{burners} normal-priority burners; logs of runs gone wrong in {logs}",
             flush=True,
         )
+        print(f"unbound kernel workers at the start: {dict(census())} (service/kworkers.py)", flush=True)
         emu = Emulator(rig, priority=60)
         config = (
             f"[server]\nrealtime_priority = {web_priority}\n"

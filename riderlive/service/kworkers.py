@@ -248,17 +248,25 @@ class KernelWorkers:
         return done
 
 
-def normal_workers(proc: Path = PROC) -> int:
-    """How many unbound kernel workers run at normal scheduling now (``hostcheck``)."""
-    count = 0
+def census(proc: Path = PROC) -> Counter[str]:
+    """The unbound kernel workers now, by scheduling (``"normal"``, ``"FIFO 1"``, ...): what a
+    bench prints with its figures, what ``hostcheck`` warns about."""
+    out: Counter[str] = Counter()
     for pid in kthreadd_children(proc):
         try:
             comm = (proc / f"{pid}/comm").read_text().strip()
-            if is_unbound_worker(comm) and read_sched(pid, comm).policy not in (Sched.FIFO, Sched.RR):
-                count += 1
+            if is_unbound_worker(comm):
+                thread = read_sched(pid, comm)
+                rt = thread.policy in (Sched.FIFO, Sched.RR)
+                out[f"{Sched(thread.policy).name} {thread.priority}" if rt else "normal"] += 1
         except OSError:
             continue
-    return count
+    return out
+
+
+def normal_workers(proc: Path = PROC) -> int:
+    """How many unbound kernel workers run at normal scheduling now (``hostcheck``)."""
+    return census(proc)["normal"]
 
 
 async def keep_raised(workers: KernelWorkers, interval_s: float = RESCAN_S) -> None:

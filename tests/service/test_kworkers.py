@@ -19,10 +19,12 @@ from riderlive.service.kworkers import (
     KThread,
     Sched,
     all_pids,
+    census,
     check_priority,
     is_unbound_worker,
     keep_raised,
     kthreadd_children,
+    normal_workers,
     read_sched,
     wanted,
 )
@@ -91,6 +93,15 @@ def test_the_kernel_threads_are_listed_and_include_unbound_workers() -> None:
     names = [(Path(f"/proc/{p}/comm").read_text().strip()) for p in kernel if Path(f"/proc/{p}/comm").exists()]
     assert any(is_unbound_worker(n) for n in names), names
     assert os.getpid() not in kernel
+
+
+def test_the_census_counts_every_unbound_worker_by_its_scheduling() -> None:
+    counts = census()
+    assert sum(counts.values()) >= 1
+    assert all(
+        key == "normal" or (key.split()[0] in ("FIFO", "RR") and 1 <= int(key.split()[1]) <= 99) for key in counts
+    )
+    assert abs(normal_workers() - counts["normal"]) <= 2  # the same count (workers come and go meanwhile)
 
 
 def test_without_the_children_file_every_pid_is_listed(tmp_path: Path) -> None:
