@@ -14,7 +14,9 @@ workers themselves are raised, below every riderlive thread (the web process's 1
 edge: it lists kthreadd's children (``/proc/2/task/2/children``; every ``/proc`` pid when
 the kernel lacks that file), reads each new pid's name once, and asks the scheduler
 (``os.sched_setscheduler``). New workers appear as the kernel needs them, so the web
-process scans again every ``RESCAN_S`` (``Service``; a tick's death does not stop it).
+process scans again every ``RESCAN_S`` (``Service``; a tick's death does not stop it). Not
+the guardian: the dead-man stays as small as it can be, and the workers matter only while
+the service drives devices (with the web process gone the guardian parks them).
 Raised workers go back to normal scheduling when the service stops; a killed web process
 leaves them raised until the next start or reboot (RT throttling,
 ``/proc/sys/kernel/sched_rt_runtime_us``, still leaves 5 % of each CPU to normal work).
@@ -181,7 +183,9 @@ class KernelWorkers:
         self.stats = WorkerStats(check_priority(priority))
         self._pids, self._match, self._proc = pids, match, proc
         self._names: dict[int, str] = {}
-        """Each pid seen, with its name then (kernel threads keep their ``kworker/uN:M`` part)."""
+        """Each pid seen, with its name then (kernel threads keep their ``kworker/uN:M`` part; a pid
+        that exits and is reused by another kernel thread within one scan keeps the old name:
+        pids are handed out in order up to ``pid_max`` before any is reused)."""
         self._mine: set[int] = set()
         """Pids this instance raised (restored by :meth:`restore`)."""
 
