@@ -237,3 +237,25 @@ def test_a_live_service_keeps_the_workers_raised_and_shows_it(tmp_path: Path) ->
 
 def test_without_the_key_the_state_says_off(server: object) -> None:
     assert server.get("/api/state").json()["host"] == {"kernel_workers": None}  # type: ignore[attr-defined]
+
+
+def test_a_scan_that_raises_is_counted_and_the_next_one_runs() -> None:
+    calls: list[int] = []
+
+    def listing() -> list[int]:
+        calls.append(len(calls))
+        if len(calls) == 1:
+            raise RuntimeError("proc went away")
+        return []
+
+    async def scenario() -> KernelWorkers:
+        workers = KernelWorkers(1, pids=listing, match=fake_worker)
+        task = asyncio.create_task(keep_raised(workers, interval_s=0.001))
+        await await_until(lambda: workers.stats.scans >= 2, 5.0)
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        return workers
+
+    stats = asyncio.run(scenario()).stats
+    assert stats.failures["RuntimeError"] == 1 and "proc went away" in stats.last_error
+    assert stats.scans >= 2 and stats.workers == 0
