@@ -249,13 +249,19 @@ def main() -> int:
     parser.add_argument("--burners", type=int, default=2, help="normal-priority busy loops in the service soak")
     parser.add_argument("--web-priority", type=int, default=10, help="server.realtime_priority in the service soak")
     parser.add_argument(
+        "--kernel-workers",
+        type=int,
+        default=0,
+        help="host.kernel_workers_priority: unbound kernel workers at this SCHED_FIFO (0: off; service/kworkers.py)",
+    )
+    parser.add_argument(
         "--logs", type=Path, default=None, help="service soak: where the logs go (default: a new temp dir)"
     )
     args = parser.parse_args()
     sys.setswitchinterval(0.0005)
     if args.soak and not args.in_process:
         burners = 0 if args.idle else args.burners
-        return service_soak(args.runs, args.run_seconds, burners, args.web_priority, args.logs)
+        return service_soak(args.runs, args.run_seconds, burners, args.web_priority, args.logs, args.kernel_workers)
     if args.soak:
         return soak(args.runs, args.run_seconds, not args.idle)
     ok = True

@@ -57,9 +57,10 @@ TWO_AT_ONCE = ("tick_guardian", "web_guardian", "tick_guardian_hang", "web_guard
 class Rig:
     """The service and its emulated rig, restarted when a trial killed the service."""
 
-    def __init__(self, workdir: Path, web_priority: int = 0) -> None:
+    def __init__(self, workdir: Path, web_priority: int = 0, kernel_workers: int = 0) -> None:
         self.workdir = workdir
         self.web_priority = web_priority
+        self.kernel_workers = kernel_workers
         self.config: RigConfig = bench_rig(workdir / "bench3.toml", 100.0, park_s=PARK_S, soft_start_s=0.2)
         self.emu = Emulator(self.config, priority=60)
         self.live: LiveServer | None = None
@@ -70,6 +71,7 @@ class Rig:
             if self.live is not None:
                 self.live.stop()
             text = f"[server]\nrealtime_priority = {self.web_priority}\n" if self.web_priority else ""
+            text += f"[host]\nkernel_workers_priority = {self.kernel_workers}\n"
             text += f'[tick]\nrate = 100.0\n[rig]\nfile = "{self.workdir / "bench3.toml"}"\nport = "{self.emu.port}"\n'
             for attempt in range(3):  # a saturated machine can take > 30 s to import the service
                 try:
@@ -230,10 +232,16 @@ def main() -> int:
     parser.add_argument(
         "--web-priority", type=int, default=0, help="server.realtime_priority (SCHED_FIFO of the web process; 0: off)"
     )
+    parser.add_argument(
+        "--kernel-workers",
+        type=int,
+        default=0,
+        help="host.kernel_workers_priority: unbound kernel workers at this SCHED_FIFO (0: off; service/kworkers.py)",
+    )
     args = parser.parse_args()
     ok = True
     with tempfile.TemporaryDirectory() as tmp, other_core_busy(7200, not args.idle):
-        rig = Rig(Path(tmp), args.web_priority)
+        rig = Rig(Path(tmp), args.web_priority, args.kernel_workers)
         try:
             for case in args.cases:
                 results = [trial(rig, case) for _ in range(args.trials)]

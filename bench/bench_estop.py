@@ -42,6 +42,7 @@ import httpx
 
 from bench.rig_fixtures import Emulator, bench_rig, decode_goals, is_goal_write, other_core_busy, torque_offs
 from riderlive.dynamixel.servo_map import deg_to_pulses
+from riderlive.service.kworkers import census
 from tests.service.live_server import LiveServer
 
 START_TIMEOUT_S = 120.0
@@ -111,7 +112,7 @@ def running(client: httpx.Client, name: str, live: LiveServer, retries: list[str
     raise SystemExit("the rig could not be kept running")
 
 
-def run(rate: float, trials: int, workdir: Path, web_priority: int) -> dict[str, list[float]]:
+def run(rate: float, trials: int, workdir: Path, web_priority: int, kernel_workers: int = 0) -> dict[str, list[float]]:
     baud = 1_000_000 if rate <= 200 else 4_000_000
     changes = {"soft_start_s": 0.1, "park_s": 0.2, "bus_watchdog_ms": 200, "reply_budget_s": 0.5}  # e-stops, not faults
     rig = bench_rig(workdir / f"bench{rate:g}.toml", rate, baud, **changes)
@@ -120,6 +121,7 @@ def run(rate: float, trials: int, workdir: Path, web_priority: int) -> dict[str,
         f"[server]\nrealtime_priority = {web_priority}\n"
         f'[tick]\nrate = {rate}\n[security]\ntoken = "{TOKEN}"\n'
         f'[rig]\nfile = "{workdir / f"bench{rate:g}.toml"}"\nport = "{emu.port}"\n'
+        f"[host]\nkernel_workers_priority = {kernel_workers}\n"
     )
     for attempt in range(3):  # a saturated machine can take > 30 s to import the service
         try:
@@ -213,12 +215,18 @@ def main() -> int:
     parser.add_argument(
         "--web-priority", type=int, default=10, help="server.realtime_priority (SCHED_FIFO of the web process; 0: off)"
     )
+    parser.add_argument(
+        "--kernel-workers",
+        type=int,
+        default=0,
+        help="host.kernel_workers_priority: unbound kernel workers at this SCHED_FIFO (0: off; service/kworkers.py)",
+    )
     args = parser.parse_args()
     sys.setswitchinterval(0.0005)
     ok = True
     with tempfile.TemporaryDirectory() as tmp, other_core_busy(3600, not args.idle):
         for rate in args.rates:
-            r = run(rate, args.trials, Path(tmp), args.web_priority)
+            r = run(rate, args.trials, Path(tmp), args.web_priority, args.kernel_workers)
             limit = 1000.0 / rate + 1.0
             worst = max(r["handler"]) * 1000
             after = sum(r["after_off"])
@@ -227,8 +235,10 @@ def main() -> int:
             busy = not args.idle
             print(
                 f"\n{rate:g} ticks/s, {args.trials} e-stops, other core busy: {busy}, web process at SCHED_FIFO "
-                f"{args.web_priority or 'off'} (target: max <= {limit:.2f} ms)"
+                f"{args.web_priority or 'off'}, kernel workers {args.kernel_workers or 'as the host has them'} "
+                f"(target: max <= {limit:.2f} ms)"
             )
+            print(f"  unbound kernel workers at the end: {dict(census())} (service/kworkers.py)")
             print(f"  handler -> torque off on the wire  {summary(r['handler'])}")
             print(f"  latched -> torque off on the wire  {summary(r['latch'])}")
             print(f"  client  -> torque off on the wire  {summary(r['client'])}   (HTTP included)")

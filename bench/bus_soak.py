@@ -45,6 +45,7 @@ from websockets.sync.client import connect
 
 from bench.rig_fixtures import Emulator, bench_rig, other_core_busy
 from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec
+from riderlive.service.kworkers import census
 from tests.service.live_server import LiveServer
 
 TOKEN = "soak-token-1"
@@ -211,7 +212,9 @@ def went_wrong(r: dict[str, Any]) -> bool:
     )
 
 
-def service_soak(runs: int, seconds: float, burners: int, web_priority: int, logs: Path | None = None) -> int:
+def service_soak(
+    runs: int, seconds: float, burners: int, web_priority: int, logs: Path | None = None, kernel_workers: int = 0
+) -> int:
     logs = logs or Path(tempfile.mkdtemp(prefix="riderlive-soak-"))
     logs.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
@@ -220,14 +223,17 @@ def service_soak(runs: int, seconds: float, burners: int, web_priority: int, log
         print(
             f"service soak: {runs} x {seconds:g} s armed, bench3 at 120 Hz (reply_budget_s {rig.bus.reply_budget_s:g}, "
             f"read every {rig.bus.read_divider} ticks, bus_watchdog_ms {rig.bus.bus_watchdog_ms}), tick SCHED_FIFO 50, "
-            f"web SCHED_FIFO {web_priority}, {burners} normal-priority burners; logs of runs gone wrong in {logs}",
+            f"web SCHED_FIFO {web_priority}, kernel workers {kernel_workers or 'as the host has them'}, "
+            f"{burners} normal-priority burners; logs of runs gone wrong in {logs}",
             flush=True,
         )
+        print(f"unbound kernel workers at the start: {dict(census())} (service/kworkers.py)", flush=True)
         emu = Emulator(rig, priority=60)
         config = (
             f"[server]\nrealtime_priority = {web_priority}\n"
             f'[tick]\nrate = 120.0\n[security]\ntoken = "{TOKEN}"\n'
             f'[rig]\nfile = "{workdir / "soak.toml"}"\nport = "{emu.port}"\n'
+            f"[host]\nkernel_workers_priority = {kernel_workers}\n"
         )
         results: list[dict[str, Any]] = []
         live = LiveServer(config, workdir, token=TOKEN)

@@ -28,6 +28,7 @@ import time
 import tty
 
 from riderlive.devices.stall import HostClock
+from riderlive.service.kworkers import census
 
 MODES = ("quiet", "nice0", "nice10", "pinned")
 
@@ -142,6 +143,7 @@ def main() -> int:
     parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
     args = parser.parse_args()
     print(f"{os.cpu_count()} CPUs; the requester at SCHED_FIFO 50, the echo at 60, 120 transactions/s of 20 bytes")
+    print(f"unbound kernel workers (the pty's serial path): {dict(census())} (raise them: riderlive host tune)")
     for mode in args.modes:
         probe(mode, args.seconds)
     return 0

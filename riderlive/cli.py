@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("riderlive.service.serve", "run the live service (websockets, REST, the tick)"),
     "export": ("riderlive.export.cli", "write a take as BVH or glTF (.glb) for engines and Blender"),
     "fit": ("riderlive.fit.cli", "fit a preset to horse takes and the rider recorded with them"),
+    "host": ("riderlive.service.host_cli", "check this host for serial devices; raise the kernel's workers"),
     "stage": ("riderlive.bus.stage", "a stage over NATS: list its rigs, e-stop them all, heartbeat, takes"),
 }
 """Subcommand -> (module with ``add_arguments`` and ``run``, one-line help)."""

@@ -231,6 +231,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         )
         text += render_device_metrics(service)
         text += render_platform_metrics(service)
+        if service.host_workers is not None:
+            text += service.host_workers.stats.prometheus()
         if service.stage is not None:
             from riderlive.bus.rig import render_metrics as render_stage_metrics
 

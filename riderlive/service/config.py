@@ -258,6 +258,15 @@ class GuardianSection(StrictModel):
     does not permit SCHED_FIFO it runs at normal priority with a warning."""
 
 
+class HostSection(StrictModel):
+    """``[host]``: what riderlive changes on its host for the serial devices (docs/hardware.md "A busy host")."""
+
+    kernel_workers_priority: int = pydantic.Field(default=0, ge=0, le=9)
+    """SCHED_FIFO priority for the kernel's unbound workers (``kworker/u*``, which carry the
+    servo bytes through the tty layer), kept raised while the service runs
+    (``service/kworkers.py``); 0: off. Below the web process's 10; needs root (CAP_SYS_NICE)."""
+
+
 class PhysicsSection(StrictModel):
     tail: bool = False
     """Run the horse's tail and the rider's braid in the tick and publish ``tail_NN.*`` /
@@ -325,6 +334,7 @@ class ServiceConfig(StrictModel):
     ranges: RangesSection = RangesSection()
     vmc: VmcSection = VmcSection()
     guardian: GuardianSection = GuardianSection()
+    host: HostSection = HostSection()
     saddle: SaddlePoint = SaddlePoint()
     """Where the saddle point sits on the horse's back (docs/saddle.md): the published
     saddle pose's point, and the point a ``/ws/saddle`` stream is taken to measure."""

@@ -6,7 +6,9 @@ USB adapter as on a pty) before the tick sees it. The tick runs at SCHED_FIFO, b
 worker competes with every other process, and on a virtual machine the hypervisor can
 take a whole vCPU away (steal). Measured (``bench/probe_stall.py``, docs/hardware.md "A
 busy host"): with both cores loaded by normal-priority work a reply's serial path was
-up to 60 ms late; with that work kept off the tick's core, 7.6-23.5 ms at most.
+up to 60 ms late; with that work kept off the tick's core, 7.6-23.5 ms at most. Raising
+the tty worker itself (``[host] kernel_workers_priority``, service/kworkers.py) is the
+fix that needs no CPU of its own (docs/performance.md "Kernel workers").
 
 :func:`gather` reads the facts (the only I/O); :func:`advise` is pure: each
 :class:`Advice` names the problem and the fix. ``serve`` prints them when a device is
@@ -28,6 +30,7 @@ ISOLATED = Path("/sys/devices/system/cpu/isolated")
 PROC_STAT = Path("/proc/stat")
 TICK_PRIORITY = 50
 """The tick's SCHED_FIFO priority (realtime/pacing.py)."""
+CAP_SYS_NICE = 23
 STEAL_WARN_SHARE = 0.001
 """Steal above this share of CPU time since boot: a host that takes the CPUs away."""
 
@@ -39,6 +42,7 @@ class HostIssue(enum.Enum):
     SHARED_CORES = "shared_cores"
     WEB_PRIORITY = "web_priority"
     STEAL = "steal"
+    KERNEL_WORKERS = "kernel_workers"
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,10 @@ class HostFacts:
     """Each device port's FTDI latency timer (ms; None: not an FTDI adapter)."""
     steal_share: float
     """CPU time stolen by the hypervisor since boot, as a share of all CPU time."""
+    normal_kernel_workers: int = 0
+    """Unbound kernel workers (``kworker/u*``, the tty flip buffer's) at normal scheduling now."""
+    sys_nice: bool = True
+    """This process may change other processes' scheduling (CAP_SYS_NICE, e.g. root)."""
 
 
 @dataclass(frozen=True)
@@ -64,8 +72,9 @@ class Advice:
         return f"{self.message}; fix: {self.fix}"
 
 
-def advise(facts: HostFacts, tick_realtime: bool, web_priority: int) -> list[Advice]:
-    """What this host should change for its serial devices (empty: nothing found)."""
+def advise(facts: HostFacts, tick_realtime: bool, web_priority: int, kernel_workers_priority: int = 0) -> list[Advice]:
+    """What this host should change for its serial devices (empty: nothing found);
+    ``kernel_workers_priority``: ``host.kernel_workers_priority`` (0: off)."""
     out = []
     for port, timer in sorted(facts.latency_timers_ms.items()):
         if timer is not None and timer > 1:
@@ -99,8 +108,9 @@ def advise(facts: HostFacts, tick_realtime: bool, web_priority: int) -> list[Adv
         out.append(
             Advice(
                 HostIssue.SHARED_CORES,
-                f"{facts.cpus} CPUs shared with everything else: the kernel's tty worker that carries the "
-                "servo replies runs at normal priority and was measured up to 60 ms late with both cores busy",
+                f"{facts.cpus} CPUs shared with everything else: the tick, the web process and the kernel's tty "
+                "worker that carries the servo replies compete with it (that worker, at normal priority, was "
+                "measured up to 60 ms late with both cores busy; a hypervisor's steal stops all of them)",
                 "keep other heavy work (render engine, browser) off one core, e.g. systemd AllowedCPUs= or "
                 "`taskset -c 1`, or run it at a lower weight (nice 10, CPUWeight=20); or boot with isolcpus",
             )
@@ -111,6 +121,25 @@ def advise(facts: HostFacts, tick_realtime: bool, web_priority: int) -> list[Adv
                 HostIssue.WEB_PRIORITY,
                 "the web process (REST e-stops) runs at normal priority on a shared host",
                 "set server.realtime_priority = 10 (SCHED_FIFO below the tick's 50)",
+            )
+        )
+    if facts.normal_kernel_workers and not kernel_workers_priority:
+        out.append(
+            Advice(
+                HostIssue.KERNEL_WORKERS,
+                f"{facts.normal_kernel_workers} unbound kernel workers (kworker/u*, which carry the servo bytes "
+                "through the tty layer) run at normal priority: with both cores busy a transfer waited up to "
+                '4 ms for one (docs/performance.md "Kernel workers")',
+                "set [host] kernel_workers_priority = 1 (as root), or `riderlive host tune --kernel-workers 1` "
+                "from a systemd unit",
+            )
+        )
+    elif kernel_workers_priority and not facts.sys_nice:
+        out.append(
+            Advice(
+                HostIssue.KERNEL_WORKERS,
+                "host.kernel_workers_priority is set but this user may not change kernel threads' scheduling",
+                "run as root (CAP_SYS_NICE), or raise them from a root unit: `riderlive host tune --kernel-workers 1`",
             )
         )
     if facts.steal_share > STEAL_WARN_SHARE:
@@ -165,4 +194,23 @@ def gather(ports: Iterable[str]) -> HostFacts:
     soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
     allowed = os.geteuid() == 0 or soft == resource.RLIM_INFINITY or soft >= TICK_PRIORITY
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return HostFacts(cpus, isolated, allowed, {p: usb_latency_timer_ms(p) for p in ports}, steal)
+    from riderlive.service.kworkers import normal_workers
+
+    timers = {p: usb_latency_timer_ms(p) for p in ports}
+    return HostFacts(cpus, isolated, allowed, timers, steal, normal_workers(), has_sys_nice())
+
+
+def parse_has_capability(status: str, bit: int) -> bool:
+    """Whether ``CapEff`` of a ``/proc/PID/status`` text has capability ``bit`` (False if absent)."""
+    for line in status.splitlines():
+        if line.startswith("CapEff:"):
+            return bool(int(line.split()[1], 16) >> bit & 1)
+    return False
+
+
+def has_sys_nice() -> bool:
+    """This process holds CAP_SYS_NICE (bit 23)."""
+    try:
+        return parse_has_capability(Path("/proc/self/status").read_text(), CAP_SYS_NICE)
+    except OSError:
+        return os.geteuid() == 0

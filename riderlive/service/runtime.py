@@ -28,6 +28,7 @@ from riderlive.service.arbiter import SADDLE_INPUT, Arbiter, Producer, next_prod
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import DeviceMetrics, plan_devices
 from riderlive.service.ingest import IngestEndpoint
+from riderlive.service.kworkers import KernelWorkers, host_status, keep_raised
 from riderlive.service.metrics import ServiceMetrics
 from riderlive.service.poses import RecordPoses
 from riderlive.service.publish import Hub
@@ -102,6 +103,10 @@ class Service:
         """Each says why arming must wait (e.g. no stage heartbeat), or None."""
         self.stage: RigNode | None = None
         self.foxglove: FoxgloveLive | None = None
+        priority = config.host.kernel_workers_priority
+        self.host_workers = KernelWorkers(priority) if priority else None
+        """The kernel's unbound workers kept at SCHED_FIFO ``host.kernel_workers_priority`` (service/kworkers.py)."""
+        self._workers_task: asyncio.Task[None] | None = None
 
     def _report_configured(self) -> None:
         """Preset, animator layer and source as configured (at start, and when a restarted
@@ -128,6 +133,8 @@ class Service:
         self.supervisor = TickSupervisor(
             self.link, self.config, self.on_tick, self.hub.publish_status, self._tick_fell_back
         )
+        if self.host_workers is not None:  # here, not in the tick: it survives a tick's death
+            self._workers_task = asyncio.create_task(keep_raised(self.host_workers))
         await self.supervisor.start()
         section = self.config.foxglove
         if section.port is not None:
@@ -157,6 +164,9 @@ class Service:
             self.vmc.close()
         if self.foxglove is not None:
             self.foxglove.stop()
+        if self._workers_task is not None:  # after the devices are parked: restores the workers
+            self._workers_task.cancel()
+            await asyncio.gather(self._workers_task, return_exceptions=True)
 
     # -- the tick's records ---------------------------------------------------
     def on_tick(self) -> None:
@@ -371,4 +381,5 @@ class Service:
             "vmc": None if self.vmc is None else self.vmc.status(),
             "timecode": self.timecode.status(link.engine_time()),
             "foxglove": None if self.foxglove is None else self.foxglove.status(),
+            "host": host_status(self.host_workers),
         }

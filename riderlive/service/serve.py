@@ -104,7 +104,12 @@ def warn_host(devices: tuple[DeviceSpec, ...], config: ServiceConfig) -> list[Ad
     with the fix (service/hostcheck.py, docs/deployment.md "A busy host")."""
     if not devices:
         return []
-    advice = advise(gather(device_ports(devices)), config.tick.realtime_priority, config.server.realtime_priority)
+    advice = advise(
+        gather(device_ports(devices)),
+        config.tick.realtime_priority,
+        config.server.realtime_priority,
+        config.host.kernel_workers_priority,
+    )
     for a in advice:
         print(f"riderlive serve: warning: {a}", file=sys.stderr, flush=True)
     return advice

@@ -3,12 +3,24 @@ from given facts, the facts read from this machine, and the warning of a live se
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 from riderlive.devices.registry import DeviceSpec
-from riderlive.service.hostcheck import HostFacts, HostIssue, advise, device_ports, gather, parse_steal_share
+from riderlive.service.hostcheck import (
+    CAP_SYS_NICE,
+    HostFacts,
+    HostIssue,
+    advise,
+    device_ports,
+    gather,
+    has_sys_nice,
+    parse_has_capability,
+    parse_steal_share,
+)
+from riderlive.service.kworkers import kthreadd_children, normal_workers
 from tests.service.live_server import LiveServer
 from tests.service.test_rig_hookup import rig_server, wait_state  # noqa: F401 (the fixture)
 
@@ -39,6 +51,24 @@ def test_each_problem_is_named_with_its_fix() -> None:
     assert "1.0%" in str(advise(HostFacts(4, "3", True, {}, 0.01), True, 10)[0])
 
 
+def test_kernel_workers_at_normal_priority_are_named_with_the_key_that_raises_them() -> None:
+    normal = HostFacts(4, "3", True, {}, 0.0, normal_kernel_workers=5)
+    (advice,) = advise(normal, True, 10)
+    assert advice.issue is HostIssue.KERNEL_WORKERS and advice.message.startswith("5 unbound kernel workers")
+    assert "[host] kernel_workers_priority = 1" in advice.fix and "riderlive host tune" in advice.fix
+    assert advise(normal, True, 10, kernel_workers_priority=1) == []  # the service raises them
+    assert issues(HostFacts(4, "3", True, {}, 0.0, normal_kernel_workers=0)) == []  # raised by the host
+    unprivileged = HostFacts(4, "3", True, {}, 0.0, normal_kernel_workers=5, sys_nice=False)
+    (advice,) = advise(unprivileged, True, 10, kernel_workers_priority=1)
+    assert advice.issue is HostIssue.KERNEL_WORKERS and "CAP_SYS_NICE" in advice.fix
+
+
+def test_capabilities_are_read_from_cap_eff() -> None:
+    assert parse_has_capability("Name:\tx\nCapEff:\t0000000000800000\n", CAP_SYS_NICE)
+    assert not parse_has_capability("CapEff:\t00000000007fffff\n", CAP_SYS_NICE)
+    assert not parse_has_capability("Name:\tx\n", CAP_SYS_NICE)
+
+
 def test_steal_share_is_read_from_the_cpu_line() -> None:
     text = "cpu  600 0 200 100 50 0 25 25 0 0\ncpu0 1 2 3 4 5 6 7 8 0 0\n"
     assert parse_steal_share(text) == pytest.approx(25 / 1000)
@@ -49,6 +79,8 @@ def test_this_hosts_facts(tmp_path: Path) -> None:
     facts = gather(["/dev/null"])
     assert facts.cpus >= 1 and 0.0 <= facts.steal_share < 1.0
     assert facts.latency_timers_ms == {"/dev/null": None}  # not an FTDI adapter
+    assert facts.sys_nice is has_sys_nice() and (os.geteuid() != 0 or facts.sys_nice)
+    assert normal_workers() <= len(kthreadd_children()) and facts.normal_kernel_workers <= len(kthreadd_children())
     rig = DeviceSpec("dynamixel", "bench3", None, "bench3", 1, 0.01)
     platform = DeviceSpec("platform", "stewart6", "/dev/pts/9", "stewart6", 1, 0.01)
     assert device_ports([rig, platform]) == ["/dev/ttyUSB0", "/dev/pts/9"]  # the rig map's own port
