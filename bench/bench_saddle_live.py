@@ -35,6 +35,7 @@ No baseline code path to compare with: the bake is the reference; each figure sa
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing as mp
 import os
@@ -79,11 +80,11 @@ def schedstat() -> tuple[float, float]:
 def produce(url: str, times: np.ndarray, rows: np.ndarray, fifo: int, out: Connection) -> None:
     """The producer process: each sample (JSON ``{"t", "v"}``, ``t`` the device's own sample time)
     sent at its time on this process's schedule; sends back, per sample, the schedule, when it
-    woke to send, when the send returned, and its thread's CPU and run-queue time (s)."""
+    woke to send and when the send returned, and its thread's CPU and run-queue time at both (s)."""
     if fifo > 0:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo))
     n = len(times)
-    woke, sent, cpu, queued = (np.zeros(n) for _ in range(4))
+    woke, sent, cpu_woke, queued_woke, cpu_sent, queued_sent = (np.zeros(n) for _ in range(6))
     with connect(url + "/ws/saddle") as ws:
         json.loads(ws.recv(timeout=5))
         start, t0 = time.perf_counter() + LEAD_IN, float(times[0])
@@ -93,11 +94,27 @@ def produce(url: str, times: np.ndarray, rows: np.ndarray, fifo: int, out: Conne
             if wait > 0:
                 time.sleep(wait)
             woke[k] = time.perf_counter()
+            cpu_woke[k], queued_woke[k] = schedstat()
             ws.send(json.dumps({"t": t, "v": row}))
             sent[k] = time.perf_counter()
-            cpu[k], queued[k] = schedstat()
+            cpu_sent[k], queued_sent[k] = schedstat()
         time.sleep(MAX_DELAY + 0.1)  # the last samples read before the producer leaves (gone: a new stream)
-    out.send({"due": due, "woke": woke, "sent": sent, "cpu": cpu, "queued": queued})
+        segments = 0  # the service's replies so far: a "segment" is a new stream for the tick
+        with contextlib.suppress(TimeoutError):
+            while True:
+                segments += json.loads(ws.recv(timeout=0)).get("type") == "segment"
+    out.send(
+        {
+            "segments": segments,
+            "due": due,
+            "woke": woke,
+            "sent": sent,
+            "cpu_woke": cpu_woke,
+            "queued_woke": queued_woke,
+            "cpu_sent": cpu_sent,
+            "queued_sent": queued_sent,
+        }
+    )
 
 
 def collect(url: str, stop: Any, out: Connection) -> None:
@@ -123,23 +140,28 @@ def collect(url: str, stop: Any, out: Connection) -> None:
 
 
 def lateness_figures(log: dict[str, np.ndarray]) -> dict[str, float]:
-    """The producer's lateness per sample (woke - due), its sends' duration, and over the samples
-    later than ``ON_TIME`` the share of their lateness spent waiting on a run queue."""
+    """The producer's lateness per sample (woke - due) and where its time went: on a run queue
+    between a send and the next wake-up (the scheduler's), during sends (CPU, run queue, and
+    blocked: neither, the socket full, the server not reading), and its CPU per sample."""
     late = log["woke"] - log["due"]
     send = log["sent"] - log["woke"]
-    queued = np.diff(log["queued"], prepend=log["queued"][0])
-    behind = late > ON_TIME
+    send_cpu = log["cpu_sent"] - log["cpu_woke"]
+    send_queued = log["queued_sent"] - log["queued_woke"]
+    blocked = np.maximum(0.0, send - send_cpu - send_queued)
+    wake_queued = log["queued_woke"][1:] - log["queued_sent"][:-1]
     return {
+        "segments": int(log["segments"]),
         "late_p50": float(np.median(late)),
         "late_p99": float(np.percentile(late, 99)),
         "late_max": float(late.max()),
-        "late_share": float(np.mean(behind)),
+        "late_share": float(np.mean(late > ON_TIME)),
         "too_late_share": float(np.mean(late > MAX_DELAY)),
         "send_max": float(send.max()),
-        "send_total": float(send.sum()),
-        "cpu": float(log["cpu"][-1] - log["cpu"][0]),
-        "queued": float(log["queued"][-1] - log["queued"][0]),
-        "queued_max": float(queued.max()),
+        "blocked": float(blocked.sum()),
+        "blocked_max": float(blocked.max()),
+        "cpu": float(log["cpu_sent"][-1] - log["cpu_woke"][0]),
+        "queued": float(log["queued_sent"][-1] - log["queued_woke"][0]),
+        "queued_max": float(max(wake_queued.max(initial=0.0), send_queued.max())),
     }
 
 
@@ -263,9 +285,7 @@ def measure(port: int, args: argparse.Namespace) -> None:
             "run  load   frames  seq gaps/dropped/skipped  min r (channel)            lower_back.rz r  1-tick step"
             "  past newest (producer / service)"
         )
-        print(
-            "     producer: late p50 / p99 / max, > 50 ms, > MAX_DELAY; send max; CPU, run-queue wait (max per sample)"
-        )
+        print("     producer: late p50 / p99 / max, > 50 ms, > MAX_DELAY; send max (blocked); CPU, run-queue wait")
         results = []
         for run in range(args.runs):
             res = one_run(port, 11 + run, args, rules)
@@ -275,12 +295,14 @@ def measure(port: int, args: argparse.Namespace) -> None:
                 f"{run + 1:>3}  {res['load']:>4.1f}  {res['frames']:>6}  {res['seq_gaps']:>3} / {res['dropped']} / "
                 f"{res['skipped']:<12}  {res['min_r']:.4f} ({res['worst']:<18})  {res['back_r']:.4f}           "
                 f"{res['back_step_max']:.3f} deg  {res['past']:.1%} ({res['past_producer']:.1%} / "
-                f"{res['past_service']:.1%})"
+                f"{res['past_service']:.1%}); {res['segments']} segments"
             )
             print(
                 f"     producer: late {res['late_p50'] * 1e3:.1f} / {res['late_p99'] * 1e3:.1f} / "
                 f"{res['late_max'] * 1e3:.1f} ms, {res['late_share']:.1%} > 50 ms, {res['too_late_share']:.1%} > "
-                f"{MAX_DELAY * 1e3:.0f} ms; send max {res['send_max'] * 1e3:.1f} ms; CPU {res['cpu'] * 1e3:.0f} ms, "
+                f"{MAX_DELAY * 1e3:.0f} ms; send max {res['send_max'] * 1e3:.1f} ms "
+                f"(blocked {res['blocked'] * 1e3:.0f} ms, "
+                f"{res['blocked_max'] * 1e3:.1f} max); CPU {res['cpu'] * 1e3:.0f} ms, "
                 f"run-queue wait {res['queued'] * 1e3:.0f} ms ({res['queued_max'] * 1e3:.1f} max)"
             )
         print(
