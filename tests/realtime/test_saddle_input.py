@@ -327,3 +327,30 @@ def test_a_stream_that_ended_long_ago_is_not_continued() -> None:
     live.clear()
     assert live.push(last + 0.005, last + 0.002 + LATE_MEMORY_S + 0.01, trot.saddle.values[0].tolist())
     assert live.continued == 0 and live.state.samples == 1
+
+
+def test_a_new_stream_that_does_not_continue_rides_as_a_fresh_input() -> None:
+    """Differential: after a stream and ``clear`` (a producer restarted on its clock's origin),
+    every tick's read, frame and delay equal a fresh input's given the same samples (the kept
+    estimator leaves no trace)."""
+    first = record(gait_script("trot", 3.0, seed=10), 200.0, seed=10)
+    second = record(gait_script("trot", 4.0, seed=11), 200.0, seed=11)
+    reused, fresh = make_saddle_input(25.0, SaddlePoint(), 0.01), make_saddle_input(25.0, SaddlePoint(), 0.01)
+    for t, row in zip(first.saddle.t.tolist(), first.saddle.values.tolist(), strict=True):
+        reused.push(t, t + 0.002, row)
+    reused.clear()
+    rng = np.random.default_rng(10)
+    times, values = second.saddle.t.tolist(), second.saddle.values.tolist()
+    start = 5.0  # engine s: within LATE_MEMORY_S of the first stream's end
+    received = np.maximum.accumulate(start + np.array(times) + 0.002 + rng.exponential(0.003, len(times)))
+    k = 0
+    for n in range(int(times[-1] * 120.0)):
+        now = start + n / 120.0
+        while k < len(times) and received[k] <= now:
+            assert reused.push(times[k], float(received[k]), values[k]) == fresh.push(
+                times[k], float(received[k]), values[k]
+            )
+            k += 1
+        assert reused.sample(now) == fresh.sample(now), now
+        assert reused.delay == fresh.delay and reused.estimate_row(now) == fresh.estimate_row(now)
+    assert reused.continued == 0
