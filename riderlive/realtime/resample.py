@@ -114,6 +114,15 @@ class ClockMap:
             if self.windows[-1][0] - self.windows[0][0] >= RATE_SPAN_S:
                 self._estimate_rate(t)
 
+    def restart_rate(self, t: float) -> None:
+        """Forget the rate's windows, not the mapping: the frames up to producer time ``t`` came
+        as a backlog (each window's least-delayed frame was late, a rate from them would be off
+        by the backlog's lateness over the span: bound to 1 +- MAX_SKEW). The saddle input's,
+        after a delivery stall (``realtime/saddle_input.py``); the horse path never calls it."""
+        self.windows.clear()
+        self.least = None
+        self.estimated_at = t
+
     def _estimate_rate(self, newest: float) -> None:
         """A new rate from the least-delayed frames of the oldest and the newest third of the
         windows; the mapping kept continuous at ``newest`` and aimed at the line through the

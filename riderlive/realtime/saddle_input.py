@@ -132,6 +132,17 @@ class Lateness:
         return max(self._current(), *self.windows) if self.windows else self._current()
 
 
+@dataclass(frozen=True)
+class _Kept:
+    """A cleared stream's estimator, kept for a new stream that continues it."""
+
+    state: State
+    history: tuple[State, ...]
+    times: tuple[float, ...]
+    received: float
+    """Engine time its newest sample was received at (s)."""
+
+
 @dataclass
 class SaddleInput:
     """The driving saddle stream in the tick: the estimator's state and the clock mapping."""
@@ -170,11 +181,23 @@ class SaddleInput:
         """Counters of the streams before the current one."""
         self.stale_episodes = 0
         """Times a driving saddle stream went stale (the rider eased to neutral)."""
+        self._last_received: float | None = None
+        """Engine time the newest sample was received at (None: none in this stream)."""
+        self._kept: _Kept | None = None
+        """The estimator of the stream before the last :meth:`clear`, until the next sample."""
+        self._draining: float | None = None
+        """After a continued stream: the offset (received - t) of its newest sample while they
+        come faster than the producer's clock (its backlog draining); None otherwise."""
+        self.continued = 0
+        """New streams that went on with the estimator of the one before (:meth:`push`)."""
 
     def clear(self) -> None:
-        """A new stream (another producer, a new segment, a producer gone): start afresh."""
+        """A new stream (another producer, a new segment, a producer gone): start afresh, the
+        estimator's state kept aside for a new stream that continues it (:meth:`push`)."""
         for name, value in self._current().items():
             self.finished[name] += value
+        if self.history and self._last_received is not None:
+            self._kept = _Kept(self.state, tuple(self.history), tuple(self.times), self._last_received)
         self.state = State()
         self.clock.clear()
         self.lateness.clear()
@@ -184,6 +207,45 @@ class SaddleInput:
         self._frames.clear()
         self.delay, self._delay_at = self.base_delay, None
         self.stale = False
+        self._last_received = self._draining = None
+
+    def _continue(self, t: float, received: float) -> None:
+        """The first sample of a new stream: if it follows the kept estimator's newest sample
+        within ``Model.max_interval`` of the producer's time (not a gap to the estimator) and
+        :data:`LATE_MEMORY_S` of ours, the stream goes on with that estimator (its lock, its
+        history to read between samples); only the clock mapping and the lateness start afresh.
+        That is a producer whose delivery stalled longer than ``input.clock_jump``: the endpoint
+        takes the stall for a clock jump and starts a new segment, but the samples are the
+        device's own, one sample interval apart; starting the estimator afresh lost the lock
+        for seconds (docs/performance.md). A real jump (a clock set or restarted) is far from
+        the newest sample and starts afresh as before."""
+        kept, self._kept = self._kept, None
+        if kept is None or not 0.0 < t - kept.state.t <= self.model.max_interval:
+            return
+        if received - kept.received > LATE_MEMORY_S:
+            return
+        counters = estimate(kept.state).counters  # folded into ``finished`` by clear(): not twice
+        for name in COUNTERS:
+            self.finished[name] -= counters[name]
+        self.state = kept.state
+        self.history.extend(kept.history)
+        self.times.extend(kept.times)
+        self._draining = math.inf  # the first sample starts it
+        self.continued += 1
+
+    def _drain(self, t: float, previous: float, received: float) -> None:
+        """While a continued stream's backlog drains (each sample arriving earlier against its
+        time than the one before by over half its step: faster than twice its clock), the clock
+        mapping's rate starts over from it (``ClockMap.restart_rate``): a rate from the backlog's
+        windows was the bound, 10 % off, and the read ran past the newest sample for seconds."""
+        if self._draining is None:
+            return
+        offset = received - t
+        if offset < self._draining - (t - previous) / 2:
+            self.clock.restart_rate(t)
+            self._draining = offset
+        else:
+            self._draining = None
 
     def _current(self) -> dict[str, int]:
         counters = estimate(self.state).counters
@@ -201,14 +263,18 @@ class SaddleInput:
 
         False (and nothing changes) for a sample not after the last one.
         """
+        if self._kept is not None:
+            self._continue(t, received)
         if not t > self.state.t:
             return False
+        previous, self._last_received = self.state.t, received
         self.state = step(self.model, self.state, t, self._samples.to_metres(values[:6]))
         if self.state.t == t:  # taken (an empty sample is counted and leaves the pose as it was)
             self.history.append(self.state)
             self.times.append(t)
         clock = self.clock
         clock.push(t, received)
+        self._drain(t, previous, received)
         if clock.anchor is not None and not self._rate_known:
             self.lateness.clear()  # measured against a mapping that did not know the rate yet
             self._rate_known = True

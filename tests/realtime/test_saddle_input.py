@@ -13,6 +13,7 @@ from riderlive.realtime.layout import InputKind
 from riderlive.realtime.saddle_input import (
     DELAY_SLEW,
     GAITS,
+    LATE_MEMORY_S,
     LOCKS,
     NO_ESTIMATE,
     SaddleInput,
@@ -152,17 +153,21 @@ def test_the_live_rider_of_late_bursty_samples_is_the_bakes(bursty: bool) -> Non
         assert r >= 0.95, f"{name}: r {r:.3f}"
 
 
-def _live_and_baked(times: np.ndarray, values: np.ndarray, received: np.ndarray) -> tuple:
-    """The tick at 120 Hz over samples received at ``received`` (engine s): from 2 s on (locked)
-    and within the samples, each tick's source time, its rider, and the offline bake's rider
-    (``saddle.rebuild`` + the rules) at that source time."""
+def _live_and_baked(
+    times: np.ndarray, values: np.ndarray, received: np.ndarray, streams: np.ndarray | None = None
+) -> tuple:
+    """The tick at 120 Hz over samples received at ``received`` (engine s), each of the tick's
+    stream ``streams`` (default: one, 7): from 2 s on (locked) and within the samples, each
+    tick's source time, its rider, and the offline bake's rider (``saddle.rebuild`` + the
+    rules) at that source time."""
     model = RiderModel(scale=25.0)
     core = TickCore(model, Timing(blend_time=0.0), ProceduralHorse("walk", 1.5, 0), Mode.INPUT)
+    streams = np.full(len(times), 7) if streams is None else streams
     tick, k, live_t, live = 1.0 / 120.0, 0, [], []
     for n in range(int(times[-1] / tick)):
         now = n * tick
         while k < len(times) and received[k] <= now:
-            core.push_input(7, float(times[k]), float(received[k]), values[k].tolist(), InputKind.SADDLE)
+            core.push_input(int(streams[k]), float(times[k]), float(received[k]), values[k].tolist(), InputKind.SADDLE)
             k += 1
         result = core.step(now)
         if result.driver is Driver.INPUT and now > 2.0:  # locked by then
@@ -253,3 +258,99 @@ def test_a_drifting_saddle_clock_is_tracked_by_the_horse_resamplers_clock_map(ra
     assert delay[settled:].max() <= steady[settled:, 2].max() + 0.005, (delay[settled:].max(), steady[:, 2].max())
     ahead, steady_ahead = np.mean(shown > newest), np.mean(steady[:, 0] > steady[:, 1])
     assert ahead <= steady_ahead + 0.05, (ahead, steady_ahead)
+
+
+def _stalled_delivery(seconds: float, stall_at: float, stall: float) -> tuple[np.ndarray, ...]:
+    """A 200 Hz trot on time (2 ms late), whose delivery stalls ``stall`` s at ``stall_at``: the
+    samples of the stall arrive together at its end, the first of them a new segment for the
+    tick (the endpoint's ``clock_backward`` jump, docs/protocol.md: stream 7, then 8)."""
+    trot = record(gait_script("trot", seconds, seed=8), 200.0, seed=8)
+    times, values = trot.saddle.t, trot.saddle.values
+    received = times + 0.002
+    inside = (times >= stall_at) & (times < stall_at + stall)
+    received[inside] = stall_at + stall + 0.002
+    streams = np.where(times >= stall_at, 8, 7)
+    return times, values, received, streams
+
+
+def test_a_delivery_stall_taken_for_a_clock_jump_keeps_the_estimators_lock() -> None:
+    """A producer's delivery stalls 0.8 s (longer than ``input.clock_jump``, 0.5 s: the endpoint
+    starts a new segment, the tick a new stream), then its samples come, one sample interval
+    apart in its own time. The new stream goes on with the estimator of the one before: still
+    locked, no lock lost or gained, every sample counted once, and from 0.3 s after the stall's
+    samples came the rider is the bake's (r >= 0.99 on every moving channel): the new stream's
+    clock rate is learnt after its backlog drained. Old code started the estimator afresh (a
+    lock to find again) and learnt the rate from the backlog's windows (10 % off, the bound: the
+    read ran past the newest sample for 3 s): min r 0.58 (cog.tx)."""
+    times, values, received, streams = _stalled_delivery(12.0, 5.0, 0.8)
+    at, live, baked = _live_and_baked(times, values, received, streams)
+    after = at >= 5.8 + 0.3
+    assert after.sum() > 400
+    worst = min(_correlations(live[after], baked[after]).items(), key=lambda kv: kv[1])
+    assert worst[1] >= 0.99, worst
+    saddle = make_saddle_input(25.0, SaddlePoint())
+    for t, rx, row, stream in zip(times.tolist(), received.tolist(), values.tolist(), streams.tolist(), strict=True):
+        if stream == 8 and saddle.continued == 0 and saddle.times[-1] < 5.0:
+            saddle.clear()  # the tick's new stream
+        assert saddle.push(t, rx, row)
+    counters = saddle.counters()
+    assert saddle.continued == 1 and estimate(saddle.state).lock == "locked"
+    assert counters["samples"] == len(times), "each sample counted once"
+    assert counters["locks"] == 1 and counters["losses"] == 0, counters
+
+
+@pytest.mark.parametrize(("step", "continued"), [(0.005, 1), (0.19, 1), (0.21, 0), (-3.0, 0), (30.0, 0)])
+def test_only_a_new_stream_that_continues_the_samples_keeps_the_estimator(step: float, continued: int) -> None:
+    """After a new stream (``clear``), the estimator is kept only when the first sample follows
+    the newest within ``Model.max_interval`` (0.2 s) of the producer's time: a clock set back or
+    forward, a restarted producer, starts afresh (one sample stepped, searching)."""
+    trot = record(gait_script("trot", 4.0, seed=9), 200.0, seed=9)
+    live = make_saddle_input(25.0, SaddlePoint())
+    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
+        live.push(t, t + 0.002, row)
+    last = float(trot.saddle.t[-1])
+    live.clear()
+    assert live.push(last + step, last + 1.0, trot.saddle.values[0].tolist())
+    assert live.continued == continued
+    assert live.state.samples == (len(trot.saddle.t) + 1 if continued else 1)
+    assert live.counters()["samples"] == len(trot.saddle.t) + 1, "each sample counted once"
+
+
+def test_a_stream_that_ended_long_ago_is_not_continued() -> None:
+    """The kept estimator is for a stall, not for a producer that comes back after
+    ``LATE_MEMORY_S`` (10 s) of our time, even on a continuous clock."""
+    trot = record(gait_script("trot", 3.0, seed=9), 200.0, seed=9)
+    live = make_saddle_input(25.0, SaddlePoint())
+    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
+        live.push(t, t + 0.002, row)
+    last = float(trot.saddle.t[-1])
+    live.clear()
+    assert live.push(last + 0.005, last + 0.002 + LATE_MEMORY_S + 0.01, trot.saddle.values[0].tolist())
+    assert live.continued == 0 and live.state.samples == 1
+
+
+def test_a_new_stream_that_does_not_continue_rides_as_a_fresh_input() -> None:
+    """Differential: after a stream and ``clear`` (a producer restarted on its clock's origin),
+    every tick's read, frame and delay equal a fresh input's given the same samples (the kept
+    estimator leaves no trace)."""
+    first = record(gait_script("trot", 3.0, seed=10), 200.0, seed=10)
+    second = record(gait_script("trot", 4.0, seed=11), 200.0, seed=11)
+    reused, fresh = make_saddle_input(25.0, SaddlePoint(), 0.01), make_saddle_input(25.0, SaddlePoint(), 0.01)
+    for t, row in zip(first.saddle.t.tolist(), first.saddle.values.tolist(), strict=True):
+        reused.push(t, t + 0.002, row)
+    reused.clear()
+    rng = np.random.default_rng(10)
+    times, values = second.saddle.t.tolist(), second.saddle.values.tolist()
+    start = 5.0  # engine s: within LATE_MEMORY_S of the first stream's end
+    received = np.maximum.accumulate(start + np.array(times) + 0.002 + rng.exponential(0.003, len(times)))
+    k = 0
+    for n in range(int(times[-1] * 120.0)):
+        now = start + n / 120.0
+        while k < len(times) and received[k] <= now:
+            assert reused.push(times[k], float(received[k]), values[k]) == fresh.push(
+                times[k], float(received[k]), values[k]
+            )
+            k += 1
+        assert reused.sample(now) == fresh.sample(now), now
+        assert reused.delay == fresh.delay and reused.estimate_row(now) == fresh.estimate_row(now)
+    assert reused.continued == 0
