@@ -40,8 +40,8 @@ from riderlive.devices.lifecycle import (
     StopRequested,
     arm_refusal,
 )
+from riderlive.devices.off_readback import Found, OffReadback
 from riderlive.devices.plug import Motion, Move, Plug
-from riderlive.devices.readback import Found, OffReadback
 from riderlive.devices.setup_run import Handback, HandbackTimeout, SetupRun
 from riderlive.devices.status import DeviceStatus, StopRecord
 from riderlive.tickframe import TickFrame
@@ -305,7 +305,7 @@ class Device:
         self.readback.written(now)
 
     def _keep_off(self, now: float) -> None:
-        """Outputs must be off: read back (``readback.py``); repeat the outputs-off until
+        """Outputs must be off: read back (``off_readback.py``); repeat the outputs-off until
         every unit reports it."""
         found = self.readback.check(now)
         stop = self.last_stop if self.state is S.ESTOP else None

@@ -1,11 +1,11 @@
-"""The outputs-off read-back's schedule (devices/readback.py), hand-computed: every tick
+"""The outputs-off read-back's schedule (devices/off_readback.py), hand-computed: every tick
 for CONFIRM_FAST_S after the outputs went off while unconfirmed, then every IDLE_CHECK_S."""
 
 from __future__ import annotations
 
 from typing import Any, cast
 
-from riderlive.devices.readback import CONFIRM_FAST_S, IDLE_CHECK_S, Found, OffReadback
+from riderlive.devices.off_readback import CONFIRM_FAST_S, IDLE_CHECK_S, Found, OffReadback
 
 PERIOD = 0.125
 """A tick (s): a binary fraction, so that the hand-computed times are exact."""
