@@ -47,6 +47,7 @@ import numpy as np
 from websockets.sync.client import connect
 
 from bench.serving import burn, start_server
+from tests.service.producers import Follower
 
 RATE = 120.0
 STALLS = (0.02, 0.05, 0.1, 0.3)
@@ -75,39 +76,23 @@ def produce(url: str, stop_at: float) -> None:
             n = int((time.perf_counter() - t0) * RATE)
 
 
-class Client:
-    """Every /ws/rider frame: (arrival perf_counter s, engine time s, rider values)."""
+class Client(Follower):
+    """Every /ws/rider frame (tests/service/producers.Follower: arrival ``at``, engine time
+    ``t``, rider ``values``)."""
 
     def __init__(self, url: str) -> None:
-        self.ws = connect(url + "/ws/rider", max_size=None, ping_interval=None)
-        self.ws.recv(timeout=10)
-        self.ws.send(json.dumps({"type": "subscribe"}))
-        self.frames: list[tuple[float, float, np.ndarray]] = []
+        super().__init__(url, horse_channels=None, max_size=None, ping_interval=None)
         self.offset = 0.0
         """perf_counter minus the service's engine time (both CLOCK_MONOTONIC on this host)."""
-        threading.Thread(target=self._recv, daemon=True).start()
-
-    def _recv(self) -> None:
-        try:
-            for message in self.ws:
-                obj = json.loads(message)
-                if obj.get("type") == "frame":
-                    self.frames.append((time.perf_counter(), float(obj["t"]), np.asarray(obj["values"], float)))
-        except Exception:
-            pass
 
     def first_after(self, at: float, timeout: float = 30.0) -> tuple[int, float]:
         """Index and arrival of the first frame ticked after ``at`` (perf_counter s): a frame
         the stopped or killed tick wrote before but that arrives after is not one."""
-        deadline = time.perf_counter() + timeout
         start = max(0, len(self.frames) - 50)
-        while time.perf_counter() < deadline:
-            for i in range(start, len(self.frames)):
-                arrival, t, _ = self.frames[i]
-                if t + self.offset > at:
-                    return i, arrival
-            time.sleep(0.001)
-        raise RuntimeError("no new frame")
+        self.inbox.wait_for(lambda f: f["t"] + self.offset > at, timeout, start)
+        i = self.first_ticked_after(at, self.offset, start)
+        assert i is not None
+        return i, self.frames[i]["at"]
 
 
 class Bench:
@@ -161,9 +146,9 @@ class Bench:
     def step_ratio(self, before: int, after: int) -> float:
         """Largest |step| across the handover over the largest per-tick step of the second before."""
         frames = self.client.frames
-        window = np.array([v for _, _, v in frames[max(0, before - int(RATE)) : before + 1]])
+        window = np.array([f["values"] for f in frames[max(0, before - int(RATE)) : before + 1]])
         slew = np.abs(np.diff(window, axis=0)).max(axis=0)
-        step = np.abs(frames[after][2] - frames[before][2])
+        step = np.abs(np.subtract(frames[after]["values"], frames[before]["values"]))
         moving = slew > 1e-9
         return float((step[moving] / slew[moving]).max()) if moving.any() else 0.0
 
@@ -195,7 +180,7 @@ class Bench:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGCONT)
         time.sleep(1.0)
-        window = [(a, t) for a, t, _ in self.client.frames if at - 0.2 < a < at + hold + 0.8]
+        window = [(f["at"], f["t"]) for f in self.client.frames if at - 0.2 < f["at"] < at + hold + 0.8]
         arrivals = [a for a, _ in window]
         ticked = sorted(t for _, t in window)
         gap = float(np.diff(arrivals).max()) if len(arrivals) > 1 else math.inf
@@ -208,14 +193,14 @@ def quantiles(values: list[float]) -> str:
     return f"p50 {np.percentile(a, 50):.1f}, p99 {np.percentile(a, 99):.1f}, max {a.max():.1f} ms (n={len(a)})"
 
 
-def stage_table(marks: list[tuple[float, float, float, int]], frames: list[tuple[float, float, np.ndarray]]) -> str:
+def stage_table(marks: list[tuple[float, float, float, int]], frames: list[dict[str, Any]]) -> str:
     """Signal -> found, -> spare told, -> its first tick, -> at the client (ms). The tick's
     clock against ours: the least ``arrival - engine time`` over every frame (a frame is
     never received before it was ticked; the quickest came within ~0.1 ms)."""
-    offset = min(arrival - t for arrival, t, _ in frames)
+    offset = min(f["at"] - f["t"] for f in frames)
     stages = []
     for at, found, promoted, after in marks:
-        arrival, t, _ = frames[after]
+        arrival, t = frames[after]["at"], frames[after]["t"]
         stages.append((found - at, promoted - found, t + offset - promoted, arrival - t - offset))
     names = ("found", "spare told", "first tick", "at the client")
     a = np.array(stages) * 1000

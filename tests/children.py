@@ -37,9 +37,14 @@ SETPRIV = "/usr/bin/setpriv"
 
 
 def mark_run() -> str:
-    """Set :data:`MARKER` to this process's pid in ``os.environ`` (a pytest started by a
-    test, or an xdist worker, is a run of its own and sweeps only its own); returns it."""
-    os.environ[MARKER] = str(os.getpid())
+    """Set :data:`MARKER` to this run in ``os.environ`` and return it: this process's pid (a
+    pytest started by a test is a run of its own), or for an xdist worker its controller's
+    run, a ``/`` and its own pid: each worker sweeps its own children, and the controller's
+    sweep also ends those of a worker that was killed before its own sweep ran (a
+    nats-server from ``riderlive/bus/broker.py`` outlived a killed worker)."""
+    inherited = os.environ.get(MARKER)
+    worker = os.environ.get("PYTEST_XDIST_WORKER") and inherited
+    os.environ[MARKER] = f"{inherited}/{os.getpid()}" if worker else str(os.getpid())
     return os.environ[MARKER]
 
 
@@ -66,14 +71,16 @@ def popen(command: Sequence[str], **kwargs: Any) -> subprocess.Popen[Any]:
 
 
 def marked(run: str) -> list[int]:
-    """Pids of live processes (not zombies, not this one) whose environment has ``MARKER=run``."""
+    """Pids of live processes (not zombies, not this one) whose environment has ``MARKER=run``
+    or a worker's run of it (``MARKER=run/pid``)."""
     wanted = f"{MARKER}={run}".encode()
+    worker = wanted + b"/"
     found = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit() or int(entry.name) == os.getpid():
             continue
         with contextlib.suppress(OSError):
-            if wanted not in (entry / "environ").read_bytes().split(b"\0"):
+            if not any(v == wanted or v.startswith(worker) for v in (entry / "environ").read_bytes().split(b"\0")):
                 continue
             if (entry / "stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
                 continue

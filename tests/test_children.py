@@ -77,3 +77,17 @@ def test_a_killed_run_leaves_no_server(tmp_path: Path, sig: signal.Signals) -> N
         if run.poll() is None:
             run.kill()
             run.wait(10)
+
+
+def test_a_workers_children_are_the_controllers_too(tmp_path: Path) -> None:
+    """An xdist worker's run is ``<controller's run>/<worker pid>``: the controller's sweep
+    finds what a killed worker left (its own sweep never ran), a run with another pid does not."""
+    run = f"test-{os.getpid()}"
+    env = dict(os.environ, **{MARKER: f"{run}/12345"})
+    left = subprocess.Popen(["sleep", "60"], env=env)
+    try:
+        wait_until(lambda: left.pid in marked(run), 10, "the worker's child is not the controller's")
+        assert left.pid not in marked(run + "0") and left.pid in marked(f"{run}/12345")
+    finally:
+        left.kill()
+        left.wait(5)

@@ -40,6 +40,7 @@ from riderlive.devices.lifecycle import (
     StopRequested,
     arm_refusal,
 )
+from riderlive.devices.off_readback import Found, OffReadback
 from riderlive.devices.plug import Motion, Move, Plug
 from riderlive.devices.setup_run import Handback, HandbackTimeout, SetupRun
 from riderlive.devices.status import DeviceStatus, StopRecord
@@ -50,10 +51,6 @@ S = DeviceState
 
 _MOVES = {S.HOMING: Move.HOME, S.SOFT_START: Move.SOFT_START, S.RUNNING: Move.RUN, S.PARKING: Move.PARK}
 _NEXT = {S.HOMING: S.SOFT_START, S.SOFT_START: S.RUNNING}
-CONFIRM_FAST_S = 1.0
-"""After outputs go off, read them back every tick for this long, then every ``IDLE_CHECK_S``."""
-IDLE_CHECK_S = 0.5
-"""While off (disarmed, parked, e-stop, fault): read back that outputs are still off."""
 
 
 class Device:
@@ -77,9 +74,7 @@ class Device:
         self.handback: Handback | None = None  # after a failover: every connect waits (``setup_run.py``)
         self._move_t0: float | None = None
         self._last_now: float | None = None
-        self._off_confirmed = True
-        self._off_since: float | None = None
-        self._next_check = 0.0
+        self.readback = OffReadback(plug, period_s)
         self._configured = False
         """The last setup ran to its end (a reset from an e-stop need not repeat it)."""
 
@@ -113,7 +108,7 @@ class Device:
             return self.state
         self.counters["arms"] += 1
         self.armed_by = by
-        self._off_confirmed = False
+        self.readback.confirmed = False
         self._start_move(S.HOMING if self.plug.needs_homing else S.SOFT_START, "armed", by, now)
         return self.state
 
@@ -239,7 +234,7 @@ class Device:
             at=now,
             fault=self.fault,
             armed_by=self.armed_by if self.state.armed else None,
-            outputs_off_confirmed=self._off_confirmed and not self.state.moving,
+            outputs_off_confirmed=self.readback.confirmed and not self.state.moving,
             estop=self.last_stop,
             wrote=wrote,
             transitions=self.life.drain(),
@@ -274,7 +269,7 @@ class Device:
         self._setup = None
         self._configured = True
         self.detail = ""
-        self._off_confirmed, self._off_since, self._next_check = False, now, now
+        self.readback.restart(now, now)
         if self.latch.latched:
             self._go(S.ESTOP, "connected while the e-stop is latched", "latch", now)
         else:
@@ -307,27 +302,22 @@ class Device:
 
     def _outputs_off(self, now: float) -> None:
         self.plug.outputs_off()
-        self._off_confirmed, self._off_since, self._next_check = False, now, now + self.period_s
+        self.readback.written(now)
 
     def _keep_off(self, now: float) -> None:
-        """Outputs must be off: read back (every tick until confirmed, then now and then);
-        repeat the outputs-off until every unit reports it."""
-        if now < self._next_check or not self.plug.is_open:
-            return
-        fast = not self._off_confirmed and (self._off_since is None or now - self._off_since < CONFIRM_FAST_S)
-        self._next_check = now + (self.period_s if fast else IDLE_CHECK_S)
-        if self.plug.outputs_confirmed_off():
-            if not self._off_confirmed:
-                self._off_confirmed = True
-                if self.last_stop is not None and self.state is S.ESTOP and self.last_stop.confirmed_at is None:
-                    self.last_stop.confirmed_at = now
-                log.debug("%s: outputs off, read back", self.name)
-            return
-        self.counters["off_repeats"] += 1
-        if self.last_stop is not None and self.state is S.ESTOP:
-            self.last_stop.repeats += 1
-        self._off_confirmed = False
-        self.plug.outputs_off()
+        """Outputs must be off: read back (``off_readback.py``); repeat the outputs-off until
+        every unit reports it."""
+        found = self.readback.check(now)
+        stop = self.last_stop if self.state is S.ESTOP else None
+        if found is Found.CONFIRMED:
+            if stop is not None and stop.confirmed_at is None:
+                stop.confirmed_at = now
+            log.debug("%s: outputs off, read back", self.name)
+        elif found is Found.NOT_OFF:
+            self.counters["off_repeats"] += 1
+            if stop is not None:
+                stop.repeats += 1
+            self.plug.outputs_off()
 
     def _stop(self, now: float) -> None:
         """Act on the e-stop request(s): outputs off at once, ``estop``, read back after."""
@@ -339,13 +329,13 @@ class Device:
         begun = getattr(self.plug, "goal_begun_at", None)  # a plug that says when its goal writes begin
         record.last_goal_at = begun if isinstance(begun, float) else None
         self.last_stop = record
-        self._off_confirmed, self._off_since, self._next_check = False, now, now
+        self.readback.restart(now, now)
         try:
             if self.plug.is_open:
                 self.plug.outputs_off()
                 first = self.plug.off_written_at  # a plug that writes twice: the first
                 record.off_written_at = first if first is not None else time.perf_counter()
-                self._next_check = now + self.period_s
+                self.readback.written(now)
         except Exception as exc:
             log.error("%s: e-stop: outputs-off failed: %s", self.name, exc)
             self.counters["estop_write_failures"] += 1
@@ -368,7 +358,7 @@ class Device:
             if isinstance(error, PortLost):
                 self.fault = fault
                 self.plug.close()
-                self._off_confirmed = False
+                self.readback.confirmed = False
                 if state is not S.ESTOP:
                     self._go(S.FAULT, fault.message, "device", now)
                 return
@@ -400,4 +390,4 @@ class Device:
     def _quiet_off(self) -> None:
         if self.plug.is_open:
             self._quietly(self.plug.outputs_off)
-        self._off_confirmed = False
+        self.readback.confirmed = False

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import msgpack
@@ -117,12 +117,20 @@ def constant(values: dict[str, float]) -> Callable[[float], dict[str, Any]]:
 
 
 class Follower:
-    """Collects every frame of /ws/rider (all rider and horse channels) in a thread; tests wait on its arrivals."""
+    """Every frame of /ws/rider in a thread, each a dict as sent (``t``: the service's engine
+    time s, ``values``: the rider's channels) with ``at``, its arrival (this process's
+    perf_counter s); tests wait on its arrivals. ``horse_channels``: the horse channels asked
+    for beside the rider's (every one by default; only frames carrying them are kept), None for
+    the rider's alone (every frame kept). ``connect_kwargs`` go to websockets' ``connect``."""
 
-    def __init__(self, url: str) -> None:
-        self.ws = connect(url + "/ws/rider").__enter__()
-        self.hello = json.loads(self.ws.recv(timeout=5))
-        self.ws.send(json.dumps({"type": "subscribe", "horse_channels": list(HORSE_NAMES)}))
+    def __init__(self, url: str, horse_channels: Sequence[str] | None = HORSE_NAMES, **connect_kwargs: Any) -> None:
+        self.ws = connect(url + "/ws/rider", **connect_kwargs).__enter__()
+        self.hello = json.loads(self.ws.recv(timeout=10))
+        subscribe: dict[str, Any] = {"type": "subscribe"}
+        if horse_channels is not None:
+            subscribe["horse_channels"] = list(horse_channels)
+        self.ws.send(json.dumps(subscribe))
+        self._horse = horse_channels is not None
         self.inbox: Inbox[dict[str, Any]] = Inbox()
         self.frames = self.inbox.items
         threading.Thread(target=self._recv, daemon=True).start()
@@ -130,12 +138,23 @@ class Follower:
     def _recv(self) -> None:
         try:
             for message in self.ws:
+                at = time.perf_counter()
                 obj = json.loads(message)
-                if obj["type"] == "frame" and "horse" in obj:
-                    obj["at"] = time.perf_counter()
+                if obj.get("type") == "frame" and ("horse" in obj or not self._horse):
+                    obj["at"] = at
                     self.inbox.append(obj)
         except Exception:
             pass
+
+    def first_ticked_after(self, at: float, offset: float, start: int = 0) -> int | None:
+        """Index of the first frame (from ``start``) ticked after ``at`` (perf_counter s): its
+        ``t + offset`` is past ``at``, ``offset`` being this process's perf_counter minus the
+        service's engine time (0 on one host: both CLOCK_MONOTONIC). A frame the stopped or
+        killed tick wrote before ``at`` but that arrives after is not one. None if none yet."""
+        for i, frame in enumerate(list(self.frames[start:]), start):
+            if frame["t"] + offset > at:
+                return i
+        return None
 
     def wait_for(self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 5.0) -> dict[str, Any]:
         """The first frame from now on that matches (woken by each arrival)."""

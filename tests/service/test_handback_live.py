@@ -12,12 +12,10 @@ and ends ``disarmed``, never re-armed.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
 import signal
 import sys
-import threading
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -25,13 +23,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from websockets.sync.client import connect
 
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
 from tests.dynamixel.test_rig_drive import goal_writes, parked_since
 from tests.service.live_server import ROOT, LiveServer
+from tests.service.producers import Follower
 from tests.waiting import wait_until
 
 TOKEN = "handback-token"
@@ -56,40 +54,16 @@ def rig_file(tmp_path: Path) -> Path:
     return path
 
 
-class RiderClient:
-    """Every /ws/rider frame as (arrival perf_counter s, engine time s); ``offset`` maps the
-    service's engine time onto this process's perf_counter (both CLOCK_MONOTONIC)."""
-
-    def __init__(self, live: LiveServer) -> None:
-        self.ws = connect(live.ws + "/ws/rider", max_size=None, ping_interval=None)  # closed with the server
-        self.ws.recv(timeout=10)
-        self.ws.send(json.dumps({"type": "subscribe"}))
-        self.frames: list[tuple[float, float]] = []
-        offsets = []
-        for _ in range(9):
-            before = time.perf_counter()
-            engine = live.get("/api/state", headers=AUTH).json()["engine_time"]
-            after = time.perf_counter()
-            offsets.append((after - before, (before + after) / 2 - engine))
-        self.offset = min(offsets)[1]  # the quickest answer: within half its round trip
-        threading.Thread(target=self._recv, daemon=True).start()
-
-    def _recv(self) -> None:
-        try:
-            for message in self.ws:
-                obj = json.loads(message)
-                if obj.get("type") == "frame":
-                    self.frames.append((time.perf_counter(), float(obj["t"])))
-        except Exception:
-            pass
-
-    def first_ticked_after(self, at: float) -> float | None:
-        """The arrival of the first frame ticked after ``at`` (a frame the killed tick wrote
-        before its death but that arrives after is not one); None if none yet."""
-        for arrival, t in list(self.frames):
-            if t + self.offset > at + 0.002:  # the offset is good to about half a round trip
-                return arrival
-        return None
+def engine_offset(live: LiveServer) -> float:
+    """This process's perf_counter minus the service's engine time (both CLOCK_MONOTONIC):
+    the quickest of 9 answers of /api/state, good to about half its round trip."""
+    offsets = []
+    for _ in range(9):
+        before = time.perf_counter()
+        engine = live.get("/api/state", headers=AUTH).json()["engine_time"]
+        after = time.perf_counter()
+        offsets.append((after - before, (before + after) / 2 - engine))
+    return min(offsets)[1]
 
 
 @pytest.fixture
@@ -140,7 +114,9 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
             break
     else:
         pytest.fail(f"the host failed the tick over before every kill: {devices(live)}")
-    client = RiderClient(live)  # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
+    # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
+    client = Follower(live.ws, horse_channels=None, max_size=None, ping_interval=None)  # closed with the server
+    offset = engine_offset(live)
     wait_until(lambda: len(client.frames) >= 50, 10.0, "no rider frames at the client")
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")
@@ -156,10 +132,11 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
         return any(t > killed and is_torque_off_write(raw) for t, raw in list(emu.arrivals))
 
     wait_until(torque_off_since_kill, 60.0, lambda: samples[-1], poll=0.03)
-    first_frame = client.first_ticked_after(killed)
+    first = client.first_ticked_after(killed + 0.002, offset)  # the offset is good to about half a round trip
+    first_frame = None if first is None else client.frames[first]["at"]
     goals, off = parked_since(emu, rig, killed)  # eased to park, torque off, no goal after, read back off
     park_ended = off[0]
-    last = client.frames[-1] if client.frames else None
+    last = {k: client.frames[-1][k] for k in ("at", "t")} if client.frames else None
     assert first_frame is not None, ("no rider frame before the park ended", len(client.frames), last, killed)
     frames_after, park_after = first_frame - killed, park_ended - killed
     print(f"kill -> first new frame at the client {frames_after * 1e3:.0f} ms; -> park ended {park_after * 1e3:.0f} ms")
