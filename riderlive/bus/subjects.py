@@ -53,7 +53,7 @@ INPUT_KINDS = frozenset({Kind.HORSE, Kind.SADDLE})
 
 def check_name(value: str, what: str) -> str:
     """``value`` if it is a valid stage/rig/producer name, else ValueError naming ``what``."""
-    if not isinstance(value, str) or not _NAME.match(value):
+    if not isinstance(value, str) or not _NAME.fullmatch(value):  # `$` alone accepts a trailing newline
         raise ValueError(f"{what} {value!r} must be 1-64 characters of A-Z a-z 0-9 _ - (no dots, no spaces)")
     return value
 
