@@ -23,6 +23,15 @@ the :class:`Model`'s thresholds and returns a :class:`Verdict`:
   not help much, but a tick nobody runs for that long is out of service).
 - **dying** (``PF_EXITING``): a kill the sentinel will tell only once the process's memory
   is released: failed over at once.
+- **waiting on device I/O** (:attr:`Verdict.IO_WAIT`): the tick declared on the safety
+  board, before a bus transaction, "waiting for a reply until D" (``board.tick_io_until``,
+  cleared after it: ``devices/iowait.py``). A heartbeat older than the threshold is excused
+  while ``now <= D + threshold``, the age stays within ``Model.io_limit`` (a tick that
+  declares one wait after another is not excused for ever) and its thread sleeps (state
+  ``S``/``D``, or it used under half the age on a CPU: a wait that polls a port wakes
+  briefly every 0.2 ms). A tick spinning (``R``, CPU time growing like the wall clock)
+  inside a declared wait is not excused. The device layer's own budgets (reply budget,
+  Bus Watchdog) keep judging the servos.
 - **starting** (no heartbeat yet): never killed while it makes progress (CPU time or
   run-queue wait grew in the last ``Model.start_stuck`` seconds); killed only when it
   made none for that long, or took ``Model.start_limit`` in all.
@@ -50,6 +59,8 @@ class Verdict(enum.Enum):
     """Older than the threshold, but the host, not the tick, explains it: counted, not punished."""
     STARTING = "starting"
     """No heartbeat yet and still making progress: waited for."""
+    IO_WAIT = "io_wait"
+    """Older than the threshold inside a declared, bounded device wait, asleep: counted, not punished."""
     HUNG = "hung"
     """Stuck: fail over."""
     DYING = "dying"
@@ -75,6 +86,8 @@ class Sched:
     """``PF_EXITING``: the process is being torn down (a SIGKILL, an exit) and runs none of its
     code any more; its sentinel becomes readable only once its memory is released, tens of
     milliseconds later for a large process on a busy host."""
+    state: str = ""
+    """The main thread's state letter (``R`` running, ``S`` asleep, ``D`` in uninterruptible I/O...)."""
 
 
 @dataclass(frozen=True)
@@ -83,6 +96,8 @@ class Model:
 
     threshold: float
     """Heartbeat age (after the discounts) that makes a tick hung."""
+    io_limit: float = 0.0
+    """The oldest heartbeat a declared device wait can excuse (0: twice the threshold)."""
     longest_excuse: float = 5.0
     """A tick starved longer than this is hung anyway."""
     start_stuck: float = 10.0
@@ -113,6 +128,8 @@ class Observation:
     reading of ``/proc/stat``): the hypervisor took the vCPU, nothing in the guest ran."""
     progress_age: float = 0.0
     """Starting only: seconds since the tick's CPU time or run-queue wait last grew."""
+    io_until: float = 0.0
+    """The deadline of the device wait the tick declared (same clock as ``now``; 0: none)."""
 
 
 @dataclass(frozen=True)
@@ -159,6 +176,18 @@ def classify(model: Model, seen: Observation) -> Finding:
     return Finding(Verdict.STALLED, left, excused, f"host stall of {age * 1000:.0f} ms ({excused * 1000:.0f} excused)")
 
 
+def _in_io_wait(model: Model, seen: Observation, age: float) -> bool:
+    """Inside a declared device wait, within its bounds, and asleep (see the module docstring)."""
+    if not seen.io_until or seen.now > seen.io_until + model.threshold:
+        return False
+    if age > (model.io_limit or 2.0 * model.threshold) or seen.sched is None:
+        return False
+    if seen.sched.state in ("S", "D"):
+        return True
+    ran = seen.sched.cpu - seen.at_beat.cpu if seen.at_beat is not None else age
+    return ran < 0.5 * age
+
+
 def _starting_stopped(model: Model, seen: Observation) -> Finding:
     """A starting tick that is stopped makes no progress: as stuck once ``start_stuck`` passed."""
     if seen.progress_age > model.start_stuck:
@@ -179,4 +208,118 @@ def read_sched(pid: int) -> Sched | None:
     state, flags = fields[0], int(fields[6])
     process_cpu = (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS
     stopped, exiting = state in (b"T", b"t"), bool(flags & PF_EXITING)
-    return Sched(int(cpu_ns) / 1e9, int(wait_ns) / 1e9, stopped, process_cpu, exiting)
+    return Sched(int(cpu_ns) / 1e9, int(wait_ns) / 1e9, stopped, process_cpu, exiting, state.decode())
+
+
+@dataclass(frozen=True)
+class ThreadState:
+    """One thread of the tick at a verdict: ``/proc/<pid>/task/<tid>/{stat,wchan,schedstat}``."""
+
+    tid: int
+    name: str
+    state: str
+    """``R`` running or runnable, ``S`` asleep, ``D`` uninterruptible (I/O), ``T`` stopped..."""
+    wchan: str
+    """The kernel function it sleeps in (``do_select``, ``futex_wait_queue``...; ``0``: running)."""
+    cpu: float
+    """Seconds on a CPU so far."""
+    wait: float
+    """Seconds runnable on a run queue so far."""
+
+
+def read_threads(pid: int) -> list[ThreadState]:
+    """Every thread of ``pid`` (its main thread first); [] when it is gone. Read only at a
+    verdict past the threshold (a few hundred microseconds for a handful of threads)."""
+    try:
+        tids = sorted(int(t) for t in os.listdir(f"/proc/{pid}/task"))
+    except (OSError, ValueError):
+        return []
+    out = []
+    for tid in sorted(tids, key=lambda t: t != pid):
+        base = f"/proc/{pid}/task/{tid}"
+        try:
+            with open(f"{base}/stat", "rb") as f:
+                stat = f.read()
+            with open(f"{base}/wchan", "rb") as f:
+                wchan = f.read().decode(errors="replace").strip() or "0"
+            with open(f"{base}/schedstat", "rb") as f:
+                cpu_ns, wait_ns, *_ = f.read().split()
+        except (OSError, ValueError):
+            continue
+        name = stat[stat.index(b"(") + 1 : stat.rindex(b")")].decode(errors="replace")
+        state = stat[stat.rindex(b")") + 2 :].split()[0].decode()
+        out.append(ThreadState(tid, name, state, wchan, int(cpu_ns) / 1e9, int(wait_ns) / 1e9))
+    return out
+
+
+def describe_threads(threads: list[ThreadState], at_beat: Sched | None) -> str:
+    """What the tick was doing, for a verdict's log line and the status: its main thread's
+    state, kernel wait channel, CPU and run-queue time since the last beat; the others' states."""
+    if not threads:
+        return "threads: gone"
+    main, rest = threads[0], threads[1:]
+    text = f"main thread {main.state} in {main.wchan}"
+    if at_beat is not None:
+        ran, waited = (main.cpu - at_beat.cpu) * 1000, (main.wait - at_beat.wait) * 1000
+        text += f", since the beat ran {ran:.1f} ms, runnable unrun {waited:.1f} ms"
+    others: dict[str, int] = {}
+    for t in rest:
+        key = f"{t.state} {t.wchan}"
+        others[key] = others.get(key, 0) + 1
+    if others:
+        text += "; other threads: " + ", ".join(f"{n} x {k}" for k, n in sorted(others.items()))
+    return text
+
+
+@dataclass
+class Tally:
+    """The verdicts that were counted, not punished (the supervision status), one count per
+    heartbeat gap; and what the tick was doing at the last hang."""
+
+    stalls: int = 0
+    """Gaps past the threshold that the host explained."""
+    stall_excused_max: float = 0.0
+    """The largest such gap's excused part (s)."""
+    io_waits_excused: int = 0
+    """Gaps past the threshold inside a declared device wait (:attr:`Verdict.IO_WAIT`)."""
+    io_wait_longest: float = 0.0
+    """The oldest heartbeat a declared device wait excused (s)."""
+    last_hang: str = ""
+    """The last hang verdict and the tick's threads then (:func:`describe_threads`)."""
+    _gap: float = -1.0
+    _counted: frozenset[Verdict] = frozenset()
+
+    def add(self, finding: Finding, beat: float, age: float) -> str | None:
+        """Count ``finding`` (STALLED or IO_WAIT) for the gap after the beat ``beat``, whose
+        raw age is ``age`` (s); the line to log at its first count, else None."""
+        if beat != self._gap:
+            self._gap, self._counted = beat, frozenset()
+        first = finding.verdict not in self._counted
+        self._counted |= {finding.verdict}
+        if finding.verdict is Verdict.IO_WAIT:
+            self.io_wait_longest = max(self.io_wait_longest, age)
+            self.io_waits_excused += first
+            return f"the tick is waiting on a device, not hung: {finding.why}" if first else None
+        if finding.verdict is Verdict.STALLED:
+            self.stall_excused_max = max(self.stall_excused_max, finding.excused)
+            self.stalls += first
+            return f"the tick is late, not hung: {finding.why}" if first else None
+        return None
+
+    def snapshot(self) -> dict[str, float | int | str]:
+        return {
+            "stalls": self.stalls,
+            "stall_excused_max": self.stall_excused_max,
+            "io_waits_excused": self.io_waits_excused,
+            "io_wait_longest": self.io_wait_longest,
+            "last_hang": self.last_hang,
+        }
+
+
+def hang_detail(finding: Finding, seen: Observation, pid: int) -> str:
+    """A hang verdict's reason with what the tick was doing then (its threads from ``/proc``,
+    the device wait it had declared): read only at a hang, once."""
+    text = f"{finding.why}; {describe_threads(read_threads(pid), seen.at_beat) if pid else 'no pid'}"
+    if seen.io_until:
+        text += f"; a device wait declared until {(seen.io_until - seen.now) * 1000:+.1f} ms"
+    return text
