@@ -91,9 +91,6 @@ class SafetyBoard(Slots, SlotBlock):
     tick_pid = Slot(int, WEB, "the tick process's pid (0: none; set by the web process at each spawn or takeover)")
     tick_generation = Slot(int, WEB, "the serving tick's generation (1, 2... : +1 per spawn or takeover)")
     tick_beat = Slot(float, TICK, "perf_counter s of the tick's last beat (every tick; 0: a new generation)")
-    tick_io_until = Slot(
-        float, TICK, "perf_counter s until which the tick waits on a device's reply (0: not waiting; devices/iowait.py)"
-    )
     tick_clean_exit = Slot(int, TICK, "the generation that stopped cleanly (the guardian has nothing to stop)")
     guardian_pid = Slot(int, GUARDIAN, "the watching guardian's pid (a standby writes it when it takes over)")
     guardian_beat = Slot(float, GUARDIAN, "perf_counter s of the guardian's last beat (every 5 ms)")
@@ -109,6 +106,11 @@ class SafetyBoard(Slots, SlotBlock):
     handback_from = Slot(
         int, WEB, "the generation the guardian must hand back before the serving one opens a transport (0: none)"
     )
+    tick_io_until = Slot(
+        float, TICK, "perf_counter s until which the tick waits on a device's bytes (0: not waiting; devices/iowait.py)"
+    )
+    tick_io_since = Slot(float, TICK, "perf_counter s when that wait began")
+    tick_io_waited = Slot(float, TICK, "seconds of device waits that ended since the tick's last beat")
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(_names(), name)

@@ -23,15 +23,20 @@ the :class:`Model`'s thresholds and returns a :class:`Verdict`:
   not help much, but a tick nobody runs for that long is out of service).
 - **dying** (``PF_EXITING``): a kill the sentinel will tell only once the process's memory
   is released: failed over at once.
-- **waiting on device I/O** (:attr:`Verdict.IO_WAIT`): the tick declared on the safety
-  board, before a bus transaction, "waiting for a reply until D" (``board.tick_io_until``,
-  cleared after it: ``devices/iowait.py``). A heartbeat older than the threshold is excused
-  while ``now <= D + threshold``, the age stays within ``Model.io_limit`` (a tick that
-  declares one wait after another is not excused for ever) and its thread sleeps (state
-  ``S``/``D``, or it used under half the age on a CPU: a wait that polls a port wakes
-  briefly every 0.2 ms). A tick spinning (``R``, CPU time growing like the wall clock)
-  inside a declared wait is not excused. The device layer's own budgets (reply budget,
-  Bus Watchdog) keep judging the servos.
+- **waiting on device I/O** (:attr:`Verdict.IO_WAIT`): the tick declares on the safety
+  board each bounded wait for a device's bytes (``devices/iowait.py``: the wait's start and
+  deadline D while it lasts, then the seconds of such waits since its last beat). That
+  time is discounted too, the part of an ongoing wait only up to D (so an age is never
+  excused past D + the threshold), in all at most ``Model.io_limit``, and only when the
+  tick is not spinning (its main thread asleep, ``S``/``D``, or on a CPU for under half
+  the age: a wait polls its port every 0.2 ms). A gap that only this discount brings under
+  the threshold is ``IO_WAIT``: counted, not punished. The device layer's own budgets
+  (reply budget, Bus Watchdog) keep judging the servos.
+- **runnable, not run**: ``/proc/<pid>/schedstat`` adds a run-queue wait only when the
+  thread gets the CPU, so a tick runnable (``R``) but not run since its beat shows none
+  (the soak saw a SCHED_FIFO 50 tick ``R`` with 0.0 ms on a CPU for 97 ms, behind other
+  real-time work): a tick ``R`` that ran under a tenth of the age is discounted the age
+  minus what it ran.
 - **starting** (no heartbeat yet): never killed while it makes progress (CPU time or
   run-queue wait grew in the last ``Model.start_stuck`` seconds); killed only when it
   made none for that long, or took ``Model.start_limit`` in all.
@@ -97,7 +102,7 @@ class Model:
     threshold: float
     """Heartbeat age (after the discounts) that makes a tick hung."""
     io_limit: float = 0.0
-    """The oldest heartbeat a declared device wait can excuse (0: twice the threshold)."""
+    """The most declared device waits can excuse of one gap (s; 0: the threshold)."""
     longest_excuse: float = 5.0
     """A tick starved longer than this is hung anyway."""
     start_stuck: float = 10.0
@@ -129,7 +134,11 @@ class Observation:
     progress_age: float = 0.0
     """Starting only: seconds since the tick's CPU time or run-queue wait last grew."""
     io_until: float = 0.0
-    """The deadline of the device wait the tick declared (same clock as ``now``; 0: none)."""
+    """The deadline of the device wait the tick is in (same clock as ``now``; 0: none)."""
+    io_since: float = 0.0
+    """When that wait began (same clock)."""
+    io_waited: float = 0.0
+    """Seconds of declared device waits that ended since the tick's last beat."""
 
 
 @dataclass(frozen=True)
@@ -163,10 +172,17 @@ def classify(model: Model, seen: Observation) -> Finding:
     stopped = seen.sched is not None and seen.sched.stopped
     starved = 0.0
     if not stopped and seen.sched is not None and seen.at_beat is not None:
+        ran = seen.sched.cpu - seen.at_beat.cpu
         starved = max(0.0, seen.sched.wait - seen.at_beat.wait)
+        if seen.sched.state == "R" and ran < 0.1 * age:  # runnable, not run: schedstat counts it later
+            starved = max(starved, age - ran)
     others = 0.0 if stopped else max(0.0, seen.others_stall, seen.stolen)
     excused = min(max(seen.woke_late, starved, others), age)
     left = age - excused
+    io = 0.0 if stopped else io_excuse(model, seen)
+    if left > model.threshold and age - max(excused, io) <= model.threshold:
+        why = f"waiting on device I/O: {age * 1000:.0f} ms since the beat, {io * 1000:.0f} of them in declared waits"
+        return Finding(Verdict.IO_WAIT, age - max(excused, io), max(excused, io), why)
     if left > model.threshold:
         what = "stopped (SIGSTOP)" if stopped else "no heartbeat"
         why = f"hung ({what} for {age * 1000:.0f} ms, {excused * 1000:.0f} of them excused)"
@@ -176,16 +192,16 @@ def classify(model: Model, seen: Observation) -> Finding:
     return Finding(Verdict.STALLED, left, excused, f"host stall of {age * 1000:.0f} ms ({excused * 1000:.0f} excused)")
 
 
-def _in_io_wait(model: Model, seen: Observation, age: float) -> bool:
-    """Inside a declared device wait, within its bounds, and asleep (see the module docstring)."""
-    if not seen.io_until or seen.now > seen.io_until + model.threshold:
-        return False
-    if age > (model.io_limit or 2.0 * model.threshold) or seen.sched is None:
-        return False
-    if seen.sched.state in ("S", "D"):
-        return True
-    ran = seen.sched.cpu - seen.at_beat.cpu if seen.at_beat is not None else age
-    return ran < 0.5 * age
+def io_excuse(model: Model, seen: Observation) -> float:
+    """Seconds of the gap spent in declared device waits, ended or ongoing (up to their
+    deadline), at most ``Model.io_limit``; 0 when the tick spins (see the module docstring)."""
+    sched, at_beat, age = seen.sched, seen.at_beat, seen.beat_age or 0.0
+    if sched is None:
+        return 0.0
+    if sched.state not in ("S", "D") and (at_beat is None or sched.cpu - at_beat.cpu >= 0.5 * age):
+        return 0.0
+    ongoing = max(0.0, min(seen.now, seen.io_until) - seen.io_since) if seen.io_until else 0.0
+    return min(seen.io_waited + ongoing, age, model.io_limit or model.threshold)
 
 
 def _starting_stopped(model: Model, seen: Observation) -> Finding:
@@ -320,6 +336,9 @@ def hang_detail(finding: Finding, seen: Observation, pid: int) -> str:
     """A hang verdict's reason with what the tick was doing then (its threads from ``/proc``,
     the device wait it had declared): read only at a hang, once."""
     text = f"{finding.why}; {describe_threads(read_threads(pid), seen.at_beat) if pid else 'no pid'}"
+    if seen.io_waited:
+        text += f"; {seen.io_waited * 1000:.1f} ms in device waits that ended since the beat"
     if seen.io_until:
-        text += f"; a device wait declared until {(seen.io_until - seen.now) * 1000:+.1f} ms"
+        since, until = (seen.io_since - seen.now) * 1000, (seen.io_until - seen.now) * 1000
+        text += f"; in a device wait declared from {since:+.1f} ms until {until:+.1f} ms"
     return text

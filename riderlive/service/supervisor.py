@@ -12,8 +12,8 @@ The web process supervises the tick process it spawned:
   discounted by what the host, not the tick, explains (``service/stall.py``: the
   supervisor's own wake-up lateness, the tick's run-queue wait from ``/proc``, the
   guardian's stalled heartbeat): a host stall is counted (``stalls``), never punished;
-  nor is a tick asleep in a reply wait it declared, within that wait's deadline plus the
-  threshold (``io_waits_excused``). A hang's log line and ``last_hang`` say what the tick's
+  nor is the time the tick spent asleep in device waits it declared, up to each one's
+  deadline (``io_waits_excused``, ``devices/iowait.py``). A hang's log line and ``last_hang`` say what the tick's
   threads were doing (state, kernel wait channel, CPU and run-queue time since the beat).
   A stopped tick (SIGSTOP) is not excused. A hung tick is killed (SIGKILL) before
   anything else touches its bus.
@@ -224,7 +224,8 @@ class TickSupervisor:
         link, watch, board = self.link, self.watch, self.link.board
         guardian_beat = board.guardian_beat if self.guardians.guardian is not None else 0.0
         beat, pid = board.tick_beat, board.tick_pid
-        observation = watch.observe(now, woke_late, beat, pid, guardian_beat, io_until=board.tick_io_until)
+        io = (board.tick_io_until, board.tick_io_since, board.tick_io_waited)
+        observation = watch.observe(now, woke_late, beat, pid, guardian_beat, io=io)
         if watch.beaten and self._first_beat is None:
             self._on_first_beat(now)
         finding = stall.classify(stall.Model(self.hang_threshold()), observation)

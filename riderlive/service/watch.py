@@ -41,11 +41,19 @@ class BeatWatch:
         """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
 
     def observe(
-        self, now: float, woke_late: float, beat: float, pid: int, guardian_beat: float, *, io_until: float = 0.0
+        self,
+        now: float,
+        woke_late: float,
+        beat: float,
+        pid: int,
+        guardian_beat: float,
+        *,
+        io: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> stall.Observation:
         """One look at ``now``: ``beat`` the board's heartbeat (0: none yet), ``pid`` the tick's,
-        ``guardian_beat`` the guardian's (0: no guardian), ``io_until`` the deadline of the device
-        wait the tick declared (0: none). Sets :attr:`beaten` at the first beat."""
+        ``guardian_beat`` the guardian's (0: no guardian), ``io`` the tick's declared device waits
+        (the ongoing one's deadline, 0: none, and start; the seconds of those ended since the beat).
+        Sets :attr:`beaten` at the first beat."""
         sched = stall.read_sched(pid) if pid else None
         age: float | None = None
         if beat:
@@ -79,5 +87,7 @@ class BeatWatch:
             others_stall=max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0,
             stolen=max(0.0, stolen),
             progress_age=now - self._progress[0],
-            io_until=io_until,
+            io_until=io[0],
+            io_since=io[1],
+            io_waited=io[2] if beat else 0.0,
         )
