@@ -241,6 +241,10 @@ class ThreadState:
     """Seconds on a CPU so far."""
     wait: float
     """Seconds runnable on a run queue so far."""
+    syscall: str = ""
+    """``/proc/.../syscall``: the system call it is in and its arguments in hex (``running``:
+    none); e.g. a ``select`` (23 on x86-64) with a write set and no timeout (0) is pyserial
+    waiting for a port to take bytes."""
 
 
 def read_threads(pid: int) -> list[ThreadState]:
@@ -262,9 +266,14 @@ def read_threads(pid: int) -> list[ThreadState]:
                 cpu_ns, wait_ns, *_ = f.read().split()
         except (OSError, ValueError):
             continue
+        try:
+            with open(f"{base}/syscall", "rb") as f:
+                syscall = " ".join(f.read().decode(errors="replace").split()[:6])
+        except OSError:
+            syscall = ""
         name = stat[stat.index(b"(") + 1 : stat.rindex(b")")].decode(errors="replace")
         state = stat[stat.rindex(b")") + 2 :].split()[0].decode()
-        out.append(ThreadState(tid, name, state, wchan, int(cpu_ns) / 1e9, int(wait_ns) / 1e9))
+        out.append(ThreadState(tid, name, state, wchan, int(cpu_ns) / 1e9, int(wait_ns) / 1e9, syscall))
     return out
 
 
@@ -274,7 +283,7 @@ def describe_threads(threads: list[ThreadState], at_beat: Sched | None) -> str:
     if not threads:
         return "threads: gone"
     main, rest = threads[0], threads[1:]
-    text = f"main thread {main.state} in {main.wchan}"
+    text = f"main thread {main.state} in {main.wchan}" + (f" (syscall {main.syscall})" if main.syscall else "")
     if at_beat is not None:
         ran, waited = (main.cpu - at_beat.cpu) * 1000, (main.wait - at_beat.wait) * 1000
         text += f", since the beat ran {ran:.1f} ms, runnable unrun {waited:.1f} ms"

@@ -236,7 +236,7 @@ class TickSupervisor:
             self.tally.last_hang = stall.hang_detail(finding, observation, pid)
             self._begin_recovery(self.tally.last_hang)
         elif (line := self.tally.add(finding, beat, observation.beat_age or 0.0)) is not None:
-            log.info(line)
+            log.warning(line)
 
     def _on_first_beat(self, now: float) -> None:
         """The serving generation has beaten: up, and a new spare warms in the background."""
