@@ -3,11 +3,25 @@ hand-made observations on a fake clock (seconds), no processes."""
 
 from __future__ import annotations
 
+import os
+import threading
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from riderlive.service.stall import Finding, Model, Observation, Sched, Tally, Verdict, classify, io_excuse
+from riderlive.service.stall import (
+    Finding,
+    Model,
+    Observation,
+    Sched,
+    Tally,
+    Verdict,
+    classify,
+    hang_detail,
+    io_excuse,
+    read_threads,
+)
 
 MODEL = Model(threshold=0.0614)
 """bench3 at 120 Hz: (5 - 1) ticks of 8.33 ms + its longest wait 28.1 ms."""
@@ -140,3 +154,23 @@ def test_the_tally_counts_one_per_gap_and_the_longest() -> None:
     assert tally.add(Finding(Verdict.OK), beat=3.0, age=0.001) is None
     assert (tally.io_waits_excused, tally.stalls) == (2, 1)
     assert tally.io_wait_longest == pytest.approx(0.080) and tally.stall_excused_max == pytest.approx(0.03)
+
+
+def test_a_hang_says_what_the_ticks_threads_were_doing() -> None:
+    asleep = threading.Event()
+    sleeper = threading.Thread(target=asleep.wait, daemon=True)
+    sleeper.start()
+    try:
+        threads = read_threads(os.getpid())
+        assert threads[0].tid == os.getpid() and threads[0].state == "R", "the main thread first, reading"
+        assert any(t.state == "S" for t in threads[1:]), [t.state for t in threads]
+        observation = seen(0.080, tick("S"), waited=0.010, since=-0.005, until=0.020)
+        text = hang_detail(classify(MODEL, observation), observation, os.getpid())
+        assert text.startswith("hung (no heartbeat for 80 ms") and "main thread R in" in text
+        assert "10.0 ms in device waits that ended" in text and "from -5.0 ms until +20.0 ms" in text
+        assert "other threads: " in text and " S " in text
+        gone = 2**22 + 7
+        assert read_threads(gone) == []
+        assert "threads: gone" in hang_detail(classify(MODEL, observation), observation, gone)
+    finally:
+        asleep.set()
