@@ -22,6 +22,7 @@ from riderlive.service.stall import (
     io_excuse,
     read_threads,
 )
+from tests.waiting import wait_until
 
 MODEL = Model(threshold=0.0614)
 """bench3 at 120 Hz: (5 - 1) ticks of 8.33 ms + its longest wait 28.1 ms."""
@@ -161,9 +162,10 @@ def test_a_hang_says_what_the_ticks_threads_were_doing() -> None:
     sleeper = threading.Thread(target=asleep.wait, daemon=True)
     sleeper.start()
     try:
+        # The new thread runs until it blocks on the event: then it sleeps.
+        wait_until(lambda: any(t.state == "S" for t in read_threads(os.getpid())[1:]), 10.0, "no thread asleep")
         threads = read_threads(os.getpid())
         assert threads[0].tid == os.getpid() and threads[0].state == "R", "the main thread first, reading"
-        assert any(t.state == "S" for t in threads[1:]), [t.state for t in threads]
         observation = seen(0.080, tick("S"), waited=0.010, since=-0.005, until=0.020)
         text = hang_detail(classify(MODEL, observation), observation, os.getpid())
         assert text.startswith("hung (no heartbeat for 80 ms") and "main thread R in" in text
