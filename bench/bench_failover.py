@@ -296,8 +296,11 @@ def main() -> None:
         )
     print(
         f"supervision: restarts {final['restarts']}, deaths {final['deaths']}, hangs {final['hangs']},"
-        f" stalls excused {final['stalls']}, warm takeovers {final['takeovers']}, spares {final['spare']}"
+        f" stalls excused {final['stalls']}, device waits excused {final.get('io_waits_excused', 0)},"
+        f" warm takeovers {final['takeovers']}, spares {final['spare']}"
     )
+    if final.get("last_hang"):
+        print(f"last hang: {final['last_hang']}")
 
 
 if __name__ == "__main__":

@@ -106,6 +106,11 @@ class SafetyBoard(Slots, SlotBlock):
     handback_from = Slot(
         int, WEB, "the generation the guardian must hand back before the serving one opens a transport (0: none)"
     )
+    tick_io_until = Slot(
+        float, TICK, "perf_counter s until which the tick waits on a device's bytes (0: not waiting; devices/iowait.py)"
+    )
+    tick_io_since = Slot(float, TICK, "perf_counter s when that wait began")
+    tick_io_waited = Slot(float, TICK, "seconds of device waits that ended since the tick's last beat")
 
     def __init__(self, name: str | None = None) -> None:
         super().__init__(_names(), name)

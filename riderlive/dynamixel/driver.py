@@ -29,6 +29,7 @@ from typing import Any
 from riderlive.channels import RIDER
 from riderlive.devices.budget import ReplyTimer
 from riderlive.devices.device import Device
+from riderlive.devices.iowait import IoWait
 from riderlive.devices.latch import StopLatch, StopView
 from riderlive.devices.lifecycle import DeviceError, HardwareFault, NoReply, Rejected, TickGap
 from riderlive.devices.plug import Motion, Move, PlugBase, Steps, ramp
@@ -95,6 +96,15 @@ class RigPlug(PlugBase):
     def stops(self, view: StopView | None) -> None:
         self._stops = view
         self.bus.port.stops = view
+
+    @property
+    def io_wait(self) -> IoWait | None:
+        """Where the bus declares its reply waits (the tick's board; ``devices/iowait.py``)."""
+        return self.bus.port.io_wait
+
+    @io_wait.setter
+    def io_wait(self, declare: IoWait | None) -> None:
+        self.bus.port.io_wait = declare
 
     @property
     def is_open(self) -> bool:

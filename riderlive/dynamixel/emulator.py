@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
 
-from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec, ServoFaults, corrupt
+from riderlive.dynamixel.emulator_faults import REPLY_FAULTS, FaultKind, FaultSpec, ServoFaults, corrupt
 from riderlive.dynamixel.emulator_instructions import Reply, dispatch
 from riderlive.dynamixel.emulator_servo import EmulatedServo, ServoSetup
 from riderlive.dynamixel.protocol import (
@@ -72,6 +72,7 @@ class BusStats:
     garbage_bytes: int = 0
     dropped_replies: int = 0
     corrupted_replies: int = 0
+    lagged_replies: int = 0
     internal_errors: int = 0
     handling_cpu_s: float = 0.0
     """CPU time the bus thread spent handling packets (not waiting for the wire), s."""
@@ -205,7 +206,7 @@ class EmulatedBus:
             for servo in targets:
                 faults = self._faults[id(servo)]
                 servo.advance(self.clock())
-                if fault.kind in (FaultKind.DROP, FaultKind.CORRUPT):
+                if fault.kind in REPLY_FAULTS:
                     faults.set_reply_fault(fault)
                 elif fault.kind is FaultKind.VANISH:
                     faults.vanished = True
@@ -326,6 +327,12 @@ class EmulatedBus:
             if faults.corrupt is not None and faults.corrupt.fires():
                 self.stats.corrupted_replies += 1
                 data = corrupt(data)
+            if faults.lag is not None and faults.lag.fires():
+                self.stats.lagged_replies += 1
+                self._flush(batch)
+                self._dribble(data, faults.lag_s)
+                t = max(t, self.clock())
+                continue
             delay = chunk.servo.return_delay_s if chunk.waits_return_delay else 0.0
             if self.wire_timing:
                 t += delay + len(data) * 10 / self.baud
@@ -352,6 +359,16 @@ class EmulatedBus:
         except OSError:
             self.stats.dropped_replies += 1
         batch.clear()
+
+    def _dribble(self, data: bytes, length_s: float) -> None:
+        """``data`` a byte at a time, evenly over ``length_s`` (the ``lag`` fault)."""
+        start = time.perf_counter()
+        for i, byte in enumerate(data):
+            end = start + length_s * (i + 1) / len(data)
+            remaining = end - time.perf_counter()
+            if remaining > 0:
+                time.sleep(remaining)
+            self._flush(bytearray((byte,)))
 
     def _sleep_until(self, deadline: float) -> None:
         """Sleep, then spin the last millisecond: OS sleeps overshoot, and a yield on a busy

@@ -7,6 +7,9 @@ Text form (the CLI's ``--fault``, also usable from tests)::
     drop:3:5          the next 5 replies of servo 3 are lost
     drop:3:0.1:7      each reply of servo 3 is lost with probability 0.1 (seed 7)
     corrupt:3:2       the next 2 replies of servo 3 arrive with a bad CRC
+    lag:3:80          the next reply of servo 3 reaches the host over 80 ms, a byte at a time (a
+                      serial path the host does not carry in time: a starved tty worker); the
+                      bus handles nothing else meanwhile
     vanish:3@2.5      servo 3 stops answering (and hearing) 2.5 s after start
     reappear:3        servo 3 is back
     overheat:3        servo 3's temperature jumps above its limit (Overheating error)
@@ -29,6 +32,7 @@ from dataclasses import dataclass, field
 class FaultKind(enum.StrEnum):
     DROP = "drop"
     CORRUPT = "corrupt"
+    LAG = "lag"
     VANISH = "vanish"
     REAPPEAR = "reappear"
     OVERHEAT = "overheat"
@@ -39,7 +43,7 @@ class FaultKind(enum.StrEnum):
 
 
 NEEDS_ID = frozenset(FaultKind) - {FaultKind.CLOSE, FaultKind.CLEAR}
-REPLY_FAULTS = frozenset({FaultKind.DROP, FaultKind.CORRUPT})
+REPLY_FAULTS = frozenset({FaultKind.DROP, FaultKind.CORRUPT, FaultKind.LAG})
 
 
 @dataclass(frozen=True)
@@ -54,6 +58,8 @@ class FaultSpec:
     at_s: float = 0.0
     volts: float | None = None
     """``voltage``: the supply voltage to set (None: below the servo's Min Voltage Limit)."""
+    lag_ms: float = 0.0
+    """``lag``: how long the reply takes to reach the host (ms)."""
 
 
 def parse_fault(text: str) -> FaultSpec:
@@ -66,8 +72,11 @@ def parse_fault(text: str) -> FaultSpec:
         at_s = float(when) if when else 0.0
         servo_id = int(parts[1]) if len(parts) > 1 else None
         count = probability = volts = None
+        lag_ms = 0.0
         if len(parts) > 2 and kind is FaultKind.VOLTAGE:
             volts = float(parts[2])
+        elif len(parts) > 2 and kind is FaultKind.LAG:
+            lag_ms = float(parts[2])
         elif len(parts) > 2:
             if "." in parts[2]:
                 probability = float(parts[2])
@@ -82,9 +91,11 @@ def parse_fault(text: str) -> FaultSpec:
         raise ValueError(f"bad fault {text!r}: {kind.value} needs a servo id")
     if probability is not None and not 0.0 <= probability <= 1.0:
         raise ValueError(f"bad fault {text!r}: probability must be within 0..1")
+    if kind is FaultKind.LAG and not 0.0 < lag_ms <= 10_000.0:
+        raise ValueError(f"bad fault {text!r}: lag needs a length in ms within 0..10000 (lag:ID:MS)")
     if kind in REPLY_FAULTS and count is None and probability is None:
         count = 1
-    return FaultSpec(kind, servo_id, count, probability, seed, at_s, volts)
+    return FaultSpec(kind, servo_id, count, probability, seed, at_s, volts, lag_ms)
 
 
 @dataclass
@@ -110,12 +121,17 @@ class ServoFaults:
 
     drop: ReplyFault | None = None
     corrupt: ReplyFault | None = None
+    lag: ReplyFault | None = None
+    lag_s: float = 0.0
+    """How long a lagged reply takes to reach the host (s)."""
     vanished: bool = False
 
     def set_reply_fault(self, spec: FaultSpec) -> None:
         fault = ReplyFault(spec.count, spec.probability or 0.0, random.Random(spec.seed))
         if spec.kind is FaultKind.DROP:
             self.drop = fault
+        elif spec.kind is FaultKind.LAG:
+            self.lag, self.lag_s = fault, spec.lag_ms / 1000.0
         else:
             self.corrupt = fault
 

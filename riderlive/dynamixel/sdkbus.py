@@ -17,6 +17,10 @@ the next request, so a late reply never corrupts the next one.
 The port is opened exclusively (``flock``): the tick and the guardian never write
 the bus at the same time, and a process that dies releases it with its file.
 While a reply is awaited, a pending e-stop request gives the wait up at once.
+
+In the tick, each wait for bytes is declared with its deadline before it begins and
+cleared when the transaction ends (``RigPort.io_wait``, ``devices/iowait.py``): the
+supervisor does not take a tick asleep in a bounded reply wait for a hung one.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import dynamixel_sdk as sdk
 import serial
 
 from riderlive.devices.budget import ReplyTimer
+from riderlive.devices.iowait import IoWait
 from riderlive.devices.latch import StopView
 from riderlive.devices.lifecycle import DeviceError, NoReply, PortBusy, PortLost, Rejected, StopRequested
 from riderlive.dynamixel.tables import ALERT_BIT, BROADCAST_ID, ItemSpec, StatusError
@@ -87,6 +92,8 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         self.stops: StopView | None = None
         self.aborted = False
         """The last wait was given up for an e-stop request."""
+        self.io_wait: IoWait | None = None
+        """Where each wait's deadline is declared (the tick's safety board; None: nowhere)."""
 
     def getCurrentTime(self) -> float:
         return time.perf_counter() * 1000.0
@@ -132,6 +139,13 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         queued = max(0.0, self.wire_free_at - self.packet_start_time)
         self.expected_ms = queued + self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms
         self.packet_timeout = self.timer.timeout_ms(self.expected_ms)
+        if self.io_wait is not None:
+            self.io_wait.until((self.packet_start_time + self.packet_timeout) / 1000.0)
+
+    def setPacketTimeoutMillis(self, msec: float) -> None:
+        super().setPacketTimeoutMillis(msec)
+        if self.io_wait is not None:
+            self.io_wait.until((self.packet_start_time + msec) / 1000.0)
 
     def replied(self) -> None:
         """A reply arrived: teach the timer how late it was."""
@@ -143,6 +157,8 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         corrupt the next one. Returns the bytes dropped."""
         start = last = self.getCurrentTime()
         dropped = 0
+        if self.io_wait is not None:
+            self.io_wait.until((start + max_ms) / 1000.0)
         while (now := self.getCurrentTime()) - last < quiet_ms and now - start < max_ms:
             waiting = self.ser.in_waiting
             if waiting:
@@ -206,6 +222,8 @@ class SdkBus:
             raise PortLost(f"{self.port_name}: {what} failed: {exc}") from exc
         finally:
             self.port.is_using = False
+            if self.port.io_wait is not None:
+                self.port.io_wait.done()
             if self.port.aborted:
                 self.port.aborted = False
                 raise StopRequested(f"{what}: given up for an e-stop")

@@ -150,6 +150,8 @@ class TickLink(TickMemory):
         if not self.board.guardian_busy:  # else the guardian's park progress (a successor of it goes on from there)
             self.board.forget_devices()
         self.board.tick_beat = 0.0
+        self.board.tick_io_until = 0.0  # the dead generation may have died inside a wait
+        self.board.tick_io_waited = 0.0
 
     def mark_down(self, reason: str) -> None:
         """No generation serves from now (a death, a hang): :meth:`status` says so."""

@@ -21,6 +21,7 @@ from typing import Any
 from riderlive.devices.board import SafetyBoard, guardian_watching
 from riderlive.devices.device import Device
 from riderlive.devices.guardians import handback_pending
+from riderlive.devices.iowait import BoardIoWait, DeclaresIoWaits
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.lifecycle import DeviceState, Refusal, Refused
 from riderlive.devices.plug import NotTunable
@@ -57,6 +58,10 @@ class TickDevices:
         """Who asked (``serve --arm``): arm each device once, when it first gets to disarmed."""
         self.devices = [Device(make_plug(spec), spec.period_s, latch) for spec in self.specs]
         self.stops = latch.view()
+        if board is not None:  # each reply wait declared on the board: not a hang (``devices/iowait.py``)
+            for device in self.devices:
+                if isinstance(device.plug, DeclaresIoWaits):
+                    device.plug.io_wait = BoardIoWait(board)
         self.statuses: list[DeviceStatus | None] = [None] * len(self.devices)
         self._auto_armed: set[str] = set()
         self.goal_written_at: float | None = None

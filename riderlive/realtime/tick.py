@@ -27,6 +27,7 @@ from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
 from riderlive.channels import RIDER_PART_NAMES as PART_NAMES
+from riderlive.devices import iowait
 from riderlive.devices.board import SafetyBoard
 from riderlive.devices.latch import StopLatch
 from riderlive.horse import ProceduralHorse
@@ -157,7 +158,7 @@ class TickLoop(TickControl):
         while self.running:
             woke = clock.wait_or_wake(self.wake_fds, None if self.devices is None else self.devices.stop_pending)
             if self.board is not None:
-                self.board.tick_beat = time.perf_counter()
+                iowait.beat(self.board, time.perf_counter())
             if woke is None:
                 self._between_deadlines()
                 continue

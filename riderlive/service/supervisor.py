@@ -11,7 +11,10 @@ The web process supervises the tick process it spawned:
   legitimate wait plus those periods (``DeviceSpec.longest_wait_s``). The age is first
   discounted by what the host, not the tick, explains (``service/stall.py``: the
   supervisor's own wake-up lateness, the tick's run-queue wait from ``/proc``, the
-  guardian's stalled heartbeat): a host stall is counted (``stalls``), never punished.
+  guardian's stalled heartbeat): a host stall is counted (``stalls``), never punished;
+  nor is the time the tick spent asleep in device waits it declared, up to each one's
+  deadline (``io_waits_excused``, ``devices/iowait.py``). A hang's log line and ``last_hang`` say what the tick's
+  threads were doing (state, kernel wait channel, CPU and run-queue time since the beat).
   A stopped tick (SIGSTOP) is not excused. A hung tick is killed (SIGKILL) before
   anything else touches its bus.
 - **starting**: a tick that has not beaten yet is never killed while it makes progress
@@ -107,10 +110,8 @@ class TickSupervisor:
         self.restarts = 0
         self.deaths = 0
         self.hangs = 0
-        self.stalls = 0
-        """Heartbeat gaps past the threshold that the host explained (not punished)."""
-        self.stall_excused_max = 0.0
-        """The largest such gap's excused part (s)."""
+        self.tally = stall.Tally()
+        """Gaps counted, not punished (host stalls, declared device waits); the last hang's detail."""
         self.last_exit: str | None = None
         self.last_outage: float | None = None
         """Seconds from the last failure to the next generation's first heartbeat."""
@@ -220,9 +221,11 @@ class TickSupervisor:
 
     def _check_tick(self, now: float, woke_late: float) -> None:
         """One look at the tick (``service/watch.py``): its first heartbeat, a hang, a stall (``service/stall.py``)."""
-        link, watch = self.link, self.watch
-        guardian_beat = link.board.guardian_beat if self.guardians.guardian is not None else 0.0
-        observation = watch.observe(now, woke_late, link.board.tick_beat, link.board.tick_pid, guardian_beat)
+        link, watch, board = self.link, self.watch, self.link.board
+        guardian_beat = board.guardian_beat if self.guardians.guardian is not None else 0.0
+        beat, pid = board.tick_beat, board.tick_pid
+        io = (board.tick_io_until, board.tick_io_since, board.tick_io_waited)
+        observation = watch.observe(now, woke_late, beat, pid, guardian_beat, io=io)
         if watch.beaten and self._first_beat is None:
             self._on_first_beat(now)
         finding = stall.classify(stall.Model(self.hang_threshold()), observation)
@@ -230,12 +233,10 @@ class TickSupervisor:
             self._on_exit()  # killed or exiting, its sentinel not readable yet: a death, not a hang
         elif finding.verdict in (stall.Verdict.HUNG, stall.Verdict.NEVER_STARTED):
             self.hangs += 1
-            self._begin_recovery(finding.why)
-        elif finding.verdict is stall.Verdict.STALLED and not watch.stalled:
-            watch.stalled = True  # one count per gap
-            self.stalls += 1
-            self.stall_excused_max = max(self.stall_excused_max, finding.excused)
-            log.info("the tick is late, not hung: %s", finding.why)
+            self.tally.last_hang = stall.hang_detail(finding, observation, pid)
+            self._begin_recovery(self.tally.last_hang)
+        elif (line := self.tally.add(finding, beat, observation.beat_age or 0.0)) is not None:
+            log.warning(line)
 
     def _on_first_beat(self, now: float) -> None:
         """The serving generation has beaten: up, and a new spare warms in the background."""
@@ -380,8 +381,7 @@ class TickSupervisor:
             "restarts": self.restarts,
             "deaths": self.deaths,
             "hangs": self.hangs,
-            "stalls": self.stalls,
-            "stall_excused_max": self.stall_excused_max,
+            **self.tally.snapshot(),
             "takeovers": self.link.takeovers,
             "last_outage": self.last_outage,
             "hang_threshold": self.hang_threshold(),

@@ -39,19 +39,27 @@ class BeatWatch:
         self._at_beat: stall.Sched | None = None
         self._progress: tuple[float, float, float] = (started_at, -1.0, -1.0)
         """Starting tick: (when it last made progress, its CPU s, its wait s then)."""
-        self.stalled = False
-        """The present gap has been counted as a stall (one count per gap)."""
 
-    def observe(self, now: float, woke_late: float, beat: float, pid: int, guardian_beat: float) -> stall.Observation:
+    def observe(
+        self,
+        now: float,
+        woke_late: float,
+        beat: float,
+        pid: int,
+        guardian_beat: float,
+        *,
+        io: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> stall.Observation:
         """One look at ``now``: ``beat`` the board's heartbeat (0: none yet), ``pid`` the tick's,
-        ``guardian_beat`` the guardian's (0: no guardian). Sets :attr:`beaten` at the first beat."""
+        ``guardian_beat`` the guardian's (0: no guardian), ``io`` the tick's declared device waits
+        (the ongoing one's deadline, 0: none, and start; the seconds of those ended since the beat).
+        Sets :attr:`beaten` at the first beat."""
         sched = stall.read_sched(pid) if pid else None
         age: float | None = None
         if beat:
             age = max(0.0, now - beat)
             if beat != self._beat_value:
                 self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
-                self.stalled = False
                 if now - self._steal_base[0] > STEAL_BASE_S:
                     self._steal_base = (now, self._host.steal_s())
             self.beaten = True
@@ -79,4 +87,7 @@ class BeatWatch:
             others_stall=max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0,
             stolen=max(0.0, stolen),
             progress_age=now - self._progress[0],
+            io_until=io[0],
+            io_since=io[1],
+            io_waited=io[2] if beat else 0.0,
         )

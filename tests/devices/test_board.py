@@ -28,10 +28,14 @@ OLD_HEADER = (
     "guardian_standby",
     "shutdown",
     "handback_from",
+    "tick_io_until",
+    "tick_io_since",
+    "tick_io_waited",
     *(f"guardian_d{d}" for d in range(MAX_DEVICES)),
 )
 """The board's header (the segment every process of a service shares): the slots before the
-typed slots, with the hand-back's two (``guardian_taking``, ``handback_from``) since."""
+typed slots, with the hand-back's two (``guardian_taking``, ``handback_from``) since, and the
+tick's declared device waits (``devices/iowait.py``) after them."""
 
 
 @pytest.fixture

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import random
 import termios
+import time
 from collections.abc import Callable
 
 import pytest
@@ -52,6 +53,21 @@ def test_corrupt_replies_fail_the_crc(bus: EmulatedBus, sdk: SdkLink) -> None:
     assert reader.fastSyncRead() == COMM_RX_CORRUPT
     assert reader.fastSyncRead() == COMM_SUCCESS
     assert bus.stats.corrupted_replies == 2
+
+
+def test_a_lagged_reply_reaches_the_host_late_and_whole(bus: EmulatedBus, sdk: SdkLink) -> None:
+    """``lag:2:80``: the next reply of servo 2 comes a byte at a time over 80 ms; a host
+    that waits long enough gets it intact."""
+    bus.apply(parse_fault("lag:2:80"))
+    start = time.perf_counter()
+    _, result, _ = sdk.ph.ping(sdk.port, 2)
+    took = time.perf_counter() - start
+    assert result == COMM_SUCCESS and took >= 0.075, took
+    assert bus.stats.lagged_replies == 1
+    assert sdk.ph.ping(sdk.port, 2)[1] == COMM_SUCCESS, "one reply only"
+    with pytest.raises(ValueError, match="lag needs a length"):
+        parse_fault("lag:2")
+    assert parse_fault("lag:3:12.5") == FaultSpec(FaultKind.LAG, 3, 1, None, 0, 0.0, None, 12.5)
 
 
 def test_clear_removes_reply_faults(bus: EmulatedBus, sdk: SdkLink) -> None:

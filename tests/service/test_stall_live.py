@@ -1,0 +1,125 @@
+"""A reply the host carries late is not a hung tick: the real server at 120 Hz, the real
+dynamixel-sdk on the emulated bus (a pty served from this process), the guardian.
+
+The emulator's ``lag`` fault hands one servo's reply to the host over 80 ms, a byte at a
+time (the serial path of a starved host: docs/hardware.md, "A busy host"); meanwhile the
+tick's read times out, the next tick drains the late bytes and reads again: bounded
+device waits, each declared on the safety board (``devices/iowait.py``), with the hang
+threshold at its tightest (``tick.hang_ticks = 3``: 54.8 ms here). No hang, no failover,
+the rig still running, each late reply counted by the device layer (``read_failures``).
+
+Not shown here: a gap *past* the threshold made of such waits (the soak's 62-66 ms ones).
+A reply of a few bytes dribbled over 80 ms leaves the drain quiet long enough to end
+early, so the gaps stayed under the threshold (``io_waits_excused`` 0 in 3 runs); the
+discount of longer gaps is tested on the soak's own figures in ``test_stall_io.py``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from riderlive.dynamixel.emulator import EmulatedBus
+from riderlive.dynamixel.emulator_faults import parse_fault
+from riderlive.dynamixel.rig import RigConfig, load_rig
+from tests.dynamixel.rig_harness import servo_setups
+from tests.service.live_server import ROOT, LiveServer
+from tests.waiting import wait_until
+
+TOKEN = "stall-token"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+LAGS = 6
+"""Lagged replies injected, one at a time."""
+
+
+def rig_file(tmp_path: Path) -> Path:
+    """bench3 with budgets that leave the servos' judgement out of it (a 2 s reply budget, a
+    600 ms Bus Watchdog) and long bounded waits: an adapter latency of 3 ms, a reply allowance
+    of 25 ms (as a loaded host teaches the reply timer)."""
+    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
+    for key, value in (
+        ("reply_budget_s", "2.0"),
+        ("bus_watchdog_ms", "600"),
+        ("soft_start_s", "0.3"),
+        ("latency_timer_ms", "3.0"),
+    ):
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 25.0\n", 1)
+    path = tmp_path / "bench3.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture
+def lagging_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
+    path = rig_file(tmp_path)
+    rig = load_rig(path)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
+    emu = EmulatedBus(servo_setups(rig), baud=rig.bus.baud)
+    emu.start()
+    assert emu._thread is not None and emu._thread.native_id is not None
+    with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
+        os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
+    config = (
+        f"[tick]\nrate = 120.0\nhang_ticks = 3.0\nspare_nice = 0\n"
+        f'[security]\ntoken = "{TOKEN}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
+    )
+    live = LiveServer(config, tmp_path, token=TOKEN)
+    try:
+        yield live, emu, rig
+    finally:
+        live.stop()
+        emu.stop()
+        print("".join(live.log[-60:]))  # shown when the test fails
+        sys.setswitchinterval(switch)
+        assert "Traceback" not in "".join(live.log), "".join(live.log)
+
+
+def devices(live: LiveServer) -> dict[str, Any]:
+    result: dict[str, Any] = live.get("/api/devices", headers=AUTH).json()
+    return result
+
+
+@pytest.mark.timeout(1800)
+def test_a_reply_carried_late_is_a_counted_device_wait_not_a_hang(
+    lagging_rig: tuple[LiveServer, EmulatedBus, RigConfig],
+) -> None:
+    live, emu, _ = lagging_rig
+    rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
+    wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+    assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
+    wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
+    # The realtime hang threshold needs a warm spare (without one a failover is a cold start).
+    wait_until(lambda: devices(live)["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
+    before = devices(live)
+    threshold = before["supervision"]["hang_threshold"]
+    assert threshold < 0.080, f"the realtime threshold at 120 Hz with hang_ticks 3: {threshold}"
+    for n in range(1, LAGS + 1):
+        emu.apply(parse_fault("lag:2:80"))
+        wait_until(lambda n=n: emu.stats.lagged_replies >= n, 10.0, "the lagged reply was not asked for")
+        reads = devices(live)["devices"][0]["counters"].get("reads", 0)
+        wait_until(
+            lambda r=reads: devices(live)["devices"][0]["counters"].get("reads", 0) >= r + 3,
+            10.0,
+            lambda: (devices(live)["devices"][0], emu.stats),
+        )
+    after = devices(live)
+    sup, was = after["supervision"], before["supervision"]
+    keys = ("hangs", "restarts", "takeovers", "stalls", "io_waits_excused", "io_wait_longest", "hang_threshold")
+    print({k: sup[k] for k in keys}, after["devices"][0]["counters"], emu.stats)
+    assert sup["hangs"] == was["hangs"] and sup["restarts"] == was["restarts"], sup["last_hang"]
+    assert sup["takeovers"] == was["takeovers"] and sup["generation"] == was["generation"]
+    assert sup["io_waits_excused"] >= was["io_waits_excused"] and sup["io_wait_longest"] >= 0.0
+    assert emu.stats.lagged_replies == LAGS
+    shown = after["devices"][0]
+    assert shown["state"] == "running", shown
+    failed = shown["counters"].get("read_failures", 0) - before["devices"][0]["counters"].get("read_failures", 0)
+    assert failed >= LAGS, "each lagged reply cost its read (the device layer counts it)"
