@@ -11,13 +11,10 @@ and ends ``disarmed``, never re-armed.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
 import signal
-import sys
 import time
-from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -25,11 +22,12 @@ from typing import Any
 import pytest
 
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.rig import RigConfig, load_rig
-from tests.dynamixel.rig_harness import is_torque_off_write, servo_setups
+from riderlive.dynamixel.rig import RigConfig
+from tests.dynamixel.rig_harness import is_torque_off_write
 from tests.dynamixel.test_rig_drive import goal_writes, parked_since
-from tests.service.live_server import ROOT, LiveServer
+from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
+from tests.service.rig_server import bench3_file, rig_server
 from tests.waiting import wait_until
 
 TOKEN = "handback-token"
@@ -40,18 +38,8 @@ PARK_S = 2.0
 
 def rig_file(tmp_path: Path) -> Path:
     """bench3 with a short soft start, its 2 s park and generous bus budgets (a loaded host)."""
-    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
-    for key, value in (
-        ("reply_budget_s", "0.3"),
-        ("bus_watchdog_ms", "600"),
-        ("soft_start_s", "0.3"),
-        ("park_s", str(PARK_S)),
-    ):
-        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
-    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 40.0\n", 1)
-    path = tmp_path / "bench3.toml"
-    path.write_text(text)
-    return path
+    settings = {"reply_budget_s": "0.3", "bus_watchdog_ms": "600", "soft_start_s": "0.3", "park_s": str(PARK_S)}
+    return bench3_file(tmp_path, settings, timeout_margin_ms=40.0)
 
 
 def engine_offset(live: LiveServer) -> float:
@@ -68,29 +56,10 @@ def engine_offset(live: LiveServer) -> float:
 
 @pytest.fixture
 def armed_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
-    path = rig_file(tmp_path)
-    rig = load_rig(path)
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
-    emu = EmulatedBus(servo_setups(rig), baud=rig.bus.baud)
-    emu.arrivals = deque(maxlen=200_000)  # every packet of the run, timed
-    emu.start()
-    assert emu._thread is not None and emu._thread.native_id is not None
-    with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
-        os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
-    config = (  # the tick at its documented real-time priority (a saturated host starves it otherwise)
-        f"[tick]\nrate = 100.0\nspare_nice = 0\n"
-        f'[security]\ntoken = "{TOKEN}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
-    )
-    live = LiveServer(config, tmp_path, token=TOKEN)
-    try:
-        yield live, emu, rig
-    finally:
-        live.stop()
-        emu.stop()
-        print("".join(live.log[-80:]))  # shown when the test fails
-        sys.setswitchinterval(switch)
-        assert "Traceback" not in "".join(live.log), "".join(live.log)
+    # the tick at its documented real-time priority (a saturated host starves it otherwise)
+    tick = "rate = 100.0\nspare_nice = 0\n"
+    with rig_server(tmp_path, rig_file(tmp_path), tick, TOKEN, record_arrivals=True, log_lines=80) as served:
+        yield served
 
 
 def devices(live: LiveServer) -> dict[str, Any]:

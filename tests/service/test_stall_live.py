@@ -16,10 +16,6 @@ discount of longer gaps is tested on the soak's own figures in ``test_stall_io.p
 
 from __future__ import annotations
 
-import contextlib
-import os
-import re
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -28,9 +24,9 @@ import pytest
 
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.emulator_faults import parse_fault
-from riderlive.dynamixel.rig import RigConfig, load_rig
-from tests.dynamixel.rig_harness import servo_setups
-from tests.service.live_server import ROOT, LiveServer
+from riderlive.dynamixel.rig import RigConfig
+from tests.service.live_server import LiveServer
+from tests.service.rig_server import bench3_file, rig_server
 from tests.waiting import wait_until
 
 TOKEN = "stall-token"
@@ -43,44 +39,14 @@ def rig_file(tmp_path: Path) -> Path:
     """bench3 with budgets that leave the servos' judgement out of it (a 2 s reply budget, a
     600 ms Bus Watchdog) and long bounded waits: an adapter latency of 3 ms, a reply allowance
     of 25 ms (as a loaded host teaches the reply timer)."""
-    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
-    for key, value in (
-        ("reply_budget_s", "2.0"),
-        ("bus_watchdog_ms", "600"),
-        ("soft_start_s", "0.3"),
-        ("latency_timer_ms", "3.0"),
-    ):
-        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
-    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 25.0\n", 1)
-    path = tmp_path / "bench3.toml"
-    path.write_text(text)
-    return path
+    settings = {"reply_budget_s": "2.0", "bus_watchdog_ms": "600", "soft_start_s": "0.3", "latency_timer_ms": "3.0"}
+    return bench3_file(tmp_path, settings, timeout_margin_ms=25.0)
 
 
 @pytest.fixture
 def lagging_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
-    path = rig_file(tmp_path)
-    rig = load_rig(path)
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
-    emu = EmulatedBus(servo_setups(rig), baud=rig.bus.baud)
-    emu.start()
-    assert emu._thread is not None and emu._thread.native_id is not None
-    with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
-        os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
-    config = (
-        f"[tick]\nrate = 120.0\nhang_ticks = 3.0\nspare_nice = 0\n"
-        f'[security]\ntoken = "{TOKEN}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
-    )
-    live = LiveServer(config, tmp_path, token=TOKEN)
-    try:
-        yield live, emu, rig
-    finally:
-        live.stop()
-        emu.stop()
-        print("".join(live.log[-60:]))  # shown when the test fails
-        sys.setswitchinterval(switch)
-        assert "Traceback" not in "".join(live.log), "".join(live.log)
+    with rig_server(tmp_path, rig_file(tmp_path), "rate = 120.0\nhang_ticks = 3.0\nspare_nice = 0\n", TOKEN) as served:
+        yield served
 
 
 def devices(live: LiveServer) -> dict[str, Any]:

@@ -1,0 +1,63 @@
+"""The real server driving bench3 on the emulated bus (a pty served from this process): the
+shared set-up of the live rig tests (``test_handback_live``, ``test_stall_live``).
+
+:func:`bench3_file` writes bench3 with the test's own budgets; :func:`rig_server` starts the
+emulator (its thread at SCHED_FIFO 30 where allowed: hardware is not starved by the host's
+load) and ``riderlive serve`` with the rig, yields both, and on the way out stops them, prints
+the server's last log lines (shown when the test fails) and asserts it logged no traceback.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+from collections import deque
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+from riderlive.dynamixel.emulator import EmulatedBus
+from riderlive.dynamixel.rig import RigConfig, load_rig
+from tests.dynamixel.rig_harness import servo_setups
+from tests.service.live_server import ROOT, LiveServer
+
+
+def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: float) -> Path:
+    """``config/rigs/bench3.toml`` with each ``key = value`` of ``settings`` replaced and the
+    bus's ``timeout_margin_ms`` set, written to ``tmp_path``."""
+    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
+    for key, value in settings.items():
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    text = text.replace("[bus]\n", f"[bus]\ntimeout_margin_ms = {timeout_margin_ms}\n", 1)
+    path = tmp_path / "bench3.toml"
+    path.write_text(text)
+    return path
+
+
+@contextlib.contextmanager
+def rig_server(
+    tmp_path: Path, path: Path, tick: str, token: str, *, record_arrivals: bool = False, log_lines: int = 60
+) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
+    """The server with the rig of ``path`` on a fresh emulator; ``tick`` is the ``[tick]``
+    table's body (TOML lines); ``record_arrivals`` keeps every packet of the run, timed."""
+    rig = load_rig(path)
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
+    emu = EmulatedBus(servo_setups(rig), baud=rig.bus.baud)
+    if record_arrivals:
+        emu.arrivals = deque(maxlen=200_000)
+    emu.start()
+    assert emu._thread is not None and emu._thread.native_id is not None
+    with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
+        os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
+    config = f'[tick]\n{tick}[security]\ntoken = "{token}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
+    live = LiveServer(config, tmp_path, token=token)
+    try:
+        yield live, emu, rig
+    finally:
+        live.stop()
+        emu.stop()
+        print("".join(live.log[-log_lines:]))  # shown when the test fails
+        sys.setswitchinterval(switch)
+        assert "Traceback" not in "".join(live.log), "".join(live.log)
