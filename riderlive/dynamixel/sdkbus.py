@@ -18,9 +18,8 @@ The port is opened exclusively (``flock``): the tick and the guardian never writ
 the bus at the same time, and a process that dies releases it with its file.
 While a reply is awaited, a pending e-stop request gives the wait up at once.
 
-In the tick, each wait for bytes is declared with its deadline before it begins and
-cleared when the transaction ends (``RigPort.io_wait``, ``devices/iowait.py``): the
-supervisor does not take a tick asleep in a bounded reply wait for a hung one.
+In the tick, each wait for bytes is declared with its deadline, cleared when the transaction
+ends (``RigPort.io_wait``, ``devices/iowait.py``): a bounded reply wait is not a hang.
 """
 
 from __future__ import annotations
@@ -139,13 +138,15 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         queued = max(0.0, self.wire_free_at - self.packet_start_time)
         self.expected_ms = queued + self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms
         self.packet_timeout = self.timer.timeout_ms(self.expected_ms)
-        if self.io_wait is not None:
-            self.io_wait.until((self.packet_start_time + self.packet_timeout) / 1000.0)
+        self._declare_wait(self.packet_start_time + self.packet_timeout)
 
     def setPacketTimeoutMillis(self, msec: float) -> None:
         super().setPacketTimeoutMillis(msec)
+        self._declare_wait(self.packet_start_time + msec)
+
+    def _declare_wait(self, deadline_ms: float) -> None:  # a wait for bytes begins (ms, getCurrentTime's)
         if self.io_wait is not None:
-            self.io_wait.until((self.packet_start_time + msec) / 1000.0)
+            self.io_wait.until(deadline_ms / 1000.0)
 
     def replied(self) -> None:
         """A reply arrived: teach the timer how late it was."""
@@ -157,8 +158,7 @@ class RigPort(sdk.PortHandler):  # type: ignore[misc]
         corrupt the next one. Returns the bytes dropped."""
         start = last = self.getCurrentTime()
         dropped = 0
-        if self.io_wait is not None:
-            self.io_wait.until((start + max_ms) / 1000.0)
+        self._declare_wait(start + max_ms)
         while (now := self.getCurrentTime()) - last < quiet_ms and now - start < max_ms:
             waiting = self.ser.in_waiting
             if waiting:
