@@ -23,7 +23,7 @@ from riderlive.realtime.saddle_input import (
 from riderlive.rules import RiderModel
 from riderlive.saddle import Model, SaddlePoint, State, estimate, horse_frame, saddle_from_horse, step
 from riderlive.saddle.rebuild import rebuild
-from riderlive.saddle.synthetic import record
+from riderlive.saddle.synthetic import Recording, record
 
 LENGTHS = [i for i, c in enumerate(HORSE) if c.kind is Kind.TRANSLATION]
 
@@ -299,17 +299,23 @@ def test_a_delivery_stall_taken_for_a_clock_jump_keeps_the_estimators_lock() -> 
     assert counters["locks"] == 1 and counters["losses"] == 0, counters
 
 
+def ended_trot(seconds: float) -> tuple[SaddleInput, Recording, float]:
+    """An input fed a clean 200 Hz trot of ``seconds`` (each sample 2 ms after its time), then
+    ``clear``-ed as a new stream does; with the recording and its last sample's time."""
+    trot = record(gait_script("trot", seconds, seed=9), 200.0, seed=9)
+    live = make_saddle_input(25.0, SaddlePoint())
+    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
+        live.push(t, t + 0.002, row)
+    live.clear()
+    return live, trot, float(trot.saddle.t[-1])
+
+
 @pytest.mark.parametrize(("step", "continued"), [(0.005, 1), (0.19, 1), (0.21, 0), (-3.0, 0), (30.0, 0)])
 def test_only_a_new_stream_that_continues_the_samples_keeps_the_estimator(step: float, continued: int) -> None:
     """After a new stream (``clear``), the estimator is kept only when the first sample follows
     the newest within ``Model.max_interval`` (0.2 s) of the producer's time: a clock set back or
     forward, a restarted producer, starts afresh (one sample stepped, searching)."""
-    trot = record(gait_script("trot", 4.0, seed=9), 200.0, seed=9)
-    live = make_saddle_input(25.0, SaddlePoint())
-    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
-        live.push(t, t + 0.002, row)
-    last = float(trot.saddle.t[-1])
-    live.clear()
+    live, trot, last = ended_trot(4.0)
     assert live.push(last + step, last + 1.0, trot.saddle.values[0].tolist())
     assert live.continued == continued
     assert live.state.samples == (len(trot.saddle.t) + 1 if continued else 1)
@@ -319,12 +325,7 @@ def test_only_a_new_stream_that_continues_the_samples_keeps_the_estimator(step: 
 def test_a_stream_that_ended_long_ago_is_not_continued() -> None:
     """The kept estimator is for a stall, not for a producer that comes back after
     ``LATE_MEMORY_S`` (10 s) of our time, even on a continuous clock."""
-    trot = record(gait_script("trot", 3.0, seed=9), 200.0, seed=9)
-    live = make_saddle_input(25.0, SaddlePoint())
-    for t, row in zip(trot.saddle.t.tolist(), trot.saddle.values.tolist(), strict=True):
-        live.push(t, t + 0.002, row)
-    last = float(trot.saddle.t[-1])
-    live.clear()
+    live, trot, last = ended_trot(3.0)
     assert live.push(last + 0.005, last + 0.002 + LATE_MEMORY_S + 0.01, trot.saddle.values[0].tolist())
     assert live.continued == 0 and live.state.samples == 1
 
