@@ -97,6 +97,19 @@ class LiveServer:
             self.stop()
             raise RuntimeError("the tick never started:\n" + "".join(self.log)) from None
 
+    def wait_guardian(self, timeout: float = 60.0) -> None:
+        """Until the devices' guardian reports alive: an arm before that is refused (503,
+        ``no_guardian``), as it should be. The guardian starts beside the tick and on a
+        loaded host reports alive seconds after the first ticks."""
+
+        def alive() -> bool:
+            try:
+                return bool(self.get("/api/devices", headers=self.auth).json()["supervision"]["guardian"]["alive"])
+            except (httpx.HTTPError, ValueError, KeyError, TypeError):
+                return False
+
+        wait_until(alive, timeout, lambda: "".join(self.log[-30:]), poll=0.05)
+
     def _read(self) -> None:
         assert self.proc.stderr is not None
         for line in self.proc.stderr:

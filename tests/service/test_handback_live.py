@@ -75,6 +75,7 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
     rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
     for _ in range(3):  # a loaded host may fail the tick over by itself (a hang): then arm again
         wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+        live.wait_guardian()
         assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
         wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
         # A spare's warm-up (imports, compiled kernels) took minutes at load 19 on the 2 shared cores.

@@ -67,6 +67,7 @@ def test_ingest_to_send_and_to_wire_are_observed_once_per_input(rig_server: Live
     wait_state(live, "disarmed")
     idle = latency(live)["histograms"]
     assert idle["ingest_to_wire"]["total"]["count"] == 0  # disarmed: no goal is written
+    live.wait_guardian()
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
     wait_state(live, "running")
     sent = stream(live, 1.5)

@@ -96,6 +96,7 @@ def test_the_service_drives_the_platform_and_the_guardian_parks_it(served: tuple
     assert tuned.status_code == 200, tuned.text
     wait_for(lambda: platform(live)["platform"]["cueing"]["intensity"] == 60.0, 2.0)
 
+    live.wait_guardian()
     armed = post(live, "/api/arm", {"device": NAME, "by": "test"})
     assert armed.status_code == 200 and armed.json()["states"] == {NAME: "homing"}, armed.text
     wait_state(live, "running", 20.0)
@@ -149,6 +150,7 @@ def test_the_platform_follows_the_configured_saddle_point_in_metres(served: tupl
     follower.ws.send(json.dumps({"type": "subscribe", "saddle": True}))
     try:
         wait_state(live, "disarmed")
+        live.wait_guardian()
         armed = post(live, "/api/arm", {"device": NAME, "by": "test"})
         assert armed.status_code == 200, armed.text
         wait_state(live, "running", 20.0)

@@ -108,6 +108,7 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     assert post(live, "/api/arm", {}).status_code == 422  # the name is required
     assert rig(live)["state"] == "disarmed"
 
+    live.wait_guardian()
     armed = post(live, "/api/arm", {"device": "bench3", "by": "test"})
     assert armed.status_code == 200, armed.text
     assert armed.json()["states"] == {"bench3": "soft_start"}
@@ -168,6 +169,7 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     live = rig_server
     wait_state(live, "disarmed")
     assert live.get("/readyz").status_code == 200 and live.get("/healthz").status_code == 200
+    live.wait_guardian()
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
     wait_state(live, "running")
 
@@ -193,6 +195,7 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     assert "category 1 stop" in log and "stopped, outputs off (read back)" in log
 
     # frozen: SIGSTOP; the supervisor kills it (hang) and the guardian parks the rig
+    live.wait_guardian()
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
     wait_state(live, "running")
     wait_ticks(live, 20)  # most likely still in the new tick's warm-up: a moving rig gets no 1 s grace

@@ -61,6 +61,7 @@ def test_a_reply_carried_late_is_a_counted_device_wait_not_a_hang(
     live, emu, _ = lagging_rig
     rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
     wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+    live.wait_guardian()
     assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
     wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
     # The realtime hang threshold needs a warm spare (without one a failover is a cold start).
