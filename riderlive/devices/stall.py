@@ -132,15 +132,28 @@ class HostClock:
 
     def steal_s(self) -> tuple[float, ...]:
         """Each CPU's cumulative steal time (the 8th value of its ``cpuN`` line)."""
+        return tuple(steal for _, steal in self.cpu_seconds())
+
+    def cpu_seconds(self) -> tuple[tuple[float, float], ...]:
+        """Each CPU's cumulative (accounted, steal) seconds (:func:`parse_cpu_seconds`; () without /proc)."""
         try:
             text = self.stat.read_text()
         except OSError:
             return ()
-        return parse_steal(text, self.tick_s)
+        return parse_cpu_seconds(text, self.tick_s)
 
 
 def parse_steal(text: str, tick_s: float) -> tuple[float, ...]:
     """Steal seconds of each ``cpuN`` line of a ``/proc/stat`` text (not the ``cpu`` total)."""
+    return tuple(steal for _, steal in parse_cpu_seconds(text, tick_s))
+
+
+def parse_cpu_seconds(text: str, tick_s: float) -> tuple[tuple[float, float], ...]:
+    """Each ``cpuN`` line's (accounted, steal) seconds: ``accounted`` is the guest's own time
+    (user, nice, system, idle, iowait, irq, softirq). A busy CPU accounts its time at each
+    scheduler tick and an idle one at each read, so ``accounted`` follows the wall clock,
+    except on a vCPU the hypervisor took: nothing there runs, not even its tick, so its
+    ``accounted`` stands still, and its steal is added only once it runs again."""
     out = []
     for line in text.splitlines():
         if not line.startswith("cpu"):
@@ -148,7 +161,7 @@ def parse_steal(text: str, tick_s: float) -> tuple[float, ...]:
         fields = line.split()
         if fields[0] == "cpu" or len(fields) < 9:
             continue
-        out.append(int(fields[8]) * tick_s)
+        out.append((sum(int(f) for f in fields[1:8]) * tick_s, int(fields[8]) * tick_s))
     return tuple(out)
 
 

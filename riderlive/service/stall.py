@@ -14,8 +14,13 @@ the :class:`Model`'s thresholds and returns a :class:`Verdict`:
   added): the supervisor's own wake-up lateness (it saw the age late), the tick's
   run-queue wait since its last beat (``/proc/<pid>/schedstat``: runnable but not run),
   the stall of another process's heartbeat (the guardian's on the safety board) over the
-  same time, and the largest one-CPU steal time (a 2-vCPU guest's hypervisor takes a
-  whole vCPU for ~100 ms: ``riderlive.devices.stall``, whose reading is used). What is
+  same time, the largest one-CPU steal time (a 2-vCPU guest's hypervisor takes a
+  whole vCPU for ~100 ms: ``riderlive.devices.stall``, whose reading is used), and the
+  time the tick's own CPU stood still: the guest adds steal only once the vCPU runs
+  again, so during such a stall the steal reads 0, but the vCPU's accounted time
+  (``/proc/stat``) stops; a tick asleep there is not woken (its timer is that CPU's) and
+  one running there is not run (measured: 107-116 ms of standing still seen from the
+  other vCPU, the 100 ms of steal added after; docs/hardware.md "A busy host"). What is
   left is measured against the threshold.
 - **stopped** (``T`` in ``/proc/<pid>/stat``, a SIGSTOP): nothing excuses it but the
   supervisor's own lateness.
@@ -93,6 +98,8 @@ class Sched:
     milliseconds later for a large process on a busy host."""
     state: str = ""
     """The main thread's state letter (``R`` running, ``S`` asleep, ``D`` in uninterruptible I/O...)."""
+    processor: int = -1
+    """The CPU the main thread last ran on (``/proc/<pid>/stat`` field 39; -1: unknown)."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +138,9 @@ class Observation:
     stolen: float = 0.0
     """The largest one-CPU steal time since about the last beat (s, ``devices/stall.py``'s
     reading of ``/proc/stat``): the hypervisor took the vCPU, nothing in the guest ran."""
+    frozen: float = 0.0
+    """Seconds since about the last beat that the tick's CPU accounted no time at all (its
+    vCPU taken: ``service/watch.py`` reads it from ``/proc/stat``, less its resolution)."""
     progress_age: float = 0.0
     """Starting only: seconds since the tick's CPU time or run-queue wait last grew."""
     io_until: float = 0.0
@@ -176,7 +186,7 @@ def classify(model: Model, seen: Observation) -> Finding:
         starved = max(0.0, seen.sched.wait - seen.at_beat.wait)
         if seen.sched.state == "R" and ran < 0.1 * age:  # runnable, not run: schedstat counts it later
             starved = max(starved, age - ran)
-    others = 0.0 if stopped else max(0.0, seen.others_stall, seen.stolen)
+    others = 0.0 if stopped else max(0.0, seen.others_stall, seen.stolen, seen.frozen)
     excused = min(max(seen.woke_late, starved, others), age)
     left = age - excused
     io = 0.0 if stopped else io_excuse(model, seen)
@@ -224,7 +234,8 @@ def read_sched(pid: int) -> Sched | None:
     state, flags = fields[0], int(fields[6])
     process_cpu = (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS
     stopped, exiting = state in (b"T", b"t"), bool(flags & PF_EXITING)
-    return Sched(int(cpu_ns) / 1e9, int(wait_ns) / 1e9, stopped, process_cpu, exiting, state.decode())
+    processor = int(fields[36]) if len(fields) > 36 else -1
+    return Sched(int(cpu_ns) / 1e9, int(wait_ns) / 1e9, stopped, process_cpu, exiting, state.decode(), processor)
 
 
 @dataclass(frozen=True)
@@ -350,4 +361,7 @@ def hang_detail(finding: Finding, seen: Observation, pid: int) -> str:
     if seen.io_until:
         since, until = (seen.io_since - seen.now) * 1000, (seen.io_until - seen.now) * 1000
         text += f"; in a device wait declared from {since:+.1f} ms until {until:+.1f} ms"
+    if seen.sched is not None and seen.sched.processor >= 0:
+        text += f"; on CPU {seen.sched.processor}, which stood still {seen.frozen * 1000:.0f} ms"
+        text += f" (steal {seen.stolen * 1000:.0f} ms)"
     return text

@@ -12,8 +12,12 @@ from riderlive.devices.stall import HostClock
 from riderlive.service import stall
 
 STEAL_BASE_S = 0.02
-"""The steal baseline is taken at a new beat at most this often (it may then count up to this
-much steal from before the beat: lenient by that, at ~50 us a read)."""
+"""The CPUs' baseline (steal, accounted time) is taken at a new beat at most this often (it may
+then count up to this much steal from before the beat: lenient by that, at ~50 us a read)."""
+FROZEN_SLACK_S = 0.03
+"""What a CPU's accounted time may fall short of the wall clock without its vCPU having been
+taken: ``/proc/stat`` counts in 10 ms units, each field rounded down on its own (the few a
+busy CPU moves: user, system, softirq)."""
 
 
 class BeatWatch:
@@ -25,8 +29,8 @@ class BeatWatch:
         self.beats_unread = 0
         """Heartbeat reads of 0 after the generation's first beat (should stay 0; see :meth:`observe`)."""
         self._host = HostClock()
-        self._steal_base: tuple[float, tuple[float, ...]] = (0.0, ())
-        """When and what the CPUs' steal was, taken at most every ``STEAL_BASE_S`` at a new beat."""
+        self._cpu_base: tuple[float, tuple[tuple[float, float], ...]] = (0.0, ())
+        """When, and each CPU's (accounted, steal) seconds then, taken at most every ``STEAL_BASE_S`` at a new beat."""
         self.reset(started_at)
 
     def reset(self, started_at: float) -> None:
@@ -60,8 +64,8 @@ class BeatWatch:
             age = max(0.0, now - beat)
             if beat != self._beat_value:
                 self._beat_value, self._last_beat, self._at_beat = beat, beat, sched
-                if now - self._steal_base[0] > STEAL_BASE_S:
-                    self._steal_base = (now, self._host.steal_s())
+                if now - self._cpu_base[0] > STEAL_BASE_S:
+                    self._cpu_base = (now, self._host.cpu_seconds())
             self.beaten = True
         elif self.beaten:
             # A generation that has beaten never reads "no beat" again (only a promotion clears
@@ -73,10 +77,9 @@ class BeatWatch:
             _, cpu, wait = self._progress
             if sched.process_cpu > cpu or sched.wait > wait:
                 self._progress = (now, sched.process_cpu, sched.wait)
-        stolen = 0.0
+        stolen = frozen = 0.0
         if age is not None and age > self.period * 2:  # only a late beat pays the read (~50 us)
-            base = self._steal_base[1]
-            stolen = max((b - a for a, b in zip(base, self._host.steal_s(), strict=False)), default=0.0)
+            stolen, frozen = cpu_stalls(self._cpu_base, (now, self._host.cpu_seconds()), sched)
         return stall.Observation(
             now=now,
             woke_late=woke_late,
@@ -86,8 +89,29 @@ class BeatWatch:
             sched=sched,
             others_stall=max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0,
             stolen=max(0.0, stolen),
+            frozen=frozen,
             progress_age=now - self._progress[0],
             io_until=io[0],
             io_since=io[1],
             io_waited=io[2] if beat else 0.0,
         )
+
+
+CpuReading = tuple[float, tuple[tuple[float, float], ...]]
+"""When (s) and each CPU's (accounted, steal) seconds (``devices.stall.HostClock.cpu_seconds``)."""
+
+
+def cpu_stalls(base: CpuReading, now: CpuReading, sched: stall.Sched | None) -> tuple[float, float]:
+    """(the largest one-CPU steal, the time the tick's CPU stood still) between two readings (s).
+
+    A vCPU the hypervisor took accounts nothing until it runs again (``parse_cpu_seconds``):
+    the wall time between the readings less the time that CPU accounted, less
+    :data:`FROZEN_SLACK_S`, is how long it stood still; 0 when the tick's CPU is unknown."""
+    (t0, before), (t1, after) = base, now
+    pairs = list(zip(before, after, strict=False))
+    stolen = max((b[1] - a[1] for a, b in pairs), default=0.0)
+    cpu = sched.processor if sched is not None else -1
+    if not 0 <= cpu < len(pairs) or t0 <= 0.0:
+        return max(0.0, stolen), 0.0
+    accounted = pairs[cpu][1][0] - pairs[cpu][0][0]
+    return max(0.0, stolen), max(0.0, (t1 - t0) - accounted - FROZEN_SLACK_S)

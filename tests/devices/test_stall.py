@@ -4,6 +4,7 @@ schedstat/steal, and the kernel's counters read for real."""
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import pytest
@@ -15,11 +16,13 @@ from riderlive.devices.stall import (
     HostSample,
     SilenceState,
     lost_between,
+    parse_cpu_seconds,
     parse_steal,
     silence_step,
     thread_run_delay_s,
     usable_between,
 )
+from tests.waiting import wait_until
 
 seconds = st.floats(min_value=0.0, max_value=100.0, allow_nan=False)
 sample = st.builds(HostSample, seconds, seconds, st.tuples(seconds, seconds))
@@ -124,6 +127,34 @@ def test_steal_is_read_per_cpu_from_proc_stat() -> None:
         "intr 1 2 3\n"
     )
     assert parse_steal(text, 0.01) == pytest.approx((1.28, 1.30))
+    # accounted: user + nice + system + idle + iowait + irq + softirq (guest is inside user)
+    parsed = parse_cpu_seconds(text, 0.01)
+    assert [x for cpu in parsed for x in cpu] == pytest.approx([226.95, 1.28, 227.00, 1.30])
+
+
+def test_a_running_cpu_accounts_the_wall_clock_and_a_taken_one_its_steal_after() -> None:
+    """What ``service/watch.cpu_stalls`` rests on, on this machine: between two readings each
+    CPU accounts the wall time, less what the hypervisor took, which is added as steal once
+    the vCPU runs again (its stalls last ~100 ms)."""
+    clock = HostClock()
+    t0, first = time.perf_counter(), clock.cpu_seconds()
+    deadline = t0 + 0.3
+    while time.perf_counter() < deadline:  # busy here, idle or busy there: both account
+        pass
+    t1, second = time.perf_counter(), clock.cpu_seconds()
+    span = t1 - t0
+    assert len(first) == len(second) == os.cpu_count()
+    for (acc0, _), (acc1, _) in zip(first, second, strict=True):
+        assert acc1 - acc0 <= span + 0.03  # never faster than the wall (10 ms units, rounded down)
+
+    def accounted_or_stolen() -> bool:  # a vCPU taken at t1 adds its steal once it runs again
+        later = clock.cpu_seconds()
+        return all(
+            (acc1 - acc0) + (steal2 - steal0) >= span - 0.03
+            for (acc0, steal0), (acc1, _), (_, steal2) in zip(first, second, later, strict=True)
+        )
+
+    wait_until(accounted_or_stolen, 1.0, lambda: (span, first, second, clock.cpu_seconds()))
 
 
 def test_the_kernel_counters_are_read_and_never_go_back() -> None:

@@ -9,6 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from riderlive.service.stall import Model, Observation, Sched, Verdict, classify, read_sched
+from riderlive.service.watch import FROZEN_SLACK_S, CpuReading, cpu_stalls
 
 MODEL = Model(threshold=0.034, longest_excuse=5.0, start_stuck=10.0, start_limit=300.0)
 RUNNING = Sched(cpu=10.0, wait=1.0, stopped=False)
@@ -128,3 +129,54 @@ def test_read_sched_reads_this_process() -> None:
     after = read_sched(os.getpid())
     assert after is not None and after.cpu > before.cpu and after.process_cpu >= before.process_cpu
     assert read_sched(2**22 + 7) is None, "no such process"
+
+
+def test_the_ticks_cpu_standing_still_excuses_a_host_stall_but_not_a_stopped_tick() -> None:
+    # Its vCPU taken for 90 of the 100 ms: the tick asleep there was not woken (the steal
+    # is added only once the vCPU runs again, so it reads 0 now).
+    assert classify(MODEL, seen(0.100, frozen=0.090)).verdict is Verdict.STALLED
+    assert classify(MODEL, seen(0.100, frozen=0.030)).verdict is Verdict.HUNG
+    assert classify(MODEL, seen(0.100, frozen=0.090, stopped=True)).verdict is Verdict.HUNG
+    assert classify(MODEL, seen(0.100, frozen=0.090, stolen=0.090)).excused == pytest.approx(0.090)  # not added
+
+
+def reading(t: float, *cpus: tuple[float, float]) -> CpuReading:
+    return (t, tuple(cpus))
+
+
+def test_cpu_stalls_by_hand() -> None:
+    on = lambda cpu: Sched(cpu=0.0, wait=0.0, stopped=False, processor=cpu)  # noqa: E731
+    base = reading(100.0, (50.0, 1.0), (60.0, 2.0))
+    # 100 ms later: CPU 0 accounted nothing (taken), CPU 1 all of it; no steal added yet
+    now = reading(100.1, (50.0, 1.0), (60.1, 2.0))
+    assert cpu_stalls(base, now, on(0)) == pytest.approx((0.0, 0.1 - FROZEN_SLACK_S))
+    assert cpu_stalls(base, now, on(1)) == (0.0, 0.0)
+    assert cpu_stalls(base, now, on(-1)) == (0.0, 0.0)  # the tick's CPU unknown
+    assert cpu_stalls(base, now, None) == (0.0, 0.0)
+    assert cpu_stalls(base, now, on(5)) == (0.0, 0.0)  # a CPU the reading does not have
+    # once CPU 0 ran again: 90 ms of steal added, 10 ms accounted
+    after = reading(100.1, (50.01, 1.09), (60.1, 2.0))
+    assert cpu_stalls(base, after, on(0)) == pytest.approx((0.09, 0.1 - 0.01 - FROZEN_SLACK_S))
+    assert cpu_stalls(reading(0.0), now, on(0)) == (0.0, 0.0)  # no baseline yet
+
+
+@given(
+    st.floats(0.0, 1.0),
+    st.floats(0.0, 1.0),
+    st.floats(0.0, 0.5),
+    st.integers(-1, 2),
+)
+def test_standing_still_is_never_more_than_the_wall_time_nor_when_the_cpu_kept_up(
+    span: float, accounted: float, steal: float, cpu: int
+) -> None:
+    base = reading(10.0, (5.0, 0.0), (5.0, 0.0))
+    now = reading(10.0 + span, (5.0 + accounted, steal), (5.0 + accounted, steal))
+    stolen, frozen = cpu_stalls(base, now, Sched(cpu=0.0, wait=0.0, stopped=False, processor=cpu))
+    assert stolen == pytest.approx(steal) and 0.0 <= frozen <= span
+    if accounted >= span - FROZEN_SLACK_S or cpu < 0:
+        assert frozen == 0.0
+
+
+def test_read_sched_names_the_cpu_it_last_ran_on() -> None:
+    sched = read_sched(os.getpid())
+    assert sched is not None and 0 <= sched.processor < (os.cpu_count() or 1)
