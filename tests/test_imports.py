@@ -15,7 +15,7 @@ LAYERS: dict[str, int] = {
         ("channels", "units", "tickframe", "configfile", "framefile", "names", "ranges", "frameunits", "__init__"), 0
     ),
     **dict.fromkeys(("fastpath", "fastpath_core", "fastpath_cache", "fastpath_batch", "fastpath_llvm"), 0),
-    **dict.fromkeys(("parquetstream", "timecode", "sched"), 0),
+    **dict.fromkeys(("parquetstream", "timecode", "sched", "prometheus"), 0),
     # 1: the pure core (no I/O, no clocks)
     **dict.fromkeys(("skeleton", "rules", "horse", "saddle", "physics"), 1),
     # 2: offline edges over the core (files in, files out)

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 import orjson
 
+from riderlive import prometheus
 from riderlive.bus.config import NatsSection
 from riderlive.bus.inbound import Control, InboundPort, ProducerInput, dumps
 from riderlive.bus.stage_deadman import StageDeadMan
@@ -372,13 +373,14 @@ async def join_stage(service: RigPort) -> RigNode:
 
 def render_metrics(node: RigNode) -> str:
     """Prometheus text for the stage link."""
-    lines = [
-        "# HELP riderlive_nats_connected 1 while connected to the stage's broker.",
-        "# TYPE riderlive_nats_connected gauge",
-        f"riderlive_nats_connected {int(node.transport.connected)}",
-        "# HELP riderlive_nats_events_total Stage link events (frames, heartbeats, stops, broker events).",
-        "# TYPE riderlive_nats_events_total counter",
-    ]
+    out = prometheus.Exposition()
+    out.one(
+        "riderlive_nats_connected",
+        prometheus.Kind.GAUGE,
+        "1 while connected to the stage's broker.",
+        node.transport.connected,
+    )
     events = Counter(node.counts) + Counter(node.transport.stats.events)
-    lines += [f'riderlive_nats_events_total{{event="{k}"}} {v}' for k, v in sorted(events.items())]
-    return "\n".join(lines) + "\n"
+    help_text = "Stage link events (frames, heartbeats, stops, broker events)."
+    out.by_label("riderlive_nats_events_total", prometheus.Kind.COUNTER, help_text, "event", sorted(events.items()))
+    return out.text()

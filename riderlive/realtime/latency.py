@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from riderlive.prometheus import sample
+
 PER_OCTAVE = 16
 LOWEST_EXPONENT = -17
 """The lowest bound is 2**-17 s = 7.6 us."""
@@ -125,15 +127,18 @@ class LatencySnapshot:
             out[f"p{q * 100:g}"] = None if not n else self.quantile(q)
         return out
 
-    def prometheus(self, name: str, help_text: str) -> list[str]:
-        """The exposition lines (``# HELP``, ``# TYPE``, buckets at every :data:`PROMETHEUS_EVERY`-th bound)."""
-        lines = [f"# HELP {name} {help_text}", f"# TYPE {name} histogram"]
+    def samples(self, name: str) -> list[str]:
+        """The exposition's sample lines (buckets at every :data:`PROMETHEUS_EVERY`-th bound,
+        ``+Inf``, ``_sum``, ``_count``); the family's ``# HELP`` and ``# TYPE`` are the caller's
+        (``riderlive.prometheus.Exposition``)."""
         cumulative = np.cumsum(self.buckets)
-        for k in range(0, N_BOUNDS, PROMETHEUS_EVERY):
-            lines.append(f'{name}_bucket{{le="{BOUNDS[k]!r}"}} {int(cumulative[k])}')
-        lines.append(f'{name}_bucket{{le="+Inf"}} {int(cumulative[-1])}')
-        lines.append(f"{name}_sum {self.total!r}")
-        lines.append(f"{name}_count {int(cumulative[-1])}")
+        lines = [
+            sample(f"{name}_bucket", int(cumulative[k]), {"le": BOUNDS[k]})
+            for k in range(0, N_BOUNDS, PROMETHEUS_EVERY)
+        ]
+        lines.append(sample(f"{name}_bucket", int(cumulative[-1]), {"le": "+Inf"}))
+        lines.append(sample(f"{name}_sum", self.total))
+        lines.append(sample(f"{name}_count", int(cumulative[-1])))
         return lines
 
 

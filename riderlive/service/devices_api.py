@@ -36,6 +36,7 @@ from riderlive.devices.latch import StopSource
 from riderlive.devices.lifecycle import REFUSAL_STATUS, DeviceState, Refusal
 from riderlive.devices.registry import DeviceSpec, plan
 from riderlive.names import NAME_PATTERN
+from riderlive.prometheus import Exposition, Kind, sample
 from riderlive.realtime import commands as cmd
 from riderlive.service import auth
 from riderlive.service.config import ServiceConfig
@@ -202,78 +203,56 @@ def add_device_routes(app: FastAPI, service: DevicesPort) -> None:
         return JSONResponse(body, 200 if ready else 503)
 
 
-def _escape(value: str) -> str:
-    return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+SUPERVISION_COUNTERS: tuple[tuple[str, str], ...] = (
+    ("restarts", "Tick processes started again after a death or a hang."),
+    ("deaths", "Tick processes that exited unasked."),
+    ("hangs", "Tick processes killed for missing their heartbeat."),
+    ("stalls", "Heartbeat gaps past the hang threshold that the host explained: counted, not punished."),
+    ("takeovers", "Tick generations started from a warm spare."),
+)
+"""Supervision's counters (``Supervisor.snapshot``), as ``riderlive_tick_*_total``."""
 
 
 def render_device_metrics(service: DevicesPort) -> str:
     """Prometheus text: supervision, guardian, each device's state and counters, refusals."""
     sup = service.supervisor.snapshot()
-    out: list[str] = []
-
-    def metric(name: str, kind: str, help_text: str, lines: list[str]) -> None:
-        out.extend([f"# HELP {name} {help_text}", f"# TYPE {name} {kind}", *lines])
-
-    metric(
+    out = Exposition()
+    out.one(
         "riderlive_tick_up",
-        "gauge",
+        Kind.GAUGE,
         "1 once the serving tick generation has beaten (0 from a failure until the next one beats).",
-        [f"riderlive_tick_up {int(sup['up'])}"],
+        bool(sup["up"]),
     )
-    for key, help_text in (
-        ("restarts", "Tick processes started again after a death or a hang."),
-        ("deaths", "Tick processes that exited unasked."),
-        ("hangs", "Tick processes killed for missing their heartbeat."),
-        ("stalls", "Heartbeat gaps past the hang threshold that the host explained: counted, not punished."),
-        ("takeovers", "Tick generations started from a warm spare."),
-    ):
-        metric(f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {sup[key]}"])
+    for key, help_text in SUPERVISION_COUNTERS:
+        out.one(f"riderlive_tick_{key}_total", Kind.COUNTER, help_text, sup[key])
     guardian = sup["guardian"]
-    metric(
-        "riderlive_guardian_up",
-        "gauge",
-        "1 while the guardian runs.",
-        [f"riderlive_guardian_up {int(guardian['alive'])}"],
-    )
+    out.one("riderlive_guardian_up", Kind.GAUGE, "1 while the guardian runs.", bool(guardian["alive"]))
     for key in ("restarts", "takeovers"):
-        line = f"riderlive_guardian_{key}_total {guardian[key]}"
-        metric(f"riderlive_guardian_{key}_total", "counter", f"Guardian {key}.", [line])
+        out.one(f"riderlive_guardian_{key}_total", Kind.COUNTER, f"Guardian {key}.", guardian[key])
     latch = service.link.latch
-    metric(
-        "riderlive_estop_latched",
-        "gauge",
-        "1 while the e-stop is latched.",
-        [f"riderlive_estop_latched {int(latch.latched)}"],
-    )
-    metric(
-        "riderlive_estop_requests_total",
-        "counter",
-        "E-stop requests (all sources).",
-        [f"riderlive_estop_requests_total {latch.requested}"],
-    )
+    out.one("riderlive_estop_latched", Kind.GAUGE, "1 while the e-stop is latched.", bool(latch.latched))
+    out.one("riderlive_estop_requests_total", Kind.COUNTER, "E-stop requests (all sources).", latch.requested)
+    name = "riderlive_estop_requests_by_source_total"
     by_source = [
-        f'riderlive_estop_requests_by_source_total{{source="{source}",authorized="{"yes" if ok else "no"}"}} {n}'
+        sample(name, n, {"source": source, "authorized": "yes" if ok else "no"})
         for (source, ok), n in sorted(service.device_metrics.estops.items())
     ]
-    metric(
-        "riderlive_estop_requests_by_source_total",
-        "counter",
-        "E-stop requests the web process received, by source and whether it was authorized (never refused).",
-        by_source,
-    )
+    help_text = "E-stop requests the web process received, by source and whether it was authorized (never refused)."
+    out.family(name, Kind.COUNTER, help_text, by_source)
     states, events = [], []
     for device in service.link.status().get("devices", []):
-        name = _escape(str(device.get("name")))
+        device_name = str(device.get("name"))
         for state in DeviceState:
-            now_in = int(device.get("state") == state.value)
-            states.append(f'riderlive_device_state{{device="{name}",state="{state.value}"}} {now_in}')
+            now_in = device.get("state") == state.value
+            states.append(sample("riderlive_device_state", now_in, {"device": device_name, "state": state.value}))
         for event, value in sorted((device.get("counters") or {}).items()):
-            events.append(f'riderlive_device_events_total{{device="{name}",event="{_escape(event)}"}} {value}')
-    metric("riderlive_device_state", "gauge", "1 for the state each device is in.", states)
-    metric("riderlive_device_events_total", "counter", "Device lifecycle and bus events by kind.", events)
-    refusals = service.device_metrics.refusals
-    lines = [
-        f'riderlive_device_refusals_total{{action="{a}",reason="{r}"}} {n}' for (a, r), n in sorted(refusals.items())
+            events.append(sample("riderlive_device_events_total", value, {"device": device_name, "event": event}))
+    out.family("riderlive_device_state", Kind.GAUGE, "1 for the state each device is in.", states)
+    out.family("riderlive_device_events_total", Kind.COUNTER, "Device lifecycle and bus events by kind.", events)
+    refusals = [
+        sample("riderlive_device_refusals_total", n, {"action": a, "reason": r})
+        for (a, r), n in sorted(service.device_metrics.refusals.items())
     ]
-    metric("riderlive_device_refusals_total", "counter", "Operator requests refused, by action and reason.", lines)
-    return "\n".join(out) + "\n"
+    help_text = "Operator requests refused, by action and reason."
+    out.family("riderlive_device_refusals_total", Kind.COUNTER, help_text, refusals)
+    return out.text()

@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from riderlive.prometheus import Exposition, Kind
+
 log = logging.getLogger(__name__)
 
 UNBOUND_WORKER = re.compile(r"kworker/u\d+:\d+")
@@ -130,23 +132,32 @@ class WorkerStats:
 
     def prometheus(self) -> str:
         """Prometheus text of these counts."""
-        lines = [
-            "# HELP riderlive_kernel_workers_priority SCHED_FIFO priority asked for the kernel's unbound workers.",
-            "# TYPE riderlive_kernel_workers_priority gauge",
-            f"riderlive_kernel_workers_priority {self.priority}",
-            "# HELP riderlive_kernel_workers Unbound kernel workers seen by the last scan, by state.",
-            "# TYPE riderlive_kernel_workers gauge",
-            f'riderlive_kernel_workers{{state="raised"}} {self.workers - self.below}',
-            f'riderlive_kernel_workers{{state="below"}} {self.below}',
-            "# HELP riderlive_kernel_workers_raised_total Unbound kernel workers raised to the priority.",
-            "# TYPE riderlive_kernel_workers_raised_total counter",
-            f"riderlive_kernel_workers_raised_total {self.raised}",
-            "# HELP riderlive_kernel_workers_failures_total Failed raises, by errno.",
-            "# TYPE riderlive_kernel_workers_failures_total counter",
-        ]
+        out = Exposition()
+        out.one(
+            "riderlive_kernel_workers_priority",
+            Kind.GAUGE,
+            "SCHED_FIFO priority asked for the kernel's unbound workers.",
+            self.priority,
+        )
+        states = (("raised", self.workers - self.below), ("below", self.below))
+        out.by_label(
+            "riderlive_kernel_workers",
+            Kind.GAUGE,
+            "Unbound kernel workers seen by the last scan, by state.",
+            "state",
+            states,
+        )
+        out.one(
+            "riderlive_kernel_workers_raised_total",
+            Kind.COUNTER,
+            "Unbound kernel workers raised to the priority.",
+            self.raised,
+        )
         failures = sorted(self.failures.items())
-        lines += [f'riderlive_kernel_workers_failures_total{{errno="{e}"}} {n}' for e, n in failures]
-        return "\n".join(lines) + "\n"
+        out.by_label(
+            "riderlive_kernel_workers_failures_total", Kind.COUNTER, "Failed raises, by errno.", "errno", failures
+        )
+        return out.text()
 
 
 def kthreadd_children(proc: Path = PROC) -> list[int]:

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from riderlive.prometheus import Exposition, Kind
 from riderlive.realtime.latency import LatencyHistogram, LatencySnapshot
 from riderlive.service.clocks import ClockEvent
 
@@ -63,10 +64,6 @@ class ServiceMetrics:
         frames_in[producer] = frames_in.get(producer, 0) + 1
 
 
-def _escape(value: str) -> str:
-    return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-
-
 SADDLE_COUNTERS: tuple[tuple[str, str], ...] = (
     ("samples", "Saddle samples stepped through the estimator."),
     ("missing", "Saddle samples with an axis missing (left out of the frame): excluded from the fits, held."),
@@ -96,6 +93,33 @@ PHASE_COUNTERS: tuple[tuple[str, str], ...] = (
 """The tick's ``phase_*`` values (``riderlive.realtime.phase_lock``), as ``riderlive_tick_phase_*``."""
 
 
+TICK_COUNTERS: tuple[tuple[str, str], ...] = (
+    ("ticks", "Ticks run."),
+    ("overruns", "Ticks that started more than one period late."),
+    ("skipped", "Deadlines skipped after overruns."),
+    ("input_frames", "Horse frames taken by the tick."),
+    ("input_lapped", "Horse frames overwritten in the ring before the tick read them."),
+    ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
+    ("step_errors", "Ticks whose step raised (the last good frame was repeated)."),
+    ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
+    ("physics_errors", "Tail physics restarts from rest after a failed or non-finite step."),
+    ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
+    ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
+    ("outputs_clamped", "Rider values clamped to their plausible range."),
+    ("hands_full_reach", "Ticks whose hands were at full reach, the reins outrunning them (reins.slip > 0)."),
+)
+"""The tick's counters, as ``riderlive_tick_*_total``."""
+CLIENT_COUNTERS: tuple[tuple[str, str], ...] = (
+    ("riderlive_frames_out_total", "Frames sent per client."),
+    ("riderlive_frames_dropped_total", "Frames replaced in a slow client's slot."),
+    (
+        "riderlive_frames_skipped_total",
+        "Ticks a client's decimation wanted that never reached it (skipped by the tick, coalesced or missed).",
+    ),
+)
+"""Per-client counters, in the order of ``render``'s client tuples after (id, path)."""
+
+
 def render(
     metrics: ServiceMetrics,
     tick: dict[str, float],
@@ -109,13 +133,7 @@ def render(
     counts every input connection, ``saddle_producers`` those of them on ``/ws/saddle``;
     ``latency``: snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (``Service.latency``)."""
     latency = latency or {}
-    out: list[str] = []
-
-    def metric(name: str, kind: str, help_text: str, lines: list[str]) -> None:
-        out.append(f"# HELP {name} {help_text}")
-        out.append(f"# TYPE {name} {kind}")
-        out.extend(lines)
-
+    out = Exposition()
     for name, histogram, help_text in (
         ("riderlive_tick_lateness_seconds", latency.get("tick_lateness"), TICK_LATENESS),
         ("riderlive_ingest_to_send_seconds", latency.get("ingest_to_send"), INGEST_TO_SEND),
@@ -123,134 +141,74 @@ def render(
         ("riderlive_ingest_to_tick_seconds", latency.get("ingest_to_tick"), INGEST_TO_TICK),
     ):
         if histogram is not None:
-            out.extend(histogram.prometheus(name, help_text))
-    metric(
-        "riderlive_tick_lateness_max_seconds",
-        "gauge",
-        "Worst tick lateness.",
-        [f"riderlive_tick_lateness_max_seconds {tick.get('lateness_max', 0.0)}"],
-    )
-    for key, help_text in (
-        ("ticks", "Ticks run."),
-        ("overruns", "Ticks that started more than one period late."),
-        ("skipped", "Deadlines skipped after overruns."),
-        ("input_frames", "Horse frames taken by the tick."),
-        ("input_lapped", "Horse frames overwritten in the ring before the tick read them."),
-        ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
-        ("step_errors", "Ticks whose step raised (the last good frame was repeated)."),
-        ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),
-        ("physics_errors", "Tail physics restarts from rest after a failed or non-finite step."),
-        ("physics_skipped_steps", "Tail physics steps skipped after a stall (time jumped instead)."),
-        ("state_resets", "Stateful stages (smoothing, blends) reset after going non-finite (eased from neutral)."),
-        ("outputs_clamped", "Rider values clamped to their plausible range."),
-        ("hands_full_reach", "Ticks whose hands were at full reach, the reins outrunning them (reins.slip > 0)."),
-    ):
-        metric(
-            f"riderlive_tick_{key}_total", "counter", help_text, [f"riderlive_tick_{key}_total {int(tick.get(key, 0))}"]
-        )
-    metric(
-        "riderlive_tick_realtime",
-        "gauge",
-        "1 when the tick runs at SCHED_FIFO.",
-        [f"riderlive_tick_realtime {int(tick.get('realtime', 0))}"],
-    )
+            out.family(name, Kind.HISTOGRAM, help_text, histogram.samples(name))
+    out.one("riderlive_tick_lateness_max_seconds", Kind.GAUGE, "Worst tick lateness.", tick.get("lateness_max", 0.0))
+    for key, help_text in TICK_COUNTERS:
+        out.one(f"riderlive_tick_{key}_total", Kind.COUNTER, help_text, int(tick.get(key, 0)))
+    out.one("riderlive_tick_realtime", Kind.GAUGE, "1 when the tick runs at SCHED_FIFO.", int(tick.get("realtime", 0)))
     for key, help_text in PHASE_GAUGES:
-        name = f"riderlive_tick_phase_{key}"
-        metric(name, "gauge", help_text, [f"{name} {tick.get(f'phase_{key}', 0.0)}"])
+        out.one(f"riderlive_tick_phase_{key}", Kind.GAUGE, help_text, tick.get(f"phase_{key}", 0.0))
     for key, help_text in PHASE_COUNTERS:
-        name = f"riderlive_tick_phase_{key}_total"
-        metric(name, "counter", help_text, [f"{name} {int(tick.get(f'phase_{key}', 0))}"])
-    metric(
-        "riderlive_clients_connected",
-        "gauge",
-        "Connected websocket clients.",
-        [
-            f'riderlive_clients_connected{{path="/ws/rider"}} {len(clients)}',
-            f'riderlive_clients_connected{{path="/ws/horse"}} {producers - saddle_producers}',
-            f'riderlive_clients_connected{{path="/ws/saddle"}} {saddle_producers}',
-        ],
+        out.one(f"riderlive_tick_phase_{key}_total", Kind.COUNTER, help_text, int(tick.get(f"phase_{key}", 0)))
+    connected = (
+        ("/ws/rider", len(clients)),
+        ("/ws/horse", producers - saddle_producers),
+        ("/ws/saddle", saddle_producers),
     )
+    out.by_label("riderlive_clients_connected", Kind.GAUGE, "Connected websocket clients.", "path", connected)
     for key, help_text in SADDLE_COUNTERS:
-        name = f"riderlive_saddle_{key}_total"
-        metric(name, "counter", help_text, [f"{name} {int(tick.get(f'saddle_{key}', 0))}"])
-    metric(
+        out.one(f"riderlive_saddle_{key}_total", Kind.COUNTER, help_text, int(tick.get(f"saddle_{key}", 0)))
+    out.by_label(
         "riderlive_input_clock_rate",
-        "gauge",
+        Kind.GAUGE,
         "The producer clock rate in use per input kind (engine s per producer s, 0.9-1.1; 0 before the first tick).",
-        [f'riderlive_input_clock_rate{{kind="{kind}"}} {tick.get(key, 0.0)}' for kind, key in CLOCK_RATES],
+        "kind",
+        ((kind, tick.get(key, 0.0)) for kind, key in CLOCK_RATES),
     )
-    metric(
-        "riderlive_frames_out_total",
-        "counter",
-        "Frames sent per client.",
-        [f'riderlive_frames_out_total{{client="{_escape(c)}"}} {sent}' for c, _, sent, _, _ in clients],
+    ids = [c[0] for c in clients]
+    per_client = ([c[2] for c in clients], [c[3] for c in clients], [c[4] for c in clients])
+    for (name, help_text), counts in zip(CLIENT_COUNTERS, per_client, strict=True):
+        out.by_label(name, Kind.COUNTER, help_text, "client", zip(ids, counts, strict=True))
+    frames_in = sorted(metrics.frames_in.items())
+    out.by_label(
+        "riderlive_frames_in_total", Kind.COUNTER, "Horse frames accepted per producer.", "producer", frames_in
     )
-    metric(
-        "riderlive_frames_dropped_total",
-        "counter",
-        "Frames replaced in a slow client's slot.",
-        [f'riderlive_frames_dropped_total{{client="{_escape(c)}"}} {dropped}' for c, _, _, dropped, _ in clients],
+    bad = sorted(metrics.bad_frames.items())
+    out.by_label("riderlive_bad_frames_total", Kind.COUNTER, "Rejected messages by reason.", "reason", bad)
+    rejected = sorted(metrics.rest_rejected.items())
+    out.by_label(
+        "riderlive_rest_rejected_total", Kind.COUNTER, "REST requests answered 4xx, by status.", "status", rejected
     )
-    metric(
-        "riderlive_frames_skipped_total",
-        "counter",
-        "Ticks a client's decimation wanted that never reached it (skipped by the tick, coalesced or missed).",
-        [f'riderlive_frames_skipped_total{{client="{_escape(c)}"}} {skipped}' for c, _, _, _, skipped in clients],
-    )
-    metric(
-        "riderlive_frames_in_total",
-        "counter",
-        "Horse frames accepted per producer.",
-        [f'riderlive_frames_in_total{{producer="{_escape(p)}"}} {n}' for p, n in sorted(metrics.frames_in.items())],
-    )
-    metric(
-        "riderlive_bad_frames_total",
-        "counter",
-        "Rejected messages by reason.",
-        [f'riderlive_bad_frames_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.bad_frames.items())],
-    )
-    metric(
-        "riderlive_rest_rejected_total",
-        "counter",
-        "REST requests answered 4xx, by status.",
-        [f'riderlive_rest_rejected_total{{status="{c}"}} {n}' for c, n in sorted(metrics.rest_rejected.items())],
-    )
-    metric(
+    out.by_label(
         "riderlive_clock_jumps_total",
-        "counter",
+        Kind.COUNTER,
         "Producer clock jumps, steps back, pauses and resumes (a new stream segment each), by direction.",
-        [
-            f'riderlive_clock_jumps_total{{direction="{e.direction}"}} {metrics.clock_jumps[e.direction]}'
-            for e in ClockEvent
-        ],
+        "direction",
+        ((e.direction, metrics.clock_jumps[e.direction]) for e in ClockEvent),
     )
-    metric(
-        "riderlive_clients_cut_off_total",
-        "counter",
-        "Clients closed after a send timeout.",
-        [f"riderlive_clients_cut_off_total {metrics.clients_cut_off}"],
+    out.one(
+        "riderlive_clients_cut_off_total", Kind.COUNTER, "Clients closed after a send timeout.", metrics.clients_cut_off
     )
-    metric(
+    out.one(
         "riderlive_ticks_coalesced_total",
-        "counter",
+        Kind.COUNTER,
         "Ticks not sent because the web process fell more than 0.25 s behind (publish.CATCH_UP).",
-        [f"riderlive_ticks_coalesced_total {metrics.ticks_coalesced}"],
+        metrics.ticks_coalesced,
     )
-    metric(
+    out.by_label(
         "riderlive_timecode_errors_total",
-        "counter",
+        Kind.COUNTER,
         "Producer or stage timecodes unusable (malformed, another rate) or jumping, by reason.",
-        [f'riderlive_timecode_errors_total{{reason="{_escape(r)}"}} {n}' for r, n in sorted(metrics.timecode.items())],
+        "reason",
+        sorted(metrics.timecode.items()),
     )
     if metrics.vmc:
-        metric(
+        out.by_label(
             "riderlive_vmc_bundles_total",
-            "counter",
+            Kind.COUNTER,
             "VMC bundles by outcome (sent, dropped: send buffer full, error: send failed, skipped: a chosen tick "
             "that got none).",
-            [
-                f'riderlive_vmc_bundles_total{{outcome="{o}"}} {metrics.vmc[o]}'
-                for o in ("sent", "dropped", "error", "skipped")
-            ],
+            "outcome",
+            ((o, metrics.vmc[o]) for o in ("sent", "dropped", "error", "skipped")),
         )
-    return "\n".join(out) + "\n"
+    return out.text()

@@ -19,6 +19,7 @@ from fastapi import FastAPI, HTTPException, Request
 
 from riderlive.devices.lifecycle import REFUSAL_STATUS, Refusal
 from riderlive.names import NAME_PATTERN
+from riderlive.prometheus import Exposition, Kind, sample
 from riderlive.realtime import commands as cmd
 
 if TYPE_CHECKING:
@@ -90,29 +91,33 @@ def render_platform_metrics(service: Service) -> str:
     status = platform_status(service)
     if not status or "platform" not in status:
         return ""
-    name = str(status.get("name", "platform")).replace('"', "")
+    name = str(status.get("name", "platform"))
     p = status["platform"]
-    lines = [
-        "# HELP riderlive_platform_workspace_use Largest actuator closeness to a soft limit (0 mid-range, 1 at it).",
-        "# TYPE riderlive_platform_workspace_use gauge",
-        f'riderlive_platform_workspace_use{{device="{name}"}} {float(p.get("workspace_use", 0.0)):.6g}',
-        "# HELP riderlive_platform_limits_total Frames in which a limit acted, by limit.",
-        "# TYPE riderlive_platform_limits_total counter",
+    out = Exposition()
+    out.family(
+        "riderlive_platform_workspace_use",
+        Kind.GAUGE,
+        "Largest actuator closeness to a soft limit (0 mid-range, 1 at it).",
+        [sample("riderlive_platform_workspace_use", float(p.get("workspace_use", 0.0)), {"device": name})],
+    )
+    limits = [
+        sample("riderlive_platform_limits_total", int(value), {"device": name, "limit": limit})
+        for limit, value in sorted((p.get("limits_hit") or {}).items())
     ]
-    for limit, value in sorted((p.get("limits_hit") or {}).items()):
-        lines.append(f'riderlive_platform_limits_total{{device="{name}",limit="{limit}"}} {int(value)}')
-    lines += [
-        "# HELP riderlive_platform_link_total Platform link events by side (host, device) and kind.",
-        "# TYPE riderlive_platform_link_total counter",
-    ]
+    out.family("riderlive_platform_limits_total", Kind.COUNTER, "Frames in which a limit acted, by limit.", limits)
     host = (p.get("link") or {}).get("counters") or {}
     device = ((p.get("firmware") or {}).get("counters")) or {}
     kinds = {
         "host": (*LINK_ERRORS, "rx_gap", "silences", "port_lost"),
         "device": (*LINK_ERRORS, "rx_gap", "deadman", "clipped", "limited", "tx_dropped"),
     }
-    for side, counters in (("host", host), ("device", device)):
-        for kind in kinds[side] if counters or side == "host" else ():
-            value = int(counters.get(kind, 0))
-            lines.append(f'riderlive_platform_link_total{{device="{name}",side="{side}",kind="{kind}"}} {value}')
-    return "\n".join(lines) + "\n"
+    link = [
+        sample(
+            "riderlive_platform_link_total", int(counters.get(kind, 0)), {"device": name, "side": side, "kind": kind}
+        )
+        for side, counters in (("host", host), ("device", device))
+        for kind in (kinds[side] if counters or side == "host" else ())
+    ]
+    help_text = "Platform link events by side (host, device) and kind."
+    out.family("riderlive_platform_link_total", Kind.COUNTER, help_text, link)
+    return out.text()
