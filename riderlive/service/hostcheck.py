@@ -147,8 +147,11 @@ def advise(facts: HostFacts, tick_realtime: bool, web_priority: int, kernel_work
             Advice(
                 HostIssue.STEAL,
                 f"the hypervisor took {facts.steal_share:.1%} of CPU time since boot (steal): whole-machine "
-                "stalls of ~100 ms; servo budgets ride through them (stall_ridethroughs), the motion does not",
-                "give the virtual machine dedicated (pinned) CPUs, or run on bare metal",
+                "stalls of ~100 ms; servo budgets ride through them (stall_ridethroughs), the motion does not, "
+                "and a servo Bus Watchdog of 100 ms or less (rig bus_watchdog_ms) trips in one: the servos stop "
+                "themselves, a fault (soak: 3 in 10 min with both cores busy)",
+                "give the virtual machine dedicated (pinned) CPUs, or run on bare metal; else accept those faults, "
+                "or raise bus_watchdog_ms to 160 (the servos then hold a dead host's last goal 60 ms longer)",
             )
         )
     return out
