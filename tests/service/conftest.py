@@ -7,6 +7,7 @@ import httpx
 import pytest
 
 from tests.service.live_server import LiveServer
+from tests.service.rig_server import serve_rig
 
 BASE_CONFIG = """
 [tick]
@@ -40,6 +41,15 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live
     live.stop()
+
+
+@pytest.fixture(scope="session")
+def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """bench3 on the emulated bus, no spare (:func:`tests.service.rig_server.serve_rig`): one
+    server for the tests that read its start or arm it once and measure (``test_hostcheck``,
+    ``test_latency``); a test that arms it disarms it again (the rig then ``parked``)."""
+    with serve_rig(tmp_path_factory.mktemp("rig"), spare=False) as live:
+        yield live
 
 
 _FAILED_LOGS: dict[str, list[str]] = {}
