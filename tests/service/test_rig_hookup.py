@@ -165,7 +165,11 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     noticed = supervision()["last_down_at"]
     assert noticed - killed < 0.01 + 0.05, "a dead tick is noticed within 1 tick + 50 ms"
     assert live.get("/readyz").status_code == 503
-    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=20.0)
+    # A spare still warming (at nice 10, armed right after the start) is discarded for a cold
+    # start: imports and kernels, tens of seconds at load 17 (20 s timed out there twice), as
+    # test_platform_hookup waits; a quick restart returns at once. The restart's promptness is
+    # test_failover's (warm) and the detection bound above.
+    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=60.0)
     wait_state(live, "disarmed", timeout=20.0)  # back, and not re-armed
     second = supervision()
     assert second["restarts"] == 1 and second["deaths"] == 1 and second["guardian"]["takeovers"] == 1
@@ -186,6 +190,6 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     wait_for(lambda: supervision()["hangs"] == 1, timeout=3.0)
     noticed = supervision()["last_down_at"]
     assert noticed - frozen < 0.25 + 0.01  # tick.hang_floor (no real-time priority here) + a half-tick check
-    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=20.0)
+    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=60.0)
     wait_state(live, "disarmed", timeout=20.0)
     assert supervision()["guardian"]["takeovers"] == 2
