@@ -90,7 +90,13 @@ class TickLink(TickMemory):
 
     @property
     def spares_wanted(self) -> bool:
-        return self.setup.isolation == "process"
+        """A warm spare is kept: a tick process with ``tick.spare`` on."""
+        return self.setup.isolation == "process" and self.setup.spare
+
+    @property
+    def cold_failover(self) -> bool:
+        """A tick process without a spare (``tick.spare`` off): every failover is a cold start."""
+        return self.setup.isolation == "process" and not self.setup.spare
 
     def start_spare(self, urgent: bool = False) -> Spare:
         """Start a spare with the settings as they are now (``urgent``: at normal priority, to

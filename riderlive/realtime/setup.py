@@ -68,6 +68,8 @@ class TickSetup:
     tunes: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Live parameters applied to devices since start (``Tune``, by device name): a new
     generation applies them to its devices before connecting them."""
+    spare: bool = True
+    """Keep a warm spare beside the running tick (``tick.spare``); off: every failover is a cold start."""
     spare_nice: int = 10
     """Nice value of the warm spare's warm-up thread (``realtime/spare.py``)."""
     phase_margin: float = 0.0003

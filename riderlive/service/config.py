@@ -72,6 +72,12 @@ class TickSection(StrictModel):
     and the shipped ``config/presets`` (by name, never by path)."""
     param_blend_time: float = pydantic.Field(default=0.5, ge=0.0, le=10.0)
     """Seconds over which a change of preset, parameters or animator layer blends in."""
+    spare: bool = True
+    """Keep a warm spare tick beside the running one (``realtime/spare.py``): a failover in
+    ~20 ms. Off: one tick process less (~175 MB resident, ~1.6 s of CPU per start and per
+    failover), and a failover is a cold start (seconds; tens of seconds on a busy host),
+    so the hang threshold stays at ``hang_floor_cold`` while no device moves
+    (docs/deployment.md, "A tick that dies or stalls"). Ignored with ``isolation = "thread"``."""
     spare_nice: int = pydantic.Field(default=10, ge=0, le=19)
     """Nice value of the warm spare tick's warm-up (``realtime/spare.py``): higher takes less
     of the running tick's CPU on a busy host and warms the spare later."""

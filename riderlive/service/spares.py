@@ -51,14 +51,18 @@ class SpareKeeper:
         link.start_spare()
 
     def warm(self) -> bool:
-        """A spare is warm, or none is wanted (a tick thread)."""
+        """A spare is warm, or none is wanted in a tick thread; never with ``tick.spare`` off
+        (a failover is a cold start then, and the hang threshold says so)."""
         spare = self.link.spare
-        return not self.link.spares_wanted or (spare is not None and spare.warm is not None)
+        if not self.link.spares_wanted:
+            return not self.link.cold_failover
+        return spare is not None and spare.warm is not None
 
     def snapshot(self) -> dict[str, Any]:
         link, spare = self.link, self.link.spare
+        state = "none" if spare is None else "warm" if spare.warm is not None else "warming"
         return {
-            "state": "none" if spare is None else "warm" if spare.warm is not None else "warming",
+            "state": "off" if link.cold_failover else state,
             "pid": None if spare is None else spare.process.pid,
             "warm_up_s": None if spare is None or spare.warm is None else spare.warm.wall_s,
             "started": link.spares_started,

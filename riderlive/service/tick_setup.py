@@ -66,5 +66,6 @@ def make_setup(
         saddle_point=config.saddle,
         phase_lock=config.tick.phase_lock,
         phase_margin=config.tick.phase_margin,
+        spare=config.tick.spare,
         spare_nice=config.tick.spare_nice,
     )

@@ -7,6 +7,7 @@ import httpx
 import pytest
 
 from tests.service.live_server import LiveServer
+from tests.service.rig_server import serve_rig
 
 BASE_CONFIG = """
 [tick]
@@ -14,6 +15,7 @@ rate = 200.0
 realtime_priority = false
 preset_dirs = ["presets"]
 hang_floor = 1.0  # the shared test server is not about supervision: no false restarts under load
+spare = false  # nor about failover: one process (~1.6 s of CPU, more loaded) less per start; see SPARE_CONFIG
 
 [input]
 delay = 0.03
@@ -29,12 +31,25 @@ resume_after = 0.5
 send_timeout = 0.5
 """
 
+SPARE_CONFIG = BASE_CONFIG.replace("spare = false", "spare = true")
+"""BASE_CONFIG with the warm spare (the default of ``tick.spare``): for tests of a failover."""
+assert SPARE_CONFIG != BASE_CONFIG
+
 
 @pytest.fixture(scope="session")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live
     live.stop()
+
+
+@pytest.fixture(scope="session")
+def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """bench3 on the emulated bus, no spare (:func:`tests.service.rig_server.serve_rig`): one
+    server for the tests that read its start or arm it once and measure (``test_hostcheck``,
+    ``test_latency``); a test that arms it disarms it again (the rig then ``parked``)."""
+    with serve_rig(tmp_path_factory.mktemp("rig"), spare=False) as live:
+        yield live
 
 
 _FAILED_LOGS: dict[str, list[str]] = {}

@@ -82,8 +82,21 @@ class LiveServer:
         if wait_for_ticks:
             self.wait_for_ticks(start_timeout_s)
 
-    def wait_for_ticks(self, timeout: float = 30.0) -> None:
-        """The tick process is spawned at startup and needs a moment to import."""
+    def wait_for_ticks(self, timeout: float = 120.0) -> None:
+        """The tick process is spawned at startup and needs a moment to import (``timeout``:
+        wide, as ``start_timeout_s``; 30 s failed test_tail_live's fixture at load 16, the
+        tail's kernels loading): until /readyz
+        says it beats (every 0.1 s), then until it has ticked 10 times (/api/state, 0.05 s).
+        /readyz costs the web process ~40 % less CPU than /api/state (3.5-4.5 against
+        5.5-7 ms a request at load 18), and a start takes 3-60 s, most of it importing:
+        at 20 /api/state polls a second that was ~0.18 s of CPU per second of start, now
+        ~0.06 (docs/performance.md, branch livefast)."""
+
+        def beating() -> bool:
+            try:
+                return self.get("/readyz").status_code == 200
+            except httpx.HTTPError:
+                return False
 
         def ticking() -> bool:
             try:
@@ -92,6 +105,7 @@ class LiveServer:
                 return False
 
         try:
+            wait_until(beating, timeout, poll=0.1)
             wait_until(ticking, timeout, poll=0.05)
         except AssertionError:
             self.stop()

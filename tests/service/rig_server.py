@@ -5,6 +5,10 @@ shared set-up of the live rig tests (``test_handback_live``, ``test_stall_live``
 emulator (its thread at SCHED_FIFO 30 where allowed: hardware is not starved by the host's
 load) and ``riderlive serve`` with the rig, yields both, and on the way out stops them, prints
 the server's last log lines (shown when the test fails) and asserts it logged no traceback.
+
+:func:`relaxed_rig` and :func:`serve_rig`: bench3 with short ramps and generous budgets, served
+with the emulator in its own process (``test_rig_hookup``; the session's ``shared_rig`` of
+``conftest.py`` for tests that only arm it and look).
 """
 
 from __future__ import annotations
@@ -19,8 +23,11 @@ from pathlib import Path
 
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import RigConfig, load_rig
-from tests.dynamixel.rig_harness import servo_setups
+from tests.dynamixel.rig_harness import servo_emulator, servo_setups
 from tests.service.live_server import ROOT, LiveServer
+
+RIG_TOKEN = "rig-token-123"
+"""The token of :func:`serve_rig`'s server."""
 
 
 def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: float) -> Path:
@@ -61,3 +68,36 @@ def rig_server(
         print("".join(live.log[-log_lines:]))  # shown when the test fails
         sys.setswitchinterval(switch)
         assert "Traceback" not in "".join(live.log), "".join(live.log)
+
+
+def relaxed_rig(tmp_path: Path) -> Path:
+    """bench3 with short ramps and generous bus budgets (this machine may be saturated)."""
+    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
+    for key, value in (
+        ("reply_budget_s", "0.3"),
+        ("bus_watchdog_ms", "600"),
+        ("soft_start_s", "0.3"),
+        ("park_s", "0.3"),
+    ):
+        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 40.0\n", 1)
+    path = tmp_path / "bench3.toml"
+    path.write_text(text)
+    return path
+
+
+@contextlib.contextmanager
+def serve_rig(tmp_path: Path, spare: bool) -> Iterator[LiveServer]:
+    """The server driving bench3 (:func:`relaxed_rig`) on the emulated bus; ``spare``: ``tick.spare``."""
+    rig_file = relaxed_rig(tmp_path)
+    with servo_emulator(rig_file) as port:
+        config = (
+            f"[tick]\nrate = 100.0\nrealtime_priority = false\nspare = {str(spare).lower()}\n"
+            f'[security]\ntoken = "{RIG_TOKEN}"\n[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
+        )
+        live = LiveServer(config, tmp_path, token=RIG_TOKEN)
+        try:
+            yield live
+        finally:
+            live.stop()
+            assert "Traceback" not in "".join(live.log), "".join(live.log)

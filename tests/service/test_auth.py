@@ -26,6 +26,7 @@ CONFIG = f"""
 [tick]
 rate = 100.0
 realtime_priority = false
+spare = false  # not about failover: one process less per start
 [security]
 require_token = true    # as if bound to a public address (tests stay on loopback)
 token = "{TOKEN}"

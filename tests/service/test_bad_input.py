@@ -74,7 +74,8 @@ def test_abuse_closes_only_that_connection(server: LiveServer) -> None:
 
 
 def test_flood_beyond_the_rate_limit_is_rejected(tmp_path) -> None:
-    live = LiveServer("[tick]\nrealtime_priority = false\n[input]\nmax_rate = 50.0\nmax_errors = 1000\n", tmp_path)
+    config = "[tick]\nrealtime_priority = false\nspare = false\n[input]\nmax_rate = 50.0\nmax_errors = 1000\n"
+    live = LiveServer(config, tmp_path)
     try:
         with connect(live.ws + "/ws/horse") as ws:
             ws.recv(timeout=5)

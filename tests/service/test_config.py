@@ -34,6 +34,7 @@ def test_the_example_file_loads_and_matches_the_defaults() -> None:
         ("[tick]\nrate = 1000.0\nphase_margin = 0.0005\n", "tick.phase_margin"),
         ("[tick]\nphase_margin = -0.001\n", "tick.phase_margin"),
         ("[tick]\nphase_lock = 'sometimes'\n", "tick.phase_lock"),
+        ("[tick]\nspare = 'maybe'\n", "tick.spare"),
         ("[host]\nkernel_workers_priority = 10\n", "host.kernel_workers_priority"),
         ("[host]\nkernel_workers_priority = -1\n", "host.kernel_workers_priority"),
         ("[host]\nkernel_workers = 1\n", "host.kernel_workers"),

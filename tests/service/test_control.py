@@ -20,7 +20,7 @@ from riderlive.horse import GAIT_TABLE, Gait
 from riderlive.rules import RiderModel, load_preset
 from riderlive.rules.kuhnel2003 import RULE_INPUTS
 from riderlive.takes import list_takes, load_replay, recover_take
-from tests.service.conftest import BASE_CONFIG
+from tests.service.conftest import BASE_CONFIG, SPARE_CONFIG
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
 from tests.waiting import wait_until
@@ -55,6 +55,15 @@ def test_openapi_documents_the_control_paths(server: LiveServer) -> None:
     ):
         assert path in paths, path
     assert server.get("/").status_code == 200
+
+
+def test_the_shared_server_keeps_no_spare_as_configured(server: LiveServer) -> None:
+    """``tick.spare = false`` (BASE_CONFIG) reaches the supervisor: no spare process, the
+    status says ``off``, and the hang threshold keeps ``tick.hang_floor_cold`` (2 s) since
+    a failover would be a cold start (the logic: tests/service/test_spares.py)."""
+    supervision = server.get("/api/devices").json()["supervision"]
+    assert supervision["spare"] == {"state": "off", "pid": None, "warm_up_s": None, "started": 0, "failed": 0}
+    assert supervision["hang_threshold"] >= 2.0
 
 
 def test_params_patch_changes_the_next_frames(server: LiveServer) -> None:
@@ -229,7 +238,7 @@ def test_sigterm_says_goodbye_and_closes_the_take(tmp_path: Path) -> None:
 def test_a_restarted_tick_keeps_preset_animator_and_source_and_requests_never_fail_meanwhile(tmp_path: Path) -> None:
     """Kill the tick: requests that change what it runs answer (never a 500) while it is
     down, and the next generation starts as the service reports it, not as at start."""
-    live = LiveServer(BASE_CONFIG, tmp_path)
+    live = LiveServer(SPARE_CONFIG, tmp_path)
     follower = Follower(live.ws)
     try:
         assert live.request("PUT", "/api/preset", json={"name": "child"}).status_code == 200

@@ -22,7 +22,6 @@ from riderlive.service.hostcheck import (
 )
 from riderlive.service.kworkers import kthreadd_children, normal_workers
 from tests.service.live_server import LiveServer
-from tests.service.test_rig_hookup import rig_server, wait_state  # noqa: F401 (the fixture)
 
 GOOD = HostFacts(cpus=4, isolated="3", realtime_allowed=True, latency_timers_ms={"/dev/ttyUSB0": 1}, steal_share=0.0)
 
@@ -86,9 +85,9 @@ def test_this_hosts_facts(tmp_path: Path) -> None:
     assert device_ports([rig, platform]) == ["/dev/ttyUSB0", "/dev/pts/9"]  # the rig map's own port
 
 
-def test_serve_warns_at_start_when_a_device_is_configured(rig_server: LiveServer) -> None:  # noqa: F811
-    wait_state(rig_server, "disarmed")
-    log = "".join(rig_server.log)
+def test_serve_warns_at_start_when_a_device_is_configured(shared_rig: LiveServer) -> None:
+    """Said before the server listens, so in its log once it is up (whatever the rig does since)."""
+    log = "".join(shared_rig.log)
     # the rig server runs its tick without real-time priority: serve says so, with the fix
     assert "riderlive serve: warning: tick.realtime_priority is off" in log
     assert "fix: set tick.realtime_priority = true" in log

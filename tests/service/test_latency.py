@@ -24,12 +24,11 @@ from websockets.sync.client import connect
 
 from riderlive.realtime.latency import BOUNDS, N_BOUNDS, LatencySnapshot
 from tests.service.live_server import LiveServer
-from tests.service.test_rig_hookup import AUTH, post, rig_server, wait_state
+from tests.service.test_rig_hookup import AUTH, post, wait_state
 from tests.waiting import wait_until
 
-__all__ = ["rig_server"]
 RATE = 100.0
-"""The fixture's tick rate."""
+"""The shared rig's tick rate (``serve_rig``)."""
 
 
 def stream(live: LiveServer, seconds: float, rate: float = 60.0) -> int:
@@ -62,14 +61,23 @@ def latency(live: LiveServer) -> dict:
     return answer.json()
 
 
-def test_ingest_to_send_and_to_wire_are_observed_once_per_input(rig_server: LiveServer) -> None:
-    live = rig_server
+def test_ingest_to_send_and_to_wire_are_observed_once_per_input(shared_rig: LiveServer) -> None:
+    """On the session's shared rig (the only test that arms it: it is disarmed again after)."""
+    live = shared_rig
     wait_state(live, "disarmed")
     idle = latency(live)["histograms"]
     assert idle["ingest_to_wire"]["total"]["count"] == 0  # disarmed: no goal is written
     live.wait_guardian()
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
-    wait_state(live, "running")
+    try:
+        wait_state(live, "running")
+        _observed_once_per_input(live)
+    finally:
+        post(live, "/api/disarm", {"device": "bench3"})
+        wait_state(live, "parked", timeout=5.0)
+
+
+def _observed_once_per_input(live: LiveServer) -> None:
     sent = stream(live, 1.5)
     answer = latency(live)
     assert answer["goal"] == 1.0 / RATE + 0.001
@@ -166,7 +174,7 @@ def test_the_tick_phase_locks_to_a_producer_at_its_rate(tmp_path: Path) -> None:
     The margin is the arrival jitter's top when that is above ``tick.phase_margin``: < 1 ms
     with a steady producer, more on a saturated machine, which the bounds follow (the
     largest margin the lock chose while the frames were measured)."""
-    config = "[server]\nrealtime_priority = 10\n[tick]\nrate = 120.0\nhang_floor = 1.0\n"
+    config = "[server]\nrealtime_priority = 10\n[tick]\nrate = 120.0\nhang_floor = 1.0\nspare = false\n"
     live = LiveServer(config, tmp_path)
     stop = threading.Event()
     try:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import signal
 import time
 from collections.abc import Callable, Iterator
@@ -23,11 +22,11 @@ import httpx
 import pytest
 from websockets.sync.client import connect
 
-from tests.dynamixel.rig_harness import servo_emulator
-from tests.service.live_server import ROOT, LiveServer
+from tests.service.live_server import LiveServer
+from tests.service.rig_server import RIG_TOKEN, relaxed_rig, serve_rig  # noqa: F401 (relaxed_rig: tests/web, tests/bus)
 from tests.waiting import wait_until
 
-TOKEN = "rig-token-123"
+TOKEN = RIG_TOKEN
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
@@ -51,36 +50,18 @@ def wait_ticks(live: LiveServer, ticks: int, timeout: float = 15.0) -> None:
     wait_for(lambda: rig(live)["counters"]["ticks"] >= start + ticks, timeout, lambda: rig(live)["counters"])
 
 
-def relaxed_rig(tmp_path: Path) -> Path:
-    """bench3 with short ramps and generous bus budgets (this machine may be saturated)."""
-    text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
-    for key, value in (
-        ("reply_budget_s", "0.3"),
-        ("bus_watchdog_ms", "600"),
-        ("soft_start_s", "0.3"),
-        ("park_s", "0.3"),
-    ):
-        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
-    text = text.replace("[bus]\n", "[bus]\ntimeout_margin_ms = 40.0\n", 1)
-    path = tmp_path / "bench3.toml"
-    path.write_text(text)
-    return path
+@pytest.fixture
+def rig_server(tmp_path: Path) -> Iterator[LiveServer]:
+    """Without the warm spare (``tick.spare = false``): for tests that never fail over."""
+    with serve_rig(tmp_path, spare=False) as live:
+        yield live
 
 
 @pytest.fixture
-def rig_server(tmp_path: Path) -> Iterator[LiveServer]:
-    rig_file = relaxed_rig(tmp_path)
-    with servo_emulator(rig_file) as port:
-        config = (
-            f'[tick]\nrate = 100.0\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
-            f'[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
-        )
-        live = LiveServer(config, tmp_path, token=TOKEN)
-        try:
-            yield live
-        finally:
-            live.stop()
-            assert "Traceback" not in "".join(live.log), "".join(live.log)
+def rig_server_spare(tmp_path: Path) -> Iterator[LiveServer]:
+    """With the warm spare (the default): for the tests of a tick that dies or hangs."""
+    with serve_rig(tmp_path, spare=True) as live:
+        yield live
 
 
 def post(live: LiveServer, path: str, body: dict | None = None, token: bool = True) -> httpx.Response:
@@ -165,8 +146,8 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     assert "-> estop: e-stop (by signal)" in log or "estop" in log
 
 
-def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(rig_server: LiveServer) -> None:
-    live = rig_server
+def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(rig_server_spare: LiveServer) -> None:
+    live = rig_server_spare
     wait_state(live, "disarmed")
     assert live.get("/readyz").status_code == 200 and live.get("/healthz").status_code == 200
     live.wait_guardian()
@@ -184,7 +165,11 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     noticed = supervision()["last_down_at"]
     assert noticed - killed < 0.01 + 0.05, "a dead tick is noticed within 1 tick + 50 ms"
     assert live.get("/readyz").status_code == 503
-    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=20.0)
+    # A spare still warming (at nice 10, armed right after the start) is discarded for a cold
+    # start: imports and kernels, tens of seconds at load 17 (20 s timed out there twice), as
+    # test_platform_hookup waits; a quick restart returns at once. The restart's promptness is
+    # test_failover's (warm) and the detection bound above.
+    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=60.0)
     wait_state(live, "disarmed", timeout=20.0)  # back, and not re-armed
     second = supervision()
     assert second["restarts"] == 1 and second["deaths"] == 1 and second["guardian"]["takeovers"] == 1
@@ -205,6 +190,6 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     wait_for(lambda: supervision()["hangs"] == 1, timeout=3.0)
     noticed = supervision()["last_down_at"]
     assert noticed - frozen < 0.25 + 0.01  # tick.hang_floor (no real-time priority here) + a half-tick check
-    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=20.0)
+    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=60.0)
     wait_state(live, "disarmed", timeout=20.0)
     assert supervision()["guardian"]["takeovers"] == 2

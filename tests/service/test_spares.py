@@ -40,6 +40,7 @@ class FakeSpare:
 @dataclass
 class FakeLink:
     spares_wanted: bool = True
+    cold_failover: bool = False
     spare: FakeSpare | None = None
     spares_started: int = 0
     spares_failed: int = 0
@@ -103,3 +104,15 @@ def test_a_spare_that_died_is_replaced_and_none_is_wanted_for_a_tick_thread() ->
     tlink.spares_wanted = False
     thread.check(0.0, serving=True)
     assert tlink.spares_started == 0 and thread.warm()  # nothing to wait for
+
+
+def test_with_the_spare_off_none_is_started_and_a_failover_counts_as_cold() -> None:
+    """``tick.spare = false``: no spare ever, the status says ``off``, and :meth:`warm` is
+    False so the hang threshold keeps ``hang_floor_cold`` (a failover is a cold start);
+    the live wiring is checked on the shared test server (test_control)."""
+    spares, link = keeper()
+    link.spares_wanted, link.cold_failover = False, True
+    for now in (0.0, 1.0, 100.0):
+        spares.check(now, serving=True)
+    assert link.spares_started == 0 and link.spare is None and not spares.warm()
+    assert spares.snapshot() == {"state": "off", "pid": None, "warm_up_s": None, "started": 0, "failed": 0}
