@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import io
 import json
 import subprocess
 import sys
@@ -16,6 +14,7 @@ import pytest
 from riderlive.channels import HORSE_NAMES, RIDER_INDEX, RIDER_NAMES
 from riderlive.rules.engine import RiderModel
 from riderlive.rules.params import load_preset
+from tests.cli_main import run_main
 
 
 def run_cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess[str]:
@@ -23,20 +22,6 @@ def run_cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess
     return subprocess.run(
         [sys.executable, "-m", "riderlive", *args], input=stdin, capture_output=True, text=True, timeout=120
     )
-
-
-def run_main(*args: str) -> subprocess.CompletedProcess[str]:
-    """``riderlive ARGS`` in this process: the same ``cli.main`` without a Python start and its
-    imports per call (~2 s quiet, 15 s loaded); the exit code argparse raises is returned."""
-    from riderlive.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main(list(args))
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
-    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def horse_take(n: int = 50, seed: int = 0) -> np.ndarray:
@@ -117,7 +102,9 @@ def test_only_the_channels_the_rules_read_are_required(tmp_path: Path) -> None:
 
     src, out = tmp_path / "minimal.csv", tmp_path / "rider.csv"
     src.write_text(",".join(RULE_INPUTS) + "\n" + ",".join(["1.0"] * len(RULE_INPUTS)) + "\n")
-    assert run_cli("bake", str(src), "-o", str(out)).returncode == 0
+    result = run_main("bake", str(src), "-o", str(out))  # which channels: no process needed
+    assert result.returncode == 0, result.stderr
+    assert read_csv(out)[1].shape == (1, 1 + len(RIDER_NAMES))
 
 
 COLUMNS = ["t", *HORSE_NAMES]

@@ -126,13 +126,20 @@ def offset_output(n: int, items: int) -> np.ndarray:
     return buffer[skip : skip + 5 * n].reshape(5, n)
 
 
+@pytest.fixture(scope="module")
+def python_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The interpreted path's outputs for both block sizes: one process without numba, for both cases."""
+    out = tmp_path_factory.mktemp("python_path")
+    root = Path(__file__).resolve().parents[1]
+    subprocess.run([sys.executable, "-c", PYTHON_PATH, str(out)], cwd=root, check=True)
+    return out
+
+
 @pytest.mark.parametrize("block", [fastpath.BLOCK, 6])
-def test_batch_streams_exactly_the_python_path(block: int, tmp_path: Path) -> None:
+def test_batch_streams_exactly_the_python_path(block: int, python_path: Path) -> None:
     """The compiled kernel (streaming stores from 32-byte boundaries, single stores before and after) writes
     exactly what the same source writes interpreted, without numba: for every frame count (none, fewer
     than a store or a block, block edges), every row alignment, with and without the output gains."""
-    root = Path(__file__).resolve().parents[1]
-    subprocess.run([sys.executable, "-c", PYTHON_PATH, str(tmp_path)], cwd=root, check=True)
     run = fastpath.batch(mixed, 3, 5, block=block)
     for n in CASE_FRAMES:
         columns = case_columns(n)
@@ -140,7 +147,7 @@ def test_batch_streams_exactly_the_python_path(block: int, tmp_path: Path) -> No
         frames = zip(a.tolist(), b.tolist(), c.tolist(), strict=True)
         direct = np.array([mixed(*frame) for frame in frames]).reshape(n, 5).T  # Python floats
         for affine in (False, True):
-            python = np.load(tmp_path / f"{block}-{n}-{affine}.npy")
+            python = np.load(python_path / f"{block}-{n}-{affine}.npy")
             expected = direct * GAIN_OUT[:, None] + OFFSET_OUT[:, None] if affine else direct
             np.testing.assert_array_equal(python, expected)
             for items in range(4):

@@ -151,6 +151,12 @@ class EmulatedServo:
 
     # -- time ----------------------------------------------------------------------------
 
+    @property
+    def last_instruction(self) -> float:
+        """Clock time (s, the bus's clock) of the last instruction packet for this servo: the
+        Bus Watchdog's span counts from it."""
+        return self._last_instruction
+
     def feed_watchdog(self, now: float) -> None:
         """An instruction packet for this servo (or broadcast) arrived at ``now``."""
         watchdog = self.memory[_WATCHDOG_ADDRESS]
