@@ -237,25 +237,32 @@ def fit_clock(t: np.ndarray) -> tuple[float, np.ndarray]:
     Not ``(t[-1] - t[0]) / (n - 1)``: that reads the rate off the two end frames alone, and
     a producer late by tens of milliseconds at one end (a busy host) then looks like another
     rate (a 120 Hz stream as 125 Hz, which fits a 500 Hz tick); the fit weighs every frame.
-    Frames are numbered two ways and the one that fits better (less :func:`spread`) wins:
-    one after another (a producer that falls behind and catches up sends every frame), or
-    by the gaps between them in median intervals (a producer that skips frames it missed:
-    a dropout is a gap of two, not a frame late by an interval)."""
+    Frames are numbered one after another (a producer that falls behind and catches up
+    sends every frame); when the median gap is at least ``SKIP_GAP`` of that fit's interval
+    (fewer than a quarter of the frames missing, and not a bursty stream, whose median gap
+    is short), also by their gaps in median gaps (a producer that skips the frames it
+    missed: a dropout is a gap of two), and the better fit (less :func:`spread`) wins."""
     rel = t - t[0]
+    k = np.arange(len(t), dtype=np.float64)
+    best = _line(k, rel)
     gaps = np.diff(rel)
-    best: tuple[float, np.ndarray] | None = None
     median = float(np.median(gaps)) if len(gaps) else 0.0
-    numberings = [np.arange(len(t), dtype=np.float64)]
-    if median > 0.0:
-        numberings.append(np.concatenate(([0.0], np.cumsum(np.maximum(1.0, np.rint(gaps / median))))))
-    for number in numberings:
-        k = number - float(np.mean(number))
-        interval = float(np.dot(k, rel) / max(float(np.dot(k, k)), 1e-12))
-        residuals = rel - float(np.mean(rel)) - interval * k
-        if best is None or spread(residuals) < spread(best[1]):
-            best = (interval, residuals)
-    assert best is not None
+    if median > 0.0 and median >= SKIP_GAP * best[0]:
+        skipped = _line(np.concatenate(([0.0], np.cumsum(np.maximum(1.0, np.rint(gaps / median))))), rel)
+        if spread(skipped[1]) < spread(best[1]):
+            best = skipped
     return best
+
+
+SKIP_GAP = 0.75
+"""See :func:`fit_clock`."""
+
+
+def _line(number: np.ndarray, rel: np.ndarray) -> tuple[float, np.ndarray]:
+    """Least-squares slope of ``rel`` against ``number``, and the residuals."""
+    k = number - float(np.mean(number))
+    interval = float(np.dot(k, rel) / max(float(np.dot(k, k)), 1e-12))
+    return interval, rel - float(np.mean(rel)) - interval * k
 
 
 def spread(residuals: np.ndarray) -> float:
