@@ -235,15 +235,18 @@ class TickLoop(TickControl):
 
     def _await_pending(self, deadline: float) -> None:
         """A frame the web process received before this deadline (``perf_counter`` seconds) and is
-        still writing: spin until its record is in the ring, at most ``pacing.PICKUP_GRACE``."""
+        still writing: spin until its record is in the ring, at most ``pacing.PICKUP_GRACE``.
+        An e-stop requested meanwhile is acted on at once (as in the clock's spin)."""
         inputs = self.inputs
         received = inputs.pending()
         until = pickup_until(deadline, received, 1.0 / self.setup.rate)
         if until < 0.0:
             return
-        while inputs.pending() == received and time.perf_counter() < until:
-            pass
         self.counter.input_pickup_waits += 1
+        devices = self.devices
+        while inputs.pending() == received and time.perf_counter() < until:
+            if devices is not None and devices.stop_pending():
+                devices.act_on_stop(time.perf_counter())
 
     def _rules(self, now: float) -> TickResult:
         """Step the rules (never raising, never non-finite); their faults and counters out."""
