@@ -37,7 +37,7 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   ends, a fixed time after each deadline, so any stream shows some ``R`` (0.4-0.7 for a
   stalling 120 Hz producer into a 500 Hz tick). The frames must also keep their own time:
   the interquartile range of their residuals from :func:`fit_clock` (``spread``) at most
-  ``max_spread`` x ``period / k`` (``keep_spread`` to stay locked).
+  ``max_spread`` (half) x ``period / k`` (``keep_spread``, 3/4, to stay locked).
 - **Lock.** Locked when ``R >= lock_resultant`` and the spread fits, over at least
   ``min_samples`` frames at a rate that fits; let go (the deadlines keep the phase they
   have: *hold*) when ``R`` falls below ``unlock_resultant`` or the spread grows past
@@ -85,13 +85,14 @@ class Model:
     """Frames seen before a lock (a random stream's resultant length is about 1/sqrt(n): 0.1)."""
     lock_resultant: float = 0.5
     unlock_resultant: float = 0.3
-    max_spread: float = 0.25
+    max_spread: float = 0.5
     """The frames' lateness against their own steady clock (the interquartile range of the
-    residuals of :func:`fit_clock`, a fraction of ``period / harmonic``) for a lock: about
-    what ``lock_resultant`` allows for Gaussian jitter (0.25 span); a producer that stalls
-    for longer and catches up has no phase of its own, whatever ``R`` the receive stamps show ..."""
-    keep_spread: float = 0.35
-    """... and to keep one (about ``unlock_resultant``)."""
+    residuals of :func:`fit_clock`, a fraction of ``period / harmonic``) for a lock: a sanity
+    check, ``R`` judges the phase (Gaussian jitter of IQR 0.25 span already gives ``R`` 0.5);
+    a producer that stalls for longer than the span and catches up keeps no time of its own,
+    whatever ``R`` the receive stamps show ..."""
+    keep_spread: float = 0.75
+    """... and to keep one."""
     rate_tolerance: float = 0.02
     """Relative difference of the mean interval from a whole multiple (or fraction) of the period."""
     max_drift: float = 0.001
