@@ -31,6 +31,7 @@ class TickCounters(SlotBlock):
     input_frames = Slot(int, TICK, "input records taken")
     input_lapped = Slot(int, TICK, "input records the web process overwrote before the tick read them")
     input_out_of_order = Slot(int, TICK, "input records refused: not after the producer's last")
+    input_pickup_waits = Slot(int, TICK, "ticks that waited at their pickup for a frame received before the deadline")
     step_errors = Slot(int, TICK, "steps that raised (the last good frame repeated)")
     nonfinite_outputs = Slot(int, TICK, "steps that gave a non-finite rider (the last good frame repeated)")
     physics_errors = Slot(int, TICK, "tail physics restarts after a failed step")

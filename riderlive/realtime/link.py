@@ -278,6 +278,11 @@ class TickLink(TickMemory):
         record[L.IN_VALUES : L.IN_VALUES + len(values)] = values
         self.inputs.write(record)
 
+    def input_pending(self, received: float | None) -> None:
+        """An input received at ``received`` (``perf_counter`` seconds) is being turned into a
+        record for the tick (None: done): the tick waits for it briefly (``pacing.pickup_until``)."""
+        self.inputs.mark_pending(received)
+
     def drain_notify(self) -> None:
         try:
             while os.read(self.notify_fd, 65536):

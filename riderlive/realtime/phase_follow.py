@@ -68,6 +68,7 @@ class PhaseFollower:
             "locked": s.locked,
             "harmonic": s.harmonic,
             "resultant": s.resultant,
+            "spread": None if math.isnan(s.spread) else s.spread,
             "drift": s.drift,
             "locks": s.locks,
             "losses": s.losses,

@@ -14,7 +14,8 @@ moves its :class:`~riderlive.realtime.pacing.DeadlineClock` by ``state.shift``.
 Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
 
 - **Phase.** Every ``analysis_interval`` seconds the last ``window`` receive times are
-  analysed. The mean interval says how the producer's rate relates to the tick's:
+  analysed. The mean interval (the least-squares fit of every frame, :func:`fit_clock`, not
+  the window's two ends) says how the producer's rate relates to the tick's:
   about a whole multiple ``m`` of the period (``m`` = 1 the same rate, ``m`` > 1 a
   divisor rate: every m-th tick takes a frame) gives harmonic ``k`` = 1; about
   ``period / k`` (a multiple rate, ``k`` frames per tick) gives harmonic ``k``. Any
@@ -31,11 +32,18 @@ Times are engine seconds; phases are seconds in ``[0, period / harmonic)``.
   wait of 256 frames; about one frame in 250 then misses its deadline) the margin is
   the arrival jitter's top: the floor for a steady producer, milliseconds on a busy
   machine, where that still beats a miss (:func:`best_margin`).
-- **Lock.** Locked when ``R >= lock_resultant`` over at least ``min_samples`` frames at a
-  rate that fits; let go (the deadlines keep the phase they have: *hold*) when ``R``
-  falls below ``unlock_resultant``, the rate stops fitting, the producer changes, or no
-  frame came for ``gap`` seconds (the window is then emptied; the tick's driver leaves
-  the input at about the same time, ``input.hold``); ``lost`` says why.
+- **Own time.** ``R`` is measured against the tick's grid, and the receive stamps are the
+  web process's: a frame that comes while it sends the tick's record is stamped when that
+  ends, a fixed time after each deadline, so any stream shows some ``R`` (0.4-0.7 for a
+  stalling 120 Hz producer into a 500 Hz tick). The frames must also keep their own time:
+  the interquartile range of their residuals from :func:`fit_clock` (``spread``) at most
+  ``max_spread`` (half) x ``period / k`` (``keep_spread``, 3/4, to stay locked).
+- **Lock.** Locked when ``R >= lock_resultant`` and the spread fits, over at least
+  ``min_samples`` frames at a rate that fits; let go (the deadlines keep the phase they
+  have: *hold*) when ``R`` falls below ``unlock_resultant`` or the spread grows past
+  ``keep_spread``, the rate stops fitting, the producer changes, or no frame came for
+  ``gap`` seconds (the window is then emptied; the tick's driver leaves the input at
+  about the same time, ``input.hold``); ``lost`` says why.
 - **Slew.** While locked each step moves the deadlines by ``gain`` x the phase error,
   at most ``slew`` x period: consecutive deadlines stay between ``(1 - slew)`` and
   ``(1 + slew)`` periods apart, so the rate the bus, the physics' fixed step and the
@@ -77,6 +85,14 @@ class Model:
     """Frames seen before a lock (a random stream's resultant length is about 1/sqrt(n): 0.1)."""
     lock_resultant: float = 0.5
     unlock_resultant: float = 0.3
+    max_spread: float = 0.5
+    """The frames' lateness against their own steady clock (the interquartile range of the
+    residuals of :func:`fit_clock`, a fraction of ``period / harmonic``) for a lock: a sanity
+    check, ``R`` judges the phase (Gaussian jitter of IQR 0.25 span already gives ``R`` 0.5);
+    a producer that stalls for longer than the span and catches up keeps no time of its own,
+    whatever ``R`` the receive stamps show ..."""
+    keep_spread: float = 0.75
+    """... and to keep one."""
     rate_tolerance: float = 0.02
     """Relative difference of the mean interval from a whole multiple (or fraction) of the period."""
     max_drift: float = 0.001
@@ -105,6 +121,8 @@ class Model:
             raise ValueError("phase lock: 0 < unlock_resultant <= lock_resultant < 1, 0.5 <= quantile < 1")
         if not (2 <= self.min_samples <= self.window):
             raise ValueError("phase lock: 2 <= min_samples <= window")
+        if not (0.0 < self.max_spread <= self.keep_spread):
+            raise ValueError("phase lock: 0 < max_spread <= keep_spread")
 
 
 class State(NamedTuple):
@@ -123,6 +141,8 @@ class State(NamedTuple):
     interval: float = math.nan
     """Mean time between frames at the last analysis."""
     resultant: float = 0.0
+    spread: float = math.nan
+    """The frames' lateness against their own clock at the last analysis (seconds; ``Analysis.spread``)."""
     arrival: float = math.nan
     """Expected arrival phase (in ``[0, period / harmonic)``) as of ``at``; NaN before the first analysis."""
     at: float = math.nan
@@ -161,6 +181,9 @@ class Analysis(NamedTuple):
     fits: bool
     """The rate has a phase against the tick: a whole multiple or fraction of it (``drift`` aside)."""
     resultant: float
+    spread: float
+    """Interquartile range (seconds) of the receive times' residuals from :func:`fit_clock`: how
+    well the frames keep their own time, whatever the tick does (``max_spread``)."""
     arrival: float
     at: float
     """The time ``arrival`` is the phase of (the window's mean receive time)."""
@@ -173,7 +196,7 @@ def analyse(model: Model, times: Sequence[float]) -> Analysis:
     """Rate, harmonic, resultant length, arrival phase and margin of ``times`` (at least 2)."""
     t = np.asarray(times, dtype=np.float64)
     period = model.period
-    interval = float(t[-1] - t[0]) / (len(t) - 1)  # the mean: a late frame and its catch-up cancel out
+    interval, residuals = fit_clock(t)
     harmonic, fits = 1, False
     if interval > 0.0:
         ratio = interval / period
@@ -202,7 +225,51 @@ def analyse(model: Model, times: Sequence[float]) -> Analysis:
     late -= median
     arrival = (float(t[0]) + mean * span + median) % span
     margin = best_margin(model, late, span)
-    return Analysis(harmonic, interval, fits, resultant, arrival, float(t[0]) + centre, margin, drift)
+    return Analysis(
+        harmonic, interval, fits, resultant, spread(residuals), arrival, float(t[0]) + centre, margin, drift
+    )
+
+
+def fit_clock(t: np.ndarray) -> tuple[float, np.ndarray]:
+    """The producer's own steady clock: ``(interval, residuals)``, the least-squares line of the
+    receive times ``t`` (seconds, at least 2) against each frame's number, and each frame's
+    distance from it (seconds).
+
+    Not ``(t[-1] - t[0]) / (n - 1)``: that reads the rate off the two end frames alone, and
+    a producer late by tens of milliseconds at one end (a busy host) then looks like another
+    rate (a 120 Hz stream as 125 Hz, which fits a 500 Hz tick); the fit weighs every frame.
+    Frames are numbered one after another (a producer that falls behind and catches up
+    sends every frame); when the median gap is at least ``SKIP_GAP`` of that fit's interval
+    (fewer than a quarter of the frames missing, and not a bursty stream, whose median gap
+    is short), also by their gaps in median gaps (a producer that skips the frames it
+    missed: a dropout is a gap of two), and the better fit (less :func:`spread`) wins."""
+    rel = t - t[0]
+    k = np.arange(len(t), dtype=np.float64)
+    best = _line(k, rel)
+    gaps = np.diff(rel)
+    median = float(np.median(gaps)) if len(gaps) else 0.0
+    if median > 0.0 and median >= SKIP_GAP * best[0]:
+        skipped = _line(np.concatenate(([0.0], np.cumsum(np.maximum(1.0, np.rint(gaps / median))))), rel)
+        if spread(skipped[1]) < spread(best[1]):
+            best = skipped
+    return best
+
+
+SKIP_GAP = 0.75
+"""See :func:`fit_clock`."""
+
+
+def _line(number: np.ndarray, rel: np.ndarray) -> tuple[float, np.ndarray]:
+    """Least-squares slope of ``rel`` against ``number``, and the residuals."""
+    k = number - float(np.mean(number))
+    interval = float(np.dot(k, rel) / max(float(np.dot(k, k)), 1e-12))
+    return interval, rel - float(np.mean(rel)) - interval * k
+
+
+def spread(residuals: np.ndarray) -> float:
+    """The interquartile range of ``residuals`` (seconds): robust to a few very late frames."""
+    q25, q75 = np.quantile(residuals, (0.25, 0.75))
+    return float(q75 - q25)
 
 
 def best_margin(model: Model, late: np.ndarray, span: float) -> float:
@@ -257,21 +324,30 @@ def step(model: Model, state: State, now: float, producer: int, arrivals: Sequen
 
 def _analysed(model: Model, state: State, now: float) -> State:
     a = analyse(model, state.times)
-    threshold, drift = (
-        (model.unlock_resultant, model.keep_drift) if state.locked else (model.lock_resultant, model.max_drift)
+    span = model.period / a.harmonic
+    threshold, drift, widest = (
+        (model.unlock_resultant, model.keep_drift, model.keep_spread)
+        if state.locked
+        else (model.lock_resultant, model.max_drift, model.max_spread)
     )
-    fits = a.fits and abs(a.drift) <= drift
-    locked = fits and a.resultant >= threshold
+    regular = a.resultant >= threshold and a.spread <= widest * span
+    locked = a.fits and abs(a.drift) <= drift and regular
     if state.locked and (not locked or a.harmonic != state.harmonic):
-        why = "irregular" if a.resultant < threshold else "another rate" if a.harmonic == state.harmonic else ""
+        why = "irregular" if not regular else "another rate" if a.harmonic == state.harmonic else ""
         state = _let_go(state, why or "another harmonic")
-        locked = a.fits and abs(a.drift) <= model.max_drift and a.resultant >= model.lock_resultant
+        locked = (
+            a.fits
+            and abs(a.drift) <= model.max_drift
+            and a.resultant >= model.lock_resultant
+            and a.spread <= model.max_spread * span
+        )
     return state._replace(
         locked=locked,
         locks=state.locks + (locked and not state.locked),
         harmonic=a.harmonic,
         interval=a.interval,
         resultant=a.resultant,
+        spread=a.spread,
         arrival=a.arrival,
         at=a.at,
         drift=a.drift,

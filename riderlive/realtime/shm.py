@@ -8,13 +8,17 @@ after the copy, so it never sees a torn record and knows when it was lapped.
 
 Layout of one segment (little-endian, native on every supported machine)::
 
-    int64  header[8]      head, capacity, width, 0...
+    int64  header[8]      head, capacity, width, pending, 0...
     int64  seq[capacity]  per-slot sequence word
     float64 data[capacity, width]
 
 The stores are plain NumPy writes: x86-64 and ARMv8 keep a single writer's stores
 in order for a reader on another core closely enough for this protocol, because the
 reader re-checks the sequence word after copying.
+
+``pending`` is the writer's note that a record is on its way: the ``perf_counter``
+nanoseconds at which the input it will carry was received (0: none). The tick reads it
+to wait a moment for a frame received just before its deadline (``pacing.pickup_until``).
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ from riderlive.devices.shared import attach as _attach
 
 FloatArray = npt.NDArray[np.float64]
 _HEADER = 8
+_PENDING = 3
+"""Header word: ``perf_counter`` ns of the input the writer is turning into a record (0: none)."""
 
 
 class SharedRing:
@@ -65,6 +71,16 @@ class SharedRing:
     @property
     def name(self) -> str:
         return self._shm.name
+
+    def mark_pending(self, received: float | None) -> None:
+        """The writer: a record for the input received at ``received`` (``perf_counter`` seconds)
+        is on its way; None: no longer (written, or not to be written)."""
+        self._header[_PENDING] = 0 if received is None else max(1, int(received * 1e9))
+
+    def pending(self) -> float:
+        """``perf_counter`` seconds at which the input the writer is working on was received; -1: none."""
+        ns = int(self._header[_PENDING])
+        return ns * 1e-9 if ns > 0 else -1.0
 
     @property
     def head(self) -> int:

@@ -37,7 +37,7 @@ from riderlive.realtime.core import Driver, TickCore, TickResult
 from riderlive.realtime.counters import COUNTERS, TickCounters
 from riderlive.realtime.frame import frame_of
 from riderlive.realtime.output import TickDevices
-from riderlive.realtime.pacing import DeadlineClock, bucket_of
+from riderlive.realtime.pacing import DeadlineClock, bucket_of, pickup_until
 from riderlive.realtime.phase_follow import PhaseFollower
 from riderlive.realtime.record import LayoutMismatch, RecordLayout
 from riderlive.realtime.setup import TickSetup
@@ -212,6 +212,7 @@ class TickLoop(TickControl):
         arrivals = self._arrivals
         arrivals.clear()
         counter = self.counter
+        self._await_pending(now + self.setup.start)
         for record in self.inputs.read_new():
             values = record[L.IN_VALUES :].tolist()
             rx = float(record[L.IN_RECEIVED])
@@ -231,6 +232,21 @@ class TickLoop(TickControl):
         if newest_rx >= 0.0:
             self.histograms["ingest_to_tick"].observe(now - newest_rx)
         return newest_rx
+
+    def _await_pending(self, deadline: float) -> None:
+        """A frame the web process received before this deadline (``perf_counter`` seconds) and is
+        still writing: spin until its record is in the ring, at most ``pacing.PICKUP_GRACE``.
+        An e-stop requested meanwhile is acted on at once (as in the clock's spin)."""
+        inputs = self.inputs
+        received = inputs.pending()
+        until = pickup_until(deadline, received, 1.0 / self.setup.rate)
+        if until < 0.0:
+            return
+        self.counter.input_pickup_waits += 1
+        devices = self.devices
+        while inputs.pending() == received and time.perf_counter() < until:
+            if devices is not None and devices.stop_pending():
+                devices.act_on_stop(time.perf_counter())
 
     def _rules(self, now: float) -> TickResult:
         """Step the rules (never raising, never non-finite); their faults and counters out."""

@@ -115,15 +115,18 @@ class IngestEndpoint:
                 if data is None:
                     data = message.get("bytes") or b""
                 now = time.perf_counter()
+                service.link.input_pending(now)  # the tick waits a moment for it (realtime/pacing.py)
                 try:
                     result = self.handle(producer, parse_message(data, config.input.max_message_bytes), now)
                 except Exception as exc:
+                    service.link.input_pending(None)
                     if not isinstance(exc, BadFrame):  # a bug: answered, counted and logged, never a silent drop
                         log.exception("ingest failed on a message from %s", producer.name)
                         exc = BadFrame("internal_error", "the service failed on this message (see its log)")
                     if await self.reject(producer, exc, now):
                         break
                     continue
+                service.link.input_pending(None)
                 while producer.outbox:
                     await send_quietly(websocket, producer.outbox.pop(0), 1.0)
                 if result is not None and result != driving:

@@ -99,6 +99,7 @@ TICK_COUNTERS: tuple[tuple[str, str], ...] = (
     ("skipped", "Deadlines skipped after overruns."),
     ("input_frames", "Horse frames taken by the tick."),
     ("input_lapped", "Horse frames overwritten in the ring before the tick read them."),
+    ("input_pickup_waits", "Ticks that waited (<= 0.3 ms) for a frame received before their deadline."),
     ("input_out_of_order", "Horse frames dropped by the tick as not newer than the last."),
     ("step_errors", "Ticks whose step raised (the last good frame was repeated)."),
     ("nonfinite_outputs", "Ticks whose rider had NaN or inf (the last good frame was repeated)."),

@@ -49,6 +49,9 @@ class TickPort(Protocol):
     ) -> None:
         """One validated frame (service units) for the tick; ``received`` in engine seconds."""
 
+    def input_pending(self, received: float | None) -> None:
+        """A frame received at ``received`` (``perf_counter`` seconds) is on its way (None: no longer)."""
+
     def tell(self, command: cmd.Command) -> bool:
         """A command the tick may miss while down (False: not sent)."""
 

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import time
 
-from riderlive.realtime.pacing import LATENESS_BUCKETS, DeadlineClock, bucket_of
+import pytest
+
+from riderlive.realtime.pacing import (
+    LATENESS_BUCKETS,
+    PICKUP_GRACE,
+    PICKUP_MAX_AGE,
+    DeadlineClock,
+    bucket_of,
+    pickup_until,
+)
 
 
 def test_deadlines_do_not_drift_whatever_the_work_costs() -> None:
@@ -38,3 +47,18 @@ def test_buckets() -> None:
     assert bucket_of(0.0) == 0
     assert bucket_of(0.0004) == LATENESS_BUCKETS.index(0.0005)
     assert bucket_of(10.0) == len(LATENESS_BUCKETS)
+
+
+@pytest.mark.parametrize("period", [1.0 / 500.0, 1.0 / 120.0, 1.0 / 1000.0])
+def test_the_pickup_waits_only_for_a_frame_received_just_before_the_deadline(period: float) -> None:
+    deadline = 100.0
+    grace = min(PICKUP_GRACE, 0.15 * period)
+    # Received 0.1 ms before the deadline, still being written: wait until deadline + grace.
+    assert pickup_until(deadline, deadline - 0.0001, period) == pytest.approx(deadline + grace, abs=1e-12)
+    assert pickup_until(deadline, deadline, period) == pytest.approx(deadline + grace, abs=1e-12)
+    assert grace <= 0.0003 and grace <= 0.15 * period
+    # None on its way, received after the deadline (the next tick's), or a stale note: no wait.
+    assert pickup_until(deadline, -1.0, period) == -1.0
+    assert pickup_until(deadline, deadline + 1e-6, period) == -1.0
+    assert pickup_until(deadline, deadline - PICKUP_MAX_AGE - 1e-6, period) == -1.0
+    assert pickup_until(deadline, deadline - PICKUP_MAX_AGE + 1e-6, period) > deadline

@@ -25,6 +25,22 @@ def test_ring_reads_what_was_written_in_order() -> None:
         ring.close()
 
 
+def test_the_writer_notes_a_record_on_its_way_for_the_reader() -> None:
+    ring = SharedRing(8, 3)
+    try:
+        reader = SharedRing(0, 0, name=ring.name)
+        assert reader.pending() == -1.0
+        ring.mark_pending(1234.567890123)
+        assert reader.pending() == pytest.approx(1234.567890123, abs=1e-9)
+        ring.write([1.0, 2.0, 3.0])
+        ring.mark_pending(None)
+        assert reader.pending() == -1.0
+        assert [r.tolist() for r in reader.read_new()] == [[1.0, 2.0, 3.0]]
+        reader.close()
+    finally:
+        ring.close()
+
+
 def test_a_lapped_reader_counts_what_it_lost_and_gets_the_newest() -> None:
     ring = SharedRing(8, 1)
     try:

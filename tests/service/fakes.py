@@ -70,6 +70,9 @@ class FakeTick:
     ) -> None:
         self.pushed.append(Pushed(producer, t, received, list(values), kind))
 
+    def input_pending(self, received: float | None) -> None:
+        """Nothing waits on it here (the real tick's pickup does)."""
+
     def tell(self, command: cmd.Command) -> bool:
         if self.up:
             self.told.append(command)
