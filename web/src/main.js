@@ -22,10 +22,6 @@ const DEFAULT_PLOTS = ["lower_back.rz", "cog.ty", "head.rz", "lfHoof.ty"];
 const METRE_SCALE = 25; // thesis rig units per metre: the service speaks metres at this length_scale
 const QUERY = new URLSearchParams(location.search);
 const RENDER = QUERY.get("render") === "sticks" ? "sticks" : "mesh";
-/** `?maxfps=N`: draw the 3D view and the plots at most N times a second (a page on the service's
- * own busy host, a wall display, a test that reads state rather than pixels); the pose, values,
- * timecode and panels still follow every frame. Absent or not a positive number: every frame. */
-const MAX_FPS = ((n) => (Number.isFinite(n) && n > 0 ? n : null))(Number(QUERY.get("maxfps")));
 
 const page = {
   connected: false,
@@ -40,8 +36,6 @@ const page = {
   service: null,
   errors: [],
   render: RENDER,
-  maxFps: MAX_FPS,
-  draws: 0, // frames drawn (3D view), of `frames` received
   exaggeration: 1,
 };
 window.riderlive = page;
@@ -277,8 +271,8 @@ async function start() {
     if (scaleOf(resolution) !== before) showScale();
   }
 
-  /** Pose both skeletons for `values` and, when `render`, draw them. */
-  function drawFrame(values, render) {
+  /** Pose both skeletons for `values` and draw them. */
+  function drawFrame(values) {
     let v = values;
     if (toMetres !== 1) {
       v = { ...values };
@@ -313,7 +307,7 @@ async function start() {
         return byName(horseRig, horseW.positions);
       },
     };
-    if (!view || !render) return;
+    if (!view) return;
     // Chain positions (tail_NN.t*, braid_NN.t*, *_cloth_NN.t*) are world positions: shifted as the horse is.
     const toView = (p) => [p[0] - shift[0], p[1], p[2] - shift[1]];
     const ti = horseRig.index.tailRoot;
@@ -356,9 +350,6 @@ async function start() {
   let lastSecond = performance.now();
   let lastLatest = null;
   let lastPlot = 0;
-  let lastDraw = -Infinity;
-  let undrawn = false; // a frame posed but not drawn yet (?maxfps)
-  const drawGap = MAX_FPS === null ? 0 : 1000 / MAX_FPS;
   function tick(now) {
     const t0 = performance.now();
     rafCount += 1;
@@ -369,37 +360,24 @@ async function start() {
       frameCount = 0;
       lastSecond = now;
       adaptScale();
-      $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${MAX_FPS === null ? "" : ` (drawn ≤ ${MAX_FPS}/s)`}${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
+      $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
     }
     if (latest && latest.tc !== undefined && latest.tc !== page.timecode) {
       page.timecode = latest.tc;
       $("timecode").textContent = `TC ${latest.tc}`;
     }
     try {
-      const due = now - lastDraw >= drawGap;
-      const fresh = latest && (latest !== lastLatest || page.exaggeration !== 1);
-      if (fresh) {
+      if (latest && (latest !== lastLatest || page.exaggeration !== 1)) {
         lastLatest = latest;
         page.values = latest.values;
-        undrawn = true;
-      }
-      if (latest && undrawn && (fresh || due)) {
-        drawFrame(latest.values, due); // posed on every frame, drawn when due
-        if (due) {
-          undrawn = false;
-          lastDraw = now;
-          page.draws += 1;
-          takeSnapshots();
-        }
-      } else if (!latest && due) {
-        drawFrame({}, true);
-        lastDraw = now;
-      }
+        drawFrame(latest.values);
+        takeSnapshots();
+      } else if (!latest) drawFrame({});
     } catch (err) {
       page.errors.push(String(err));
       throw err;
     }
-    if (now - lastPlot >= Math.max(33, drawGap)) {
+    if (now - lastPlot >= 33) {
       lastPlot = now; // plots at <= 30 Hz: enough for the eye, half the canvas work
       plots.draw();
     }
