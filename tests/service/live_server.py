@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import httpx
 
@@ -110,6 +111,11 @@ class LiveServer:
         except AssertionError:
             self.stop()
             raise RuntimeError("the tick never started:\n" + "".join(self.log)) from None
+
+    def devices(self) -> dict[str, Any]:
+        """``GET /api/devices`` (with this server's token): each device's state, supervision."""
+        result: dict[str, Any] = self.get("/api/devices", headers=self.auth).json()
+        return result
 
     def wait_guardian(self, timeout: float = 60.0) -> None:
         """Until the devices' guardian reports alive: an arm before that is refused (503,

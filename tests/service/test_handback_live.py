@@ -62,28 +62,23 @@ def armed_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigConf
         yield served
 
 
-def devices(live: LiveServer) -> dict[str, Any]:
-    result: dict[str, Any] = live.get("/api/devices", headers=AUTH).json()
-    return result
-
-
 @pytest.mark.timeout(1800)
 def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_ends_disarmed(
     armed_rig: tuple[LiveServer, EmulatedBus, RigConfig],
 ) -> None:
     live, emu, rig = armed_rig
-    rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
+    rig_state = lambda: live.devices()["devices"][0]["state"]  # noqa: E731
     for _ in range(3):  # a loaded host may fail the tick over by itself (a hang): then arm again
-        wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+        wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, live.devices)
         live.wait_guardian()
         assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
-        wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
+        wait_until(lambda: rig_state() == "running", 30.0, live.devices)
         # A spare's warm-up (imports, compiled kernels) took minutes at load 19 on the 2 shared cores.
-        wait_until(lambda: devices(live)["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
+        wait_until(lambda: live.devices()["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
         if rig_state() == "running":
             break
     else:
-        pytest.fail(f"the host failed the tick over before every kill: {devices(live)}")
+        pytest.fail(f"the host failed the tick over before every kill: {live.devices()}")
     # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
     client = Follower(live.ws, horse_channels=None, max_size=None, ping_interval=None)  # closed with the server
     offset = engine_offset(live)
@@ -91,14 +86,14 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")
 
-    before = devices(live)["supervision"]
+    before = live.devices()["supervision"]
     killed = time.perf_counter()
     os.kill(before["tick_pid"], signal.SIGKILL)
     # While the guardian parks: the new generation up, its rig waiting for the hand-back.
     samples: list[tuple[float, dict[str, Any]]] = []
 
     def torque_off_since_kill() -> bool:
-        samples.append((time.perf_counter(), devices(live)))
+        samples.append((time.perf_counter(), live.devices()))
         return any(t > killed and is_torque_off_write(raw) for t, raw in list(emu.arrivals))
 
     wait_until(torque_off_since_kill, 60.0, lambda: samples[-1], poll=0.03)
@@ -132,11 +127,11 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
         f"waiting for the guardian to park and hand back generation {generation} (guardian: parking"
     ), detail
 
-    wait_until(lambda: rig_state() == "disarmed", 30.0, lambda: devices(live))
-    shown = devices(live)["devices"][0]
+    wait_until(lambda: rig_state() == "disarmed", 30.0, live.devices)
+    shown = live.devices()["devices"][0]
     assert shown["counters"]["handback_waits"] == 1 and shown["counters"].get("handback_timeouts", 0) == 0
     assert shown["counters"].get("arms", 0) == 0 and shown["armed_by"] is None  # never re-armed
-    ticks = lambda: devices(live)["devices"][0]["counters"]["ticks"]  # noqa: E731
+    ticks = lambda: live.devices()["devices"][0]["counters"]["ticks"]  # noqa: E731
     idle_from = ticks()
     wait_until(lambda: ticks() >= idle_from + 50, 10.0, "the new generation ticks its rig")  # half a second
     assert rig_state() == "disarmed"

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -49,36 +48,31 @@ def lagging_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigCo
         yield served
 
 
-def devices(live: LiveServer) -> dict[str, Any]:
-    result: dict[str, Any] = live.get("/api/devices", headers=AUTH).json()
-    return result
-
-
 @pytest.mark.timeout(1800)
 def test_a_reply_carried_late_is_a_counted_device_wait_not_a_hang(
     lagging_rig: tuple[LiveServer, EmulatedBus, RigConfig],
 ) -> None:
     live, emu, _ = lagging_rig
-    rig_state = lambda: devices(live)["devices"][0]["state"]  # noqa: E731
-    wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, lambda: devices(live))
+    rig_state = lambda: live.devices()["devices"][0]["state"]  # noqa: E731
+    wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, live.devices)
     live.wait_guardian()
     assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
-    wait_until(lambda: rig_state() == "running", 30.0, lambda: devices(live))
+    wait_until(lambda: rig_state() == "running", 30.0, live.devices)
     # The realtime hang threshold needs a warm spare (without one a failover is a cold start).
-    wait_until(lambda: devices(live)["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
-    before = devices(live)
+    wait_until(lambda: live.devices()["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
+    before = live.devices()
     threshold = before["supervision"]["hang_threshold"]
     assert threshold < 0.080, f"the realtime threshold at 120 Hz with hang_ticks 3: {threshold}"
     for n in range(1, LAGS + 1):
         emu.apply(parse_fault("lag:2:80"))
         wait_until(lambda n=n: emu.stats.lagged_replies >= n, 10.0, "the lagged reply was not asked for")
-        reads = devices(live)["devices"][0]["counters"].get("reads", 0)
+        reads = live.devices()["devices"][0]["counters"].get("reads", 0)
         wait_until(
-            lambda r=reads: devices(live)["devices"][0]["counters"].get("reads", 0) >= r + 3,
+            lambda r=reads: live.devices()["devices"][0]["counters"].get("reads", 0) >= r + 3,
             10.0,
-            lambda: (devices(live)["devices"][0], emu.stats),
+            lambda: (live.devices()["devices"][0], emu.stats),
         )
-    after = devices(live)
+    after = live.devices()
     sup, was = after["supervision"], before["supervision"]
     keys = ("hangs", "restarts", "takeovers", "stalls", "io_waits_excused", "io_wait_longest", "hang_threshold")
     print({k: sup[k] for k in keys}, after["devices"][0]["counters"], emu.stats)
