@@ -88,7 +88,7 @@ class BeatWatch:
             at_beat=self._at_beat,
             sched=sched,
             others_stall=max(0.0, now - guardian_beat - 2 * POLL_S) if guardian_beat else 0.0,
-            stolen=max(0.0, stolen),
+            stolen=stolen,
             frozen=frozen,
             progress_age=now - self._progress[0],
             io_until=io[0],

@@ -25,6 +25,7 @@ from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.rig import RigConfig, load_rig
 from tests.dynamixel.rig_harness import servo_emulator, servo_setups
 from tests.service.live_server import ROOT, LiveServer
+from tests.waiting import wait_until
 
 RIG_TOKEN = "rig-token-123"
 """The token of :func:`serve_rig`'s server."""
@@ -101,3 +102,17 @@ def serve_rig(tmp_path: Path, spare: bool) -> Iterator[LiveServer]:
         finally:
             live.stop()
             assert "Traceback" not in "".join(live.log), "".join(live.log)
+
+
+def arm_running(live: LiveServer, device: str = "bench3") -> None:
+    """Once ``device`` may be armed (disarmed or parked, the guardian alive): arm it by REST
+    and wait until it runs."""
+
+    def state() -> str:
+        return str(live.devices()["devices"][0]["state"])
+
+    wait_until(lambda: state() in ("disarmed", "parked"), 60.0, live.devices)
+    live.wait_guardian()
+    armed = live.request("POST", "/api/arm", json={"device": device}, headers=live.auth)
+    assert armed.status_code == 200, armed.text
+    wait_until(lambda: state() == "running", 30.0, live.devices)

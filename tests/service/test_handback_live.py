@@ -27,7 +27,7 @@ from tests.dynamixel.rig_harness import is_torque_off_write
 from tests.dynamixel.test_rig_drive import goal_writes, parked_since
 from tests.service.live_server import LiveServer
 from tests.service.producers import Follower
-from tests.service.rig_server import bench3_file, rig_server
+from tests.service.rig_server import arm_running, bench3_file, rig_server
 from tests.waiting import wait_until
 
 TOKEN = "handback-token"
@@ -69,10 +69,7 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
     live, emu, rig = armed_rig
     rig_state = lambda: live.devices()["devices"][0]["state"]  # noqa: E731
     for _ in range(3):  # a loaded host may fail the tick over by itself (a hang): then arm again
-        wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, live.devices)
-        live.wait_guardian()
-        assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
-        wait_until(lambda: rig_state() == "running", 30.0, live.devices)
+        arm_running(live)
         # A spare's warm-up (imports, compiled kernels) took minutes at load 19 on the 2 shared cores.
         wait_until(lambda: live.devices()["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
         if rig_state() == "running":

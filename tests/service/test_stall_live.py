@@ -25,7 +25,7 @@ from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.emulator_faults import parse_fault
 from riderlive.dynamixel.rig import RigConfig
 from tests.service.live_server import LiveServer
-from tests.service.rig_server import bench3_file, rig_server
+from tests.service.rig_server import arm_running, bench3_file, rig_server
 from tests.waiting import wait_until
 
 TOKEN = "stall-token"
@@ -53,11 +53,7 @@ def test_a_reply_carried_late_is_a_counted_device_wait_not_a_hang(
     lagging_rig: tuple[LiveServer, EmulatedBus, RigConfig],
 ) -> None:
     live, emu, _ = lagging_rig
-    rig_state = lambda: live.devices()["devices"][0]["state"]  # noqa: E731
-    wait_until(lambda: rig_state() in ("disarmed", "parked"), 60.0, live.devices)
-    live.wait_guardian()
-    assert live.request("POST", "/api/arm", json={"device": "bench3"}, headers=AUTH).status_code == 200
-    wait_until(lambda: rig_state() == "running", 30.0, live.devices)
+    arm_running(live)
     # The realtime hang threshold needs a warm spare (without one a failover is a cold start).
     wait_until(lambda: live.devices()["supervision"]["spare"]["state"] == "warm", 900.0, "no warm spare")
     before = live.devices()
