@@ -294,7 +294,9 @@ def test_page_sends_the_control_token_and_reconnects_to_a_restarted_service(brow
     try:
         s.start()
         without = open_page(browser, s.url)
-        without.wait_for("riderlive.connected && riderlive.frames > 5")  # publishing stays open
+        # Publishing stays open. The first frames wait for the tick's first start (cold, with
+        # its spare beside it: up to ~10 s on a loaded host), as the live_page fixture does.
+        without.wait_for("riderlive.connected && riderlive.frames > 5", timeout=40)
         # An e-stop is never locked (auth.Rule.NEVER_LOCKED): it latches without the token;
         # the reset, a write that needs it, is refused, and the page says why.
         devices = lambda: s.get("/api/devices")  # noqa: E731

@@ -36,6 +36,27 @@ def snapshot(p: PageUnderTest) -> tuple[np.ndarray, dict[str, Any]]:
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int), shot
 
 
+def snapshots_when(p: PageUnderTest, tests: list[str], timeout: float = 10.0) -> str:
+    """Ask the page for the view of the first frame whose values pass each test (a JS
+    expression of ``v``); returns the page-side name to await with :func:`shots_of`.
+
+    The page checks every frame it receives and queues each matching one to be drawn
+    next, so a pose that lasts a few ticks is caught at any drawing rate (a loaded host
+    draws a few frames/s) and the requests, made up front, never miss an early one.
+    """
+    asks = ", ".join(f"riderlive.snapshotWhen((v) => {t}, {timeout * 1000:.0f})" for t in tests)
+    p.page.evaluate(f"() => {{ riderlive.pendingShots = Promise.all([{asks}]); }}")
+    return "riderlive.pendingShots"
+
+
+def shots_of(p: PageUnderTest, name: str) -> list[tuple[np.ndarray, dict[str, Any]]]:
+    out = []
+    for shot in p.page.evaluate(name):
+        png = base64.b64decode(shot.pop("image").split(",", 1)[1])
+        out.append((np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int), shot))
+    return out
+
+
 def scene_pixels(p: PageUnderTest) -> np.ndarray:
     return snapshot(p)[0]
 
@@ -76,15 +97,16 @@ def test_pelvis_stays_in_the_saddle_through_a_jump(live_page: PageUnderTest, ser
         p.page.locator("[data-view=side]").click()
         p.state("riderlive.setIdColors(true)")
         p.wait_for("riderlive.horseText && riderlive.horseText.startsWith('horse: canter')", timeout=15)
+        conds = [
+            "v['rearPivot.rz'] > 12",  # take-off
+            "v['hip.rz'] > 15",  # over the fence, folded forward from the hip ([jump] layer)
+            "v['rearPivot.rz'] < -10",  # landing
+        ]
+        pending = snapshots_when(p, conds)
         server.request("POST", "/api/horse/perform", {"move": "jump"})
         seen = []
-        for cond in (
-            "riderlive.values['rearPivot.rz'] > 12",  # take-off
-            "riderlive.values['hip.rz'] > 15",  # over the fence, folded forward from the hip ([jump] layer)
-            "riderlive.values['rearPivot.rz'] < -10",  # landing
-        ):
-            p.wait_for(cond, timeout=10)
-            img, shot = snapshot(p)
+        for cond, (img, shot) in zip(conds, shots_of(p, pending), strict=True):
+            assert p.page.evaluate(f"(v) => {cond}", shot["values"]), cond  # the pose drawn is the one asked for
             seen.append((cond, img, (shot["horseWorld"]["saddle"], shot["riderWorld"]["hips"])))
         gaps: list[float] = []
         for cond, img, (saddle, hips) in seen:

@@ -206,6 +206,7 @@ async function start() {
     },
     frame(frame) {
       latest = frame;
+      pinMatches(frame);
       frameCount += 1;
       page.frames += 1;
       page.seq = frame.seq;
@@ -337,6 +338,28 @@ async function start() {
   // The 3D view as drawn, with the pose it shows (tests): taken right after the next render.
   const snapshots = [];
   page.snapshot = () => new Promise((resolve) => snapshots.push(resolve));
+  // The view of the first frame received whose values match `test` (values -> bool): each
+  // matching frame is queued and drawn in turn before newer ones, so a pose that lasts a
+  // few ticks is caught however slowly the page draws. Rejects after `timeoutMs`.
+  const pinRequests = [];
+  const pinned = [];
+  page.snapshotWhen = (test, timeoutMs = 10000) =>
+    new Promise((resolve, reject) => {
+      const request = { test, resolve };
+      pinRequests.push(request);
+      setTimeout(() => {
+        const i = pinRequests.indexOf(request);
+        if (i < 0) return;
+        pinRequests.splice(i, 1);
+        reject(new Error(`no frame matched within ${timeoutMs} ms: ${test}`));
+      }, timeoutMs);
+    });
+  function pinMatches(frame) {
+    for (let i = 0; i < pinRequests.length; ) {
+      if (pinRequests[i].test(frame.values)) pinned.push({ frame, resolve: pinRequests.splice(i, 1)[0].resolve });
+      else i += 1;
+    }
+  }
   function takeSnapshots() {
     if (!snapshots.length || !view) return;
     const shot = { image: view.canvas.toDataURL("image/png"), width: view.canvas.width, scale: view.canvas.width / view.canvas.clientWidth };
@@ -367,12 +390,15 @@ async function start() {
       $("timecode").textContent = `TC ${latest.tc}`;
     }
     try {
-      if (latest && (latest !== lastLatest || page.exaggeration !== 1)) {
-        lastLatest = latest;
-        page.values = latest.values;
-        drawFrame(latest.values);
+      const pin = pinned.shift();
+      const shown = pin ? pin.frame : latest;
+      if (pin) snapshots.push(pin.resolve);
+      if (shown && (shown !== lastLatest || page.exaggeration !== 1 || pin)) {
+        lastLatest = shown;
+        page.values = shown.values;
+        drawFrame(shown.values);
         takeSnapshots();
-      } else if (!latest) drawFrame({});
+      } else if (!shown) drawFrame({});
     } catch (err) {
       page.errors.push(String(err));
       throw err;
