@@ -1,12 +1,18 @@
-"""The real service (uvicorn, its own process, a free loopback port) and a real headless Chromium."""
+"""The real service (uvicorn, its own process, a free loopback port) and a real headless Chromium.
+
+One service with the default config serves every module of a worker (``shared_server``,
+session scope): a start costs ~7 s of CPU and 3-40 s of wall (quiet to loaded), and the
+modules leave it as they found it (``server``'s teardown checks the e-stop and the source).
+A test that needs another config or restarts its service starts its own :class:`Server`.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import json
 import os
+import re
 import signal
-import socket
 import subprocess
 import sys
 import urllib.request
@@ -26,17 +32,12 @@ PACKAGE_ROOT = Path(riderlive.__file__).resolve().parents[1]
 """Where the tests import riderlive from: the server runs that same code."""
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @dataclass
 class Server:
     """A running ``riderlive serve`` on 127.0.0.1."""
 
     port: int
+    """0: the service picks a free one (read from its log); a restart keeps the port it got."""
     workdir: Path
     extra_config: str = ""
     """More TOML sections for the service's config."""
@@ -47,7 +48,9 @@ class Server:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self, timeout: float = 20.0) -> None:
+    def start(self, timeout: float = 120.0) -> None:
+        """Until it answers ``GET /api/state``. No test times the start, so the bound is wide:
+        at load 19 a start's imports alone took over 20 s (a failed run); a quick start returns at once."""
         config = self.workdir / "service.toml"
         config.write_text(
             f'[server]\nport = {self.port}\n\n[takes]\ndirectory = "{self.workdir / "takes"}"\n\n{self.extra_config}'
@@ -68,6 +71,11 @@ class Server:
         def answers() -> bool:
             if self.process is None or self.process.poll() is not None:
                 return True
+            if self.port == 0:
+                said = re.search(r"listening on port (\d+)", log.read_text(errors="replace"))
+                if said is None:
+                    return False
+                self.port = int(said.group(1))
             with contextlib.suppress(OSError):
                 self.get("/api/state")
                 return True
@@ -115,15 +123,27 @@ def _needs_service() -> None:
         pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (.ci/run does it)")
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+@pytest.fixture(scope="session")
+def shared_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """The default service, once per worker; fitted presets go to ``presets`` (``tick.preset_dirs``)."""
     _needs_service()
-    s = Server(free_port(), tmp_path_factory.mktemp("serve"))
+    workdir = tmp_path_factory.mktemp("serve")
+    s = Server(0, workdir, extra_config=f'[tick]\npreset_dirs = ["{workdir / "presets"}"]\n')
     try:
         s.start()
         yield s
     finally:
         s.stop()
+
+
+@pytest.fixture(scope="module")
+def server(shared_server: Server) -> Iterator[Server]:
+    """The shared service for one module, which must leave it as it found it: live source,
+    e-stop clear (checked here, so a module that did not fails itself, not the next one)."""
+    yield shared_server
+    state = shared_server.get("/api/state")
+    assert state["source"] == {"kind": "live"}, f"the module left the source at {state['source']}"
+    assert not state["tick"].get("estop"), "the module left the e-stop latched"
 
 
 @pytest.fixture(scope="session")
@@ -150,19 +170,35 @@ class PageUnderTest:
         return self.state(expr)
 
 
-def open_page(browser: Any, url: str, path: str = "/") -> PageUnderTest:
+STATE_FPS = 10.0
+"""Draws a second of a page whose tests read its state, not its pixels (``?maxfps``): an open
+page otherwise draws every frame in software WebGL, ~0.7 of a core on the loaded host (as
+many frames as it gets a CPU for), for as long as it stays open."""
+
+
+def with_max_fps(path: str, max_fps: float | None) -> str:
+    """``path`` (``/``, ``/?render=sticks``, ``/#token=...``) asking the page for ``?maxfps``."""
+    if max_fps is None:
+        return path
+    where, hash_, fragment = path.partition("#")
+    return f"{where}{'&' if '?' in where else '?'}maxfps={max_fps:g}{hash_}{fragment}"
+
+
+def open_page(browser: Any, url: str, path: str = "/", max_fps: float | None = None) -> PageUnderTest:
+    """A new page at ``url + path``; ``max_fps``: draw at most that often (the page's ``?maxfps``)."""
     page = browser.new_page(viewport={"width": 1280, "height": 760})
     errors: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(f"uncaught: {e}"))
-    page.goto(url + path)
+    page.goto(url + with_max_fps(path, max_fps), timeout=120_000)  # a just started service on a busy host
     return PageUnderTest(page, errors)
 
 
 @pytest.fixture(scope="module")
 def live_page(browser: Any, server: Server) -> Iterator[PageUnderTest]:
-    """One page for the module's tests (each leaves the service as it found it)."""
-    p = open_page(browser, server.url)
+    """One page for the module's tests (each leaves the service as it found it), drawing at
+    most :data:`STATE_FPS` times a second: a module about pixels overrides this fixture."""
+    p = open_page(browser, server.url, max_fps=STATE_FPS)
     p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5", timeout=40)
     yield p
     p.page.close()

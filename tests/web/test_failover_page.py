@@ -25,7 +25,7 @@ import pytest
 from tests.dynamixel.rig_harness import servo_emulator
 from tests.service.test_rig_hookup import relaxed_rig
 from tests.waiting import wait_until
-from tests.web.conftest import PageUnderTest, Server, free_port, open_page
+from tests.web.conftest import STATE_FPS, PageUnderTest, Server, open_page
 
 pytestmark = pytest.mark.browser
 TOKEN = "page-failover-1"
@@ -52,8 +52,8 @@ def rig_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
             f'[tick]\nrate = 100.0\nrealtime_priority = false\n[security]\ntoken = "{TOKEN}"\n'
             f'[rig]\nfile = "{rig_file}"\nport = "{port}"\n'
         )
-        server = Server(free_port(), workdir, extra_config=extra)
-        server.start(timeout=60)
+        server = Server(0, workdir, extra_config=extra)
+        server.start()
         try:
             yield server
         finally:
@@ -82,7 +82,7 @@ def rig_state(server: Server) -> str:
 
 @pytest.fixture(scope="module")
 def page(browser: Any, rig_server: Server) -> Iterator[PageUnderTest]:
-    p = open_page(browser, rig_server.url, f"/#token={TOKEN}")
+    p = open_page(browser, rig_server.url, f"/#token={TOKEN}", max_fps=STATE_FPS)
     p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5", timeout=60)
     yield p
     p.page.close()

@@ -19,8 +19,9 @@ from riderlive.channels import HORSE_NAMES, RIDER_NAMES
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from riderlive.rules.params import load_preset
-from tests.web.conftest import PageUnderTest, Server, _needs_service, free_port, open_page
+from tests.web.conftest import STATE_FPS, PageUnderTest, Server, open_page
 
+pytestmark = pytest.mark.browser
 TAKE = "page-fit-take"
 RATE = 120.0
 
@@ -31,17 +32,16 @@ def csv_text(names: list[str], rows: np.ndarray) -> str:
     return "\n".join(lines) + "\n"
 
 
-@pytest.fixture(scope="module")
-def fit_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    """A service whose fitted presets go to ``presets`` (``tick.preset_dirs``)."""
-    _needs_service()
-    workdir = tmp_path_factory.mktemp("serve-fit")
-    s = Server(free_port(), workdir, extra_config=f'[tick]\npreset_dirs = ["{workdir / "presets"}"]\n')
+@pytest.fixture
+def fit_server(server: Server) -> Iterator[Server]:
+    """The shared service (its fitted presets go to ``tick.preset_dirs``), given back with the
+    preset it ran before: the other modules check the rules' default rider."""
+    before = server.get("/api/presets")["current"]
     try:
-        s.start()
-        yield s
+        yield server
     finally:
-        s.stop()
+        server.request("PUT", "/api/preset", {"name": before})
+        assert server.get("/api/presets")["current"] == before
 
 
 def test_fit_a_preset_from_an_imported_rider_and_apply_it(browser: Any, fit_server: Server, tmp_path: Path) -> None:
@@ -55,7 +55,7 @@ def test_fit_a_preset_from_an_imported_rider_and_apply_it(browser: Any, fit_serv
     rider = tmp_path / "english_rider.csv"
     rider.write_text(csv_text(list(RIDER_NAMES), np.array([model.evaluate(list(r)) for r in rows])))
 
-    p: PageUnderTest = open_page(browser, fit_server.url)
+    p: PageUnderTest = open_page(browser, fit_server.url, max_fps=STATE_FPS)
     try:
         page = p.page
         row = f"#takes li[data-take='{TAKE}']"

@@ -16,7 +16,6 @@ import re
 import signal
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -30,11 +29,8 @@ SPEED = re.compile(r"^horse: (?:(\w+) · )?(\d+\.\d) m/s$")
 
 
 @pytest.fixture(scope="module")
-def page(browser: Any, server: Server) -> Iterator[PageUnderTest]:
-    p = open_page(browser, server.url)
-    p.wait_for("window.riderlive && riderlive.connected && riderlive.frames > 5", timeout=30)  # a busy host
-    yield p
-    p.page.close()
+def page(live_page: PageUnderTest) -> PageUnderTest:
+    return live_page
 
 
 def _header(p: PageUnderTest) -> str:

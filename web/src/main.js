@@ -22,6 +22,10 @@ const DEFAULT_PLOTS = ["lower_back.rz", "cog.ty", "head.rz", "lfHoof.ty"];
 const METRE_SCALE = 25; // thesis rig units per metre: the service speaks metres at this length_scale
 const QUERY = new URLSearchParams(location.search);
 const RENDER = QUERY.get("render") === "sticks" ? "sticks" : "mesh";
+/** `?maxfps=N`: draw the 3D view and the plots at most N times a second (a page on the service's
+ * own busy host, a wall display, a test that reads state rather than pixels); the pose, values,
+ * timecode and panels still follow every frame. Absent or not a positive number: every frame. */
+const MAX_FPS = ((n) => (Number.isFinite(n) && n > 0 ? n : null))(Number(QUERY.get("maxfps")));
 
 const page = {
   connected: false,
@@ -36,6 +40,8 @@ const page = {
   service: null,
   errors: [],
   render: RENDER,
+  maxFps: MAX_FPS,
+  draws: 0, // frames drawn (3D view), of `frames` received
   exaggeration: 1,
 };
 window.riderlive = page;
@@ -272,8 +278,8 @@ async function start() {
     if (scaleOf(resolution) !== before) showScale();
   }
 
-  /** Pose both skeletons for `values` and draw them. */
-  function drawFrame(values) {
+  /** Pose both skeletons for `values` and, when `render`, draw them. */
+  function drawFrame(values, render) {
     let v = values;
     if (toMetres !== 1) {
       v = { ...values };
@@ -308,7 +314,7 @@ async function start() {
         return byName(horseRig, horseW.positions);
       },
     };
-    if (!view) return;
+    if (!view || !render) return;
     // Chain positions (tail_NN.t*, braid_NN.t*, *_cloth_NN.t*) are world positions: shifted as the horse is.
     const toView = (p) => [p[0] - shift[0], p[1], p[2] - shift[1]];
     const ti = horseRig.index.tailRoot;
@@ -373,6 +379,9 @@ async function start() {
   let lastSecond = performance.now();
   let lastLatest = null;
   let lastPlot = 0;
+  let lastDraw = -Infinity;
+  let undrawn = false; // a frame posed but not drawn yet (?maxfps)
+  const drawGap = MAX_FPS === null ? 0 : 1000 / MAX_FPS;
   function tick(now) {
     const t0 = performance.now();
     rafCount += 1;
@@ -383,27 +392,40 @@ async function start() {
       frameCount = 0;
       lastSecond = now;
       adaptScale();
-      $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
+      $("rates").textContent = `${page.frameRate.toFixed(0)} frames/s in · ${page.fps.toFixed(0)} fps${MAX_FPS === null ? "" : ` (drawn ≤ ${MAX_FPS}/s)`}${page.tickRate ? ` · tick ${page.tickRate} Hz` : ""}${link.restarts ? ` · service restarted ×${link.restarts}` : ""}`;
     }
     if (latest && latest.tc !== undefined && latest.tc !== page.timecode) {
       page.timecode = latest.tc;
       $("timecode").textContent = `TC ${latest.tc}`;
     }
     try {
-      const pin = pinned.shift();
-      const shown = pin ? pin.frame : latest;
+      const pin = pinned.shift(); // a frame asked for by snapshotWhen: drawn now, whatever ?maxfps says
       if (pin) snapshots.push(pin.resolve);
-      if (shown && (shown !== lastLatest || page.exaggeration !== 1 || pin)) {
+      const shown = pin ? pin.frame : latest;
+      const due = Boolean(pin) || now - lastDraw >= drawGap;
+      const fresh = shown && (shown !== lastLatest || page.exaggeration !== 1 || Boolean(pin));
+      if (fresh) {
         lastLatest = shown;
         page.values = shown.values;
-        drawFrame(shown.values);
-        takeSnapshots();
-      } else if (!shown) drawFrame({});
+        undrawn = true;
+      }
+      if (shown && undrawn && (fresh || due)) {
+        drawFrame(shown.values, due); // posed on every frame, drawn when due
+        if (due) {
+          undrawn = false;
+          lastDraw = now;
+          page.draws += 1;
+          takeSnapshots();
+        }
+      } else if (!shown && due) {
+        drawFrame({}, true);
+        lastDraw = now;
+      }
     } catch (err) {
       page.errors.push(String(err));
       throw err;
     }
-    if (now - lastPlot >= 33) {
+    if (now - lastPlot >= Math.max(33, drawGap)) {
       lastPlot = now; // plots at <= 30 Hz: enough for the eye, half the canvas work
       plots.draw();
     }
