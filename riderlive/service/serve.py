@@ -12,6 +12,7 @@ import asyncio
 import concurrent.futures
 import math
 import os
+import signal
 import socket
 import sys
 from types import FrameType
@@ -45,12 +46,18 @@ def uvicorn_config(app: object, config: ServiceConfig, fd: int | None = None) ->
     )
 
 
+ABANDON_AFTER = 2
+"""Ctrl+C presses after the first (which began the stop) that abandon the stop."""
+
+
 class RiderServer(uvicorn.Server):
     """uvicorn's server, saying goodbye to websocket clients before it drops them."""
 
     def __init__(self, config: uvicorn.Config, service: Service) -> None:
         super().__init__(config)
         self.service = service
+        self.interrupts_while_stopping = 0
+        """Ctrl+C pressed after the stop began (:data:`ABANDON_AFTER` of them force the exit)."""
 
     async def startup(self, sockets: list[socket.socket] | None = None) -> None:
         """``asyncio.to_thread`` work (bakes, upload checks, recovering a take) at normal priority,
@@ -66,10 +73,26 @@ class RiderServer(uvicorn.Server):
         await super().shutdown(sockets)
 
     def handle_exit(self, sig: int, frame: FrameType | None) -> None:
-        """SIGINT/SIGTERM of the process that drives the devices: e-stop first."""
+        """SIGINT/SIGTERM of the process that drives the devices: e-stop first.
+
+        uvicorn forces an exit at the second Ctrl+C, which cancels the app's shutdown (the
+        devices' park, the take's last rows, the guardian's stop) and prints a traceback; a
+        second Ctrl+C while the stop runs is only answered, the third abandons it (the
+        guardian then parks what was armed, the take is recovered at the next start)."""
         supervisor = getattr(self.service, "supervisor", None)
         if supervisor is not None:
             supervisor.estop(StopSource.SIGNAL)
+        if self.should_exit and sig == signal.SIGINT:
+            self.interrupts_while_stopping += 1
+            if self.interrupts_while_stopping < ABANDON_AFTER:
+                print(
+                    "riderlive serve: stopping (parking the devices, closing the take); "
+                    "Ctrl+C once more abandons it and leaves the park to the guardian",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                return
+            print("riderlive serve: stop abandoned", file=sys.stderr, flush=True)
         super().handle_exit(sig, frame)
 
 
