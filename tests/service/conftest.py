@@ -16,6 +16,7 @@ realtime_priority = false
 preset_dirs = ["presets"]
 hang_floor = 1.0  # the shared test server is not about supervision: no false restarts under load
 spare = false  # nor about failover: one process (~1.6 s of CPU, more loaded) less per start; see SPARE_CONFIG
+spin = 0.0  # nor about sub-ms pacing: the 1 ms spin before each deadline cost 0.2 of a core per server
 
 [input]
 delay = 0.03
@@ -36,14 +37,18 @@ SPARE_CONFIG = BASE_CONFIG.replace("spare = false", "spare = true")
 assert SPARE_CONFIG != BASE_CONFIG
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """One default server for tests/service, stopped when the package ends: an idle server
+    costs ~0.55 of a core (tick at 200 Hz with its 1 ms spin 0.38, web 0.17), which a
+    session scope charged to every test after tests/service (tests/web's software WebGL
+    pages ran 2-3x slower in the full suite than alone)."""
     live = LiveServer(BASE_CONFIG, tmp_path_factory.mktemp("serve"))
     yield live
     live.stop()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def shared_rig(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     """bench3 on the emulated bus, no spare (:func:`tests.service.rig_server.serve_rig`): one
     server for the tests that read its start or arm it once and measure (``test_hostcheck``,
