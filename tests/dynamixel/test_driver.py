@@ -157,7 +157,7 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
                 jump = max([abs(goal - before)] + [abs(goal - g) for g in acting.get(sid, [])])
                 assert abs(err) < jump + TRACKING_MAX_DEG
                 errors.append(abs(err))
-                lagging += abs(err) > abs(goal - before) + TRACKING_LAG_DEG
+                lagging += abs(err) > jump + TRACKING_LAG_DEG
         previous = goals
     assert reads >= len(running) // rig.bus.read_divider - 1
     assert missed <= 0.5 * (len(errors) + missed)  # a loaded 2-core box misses reads (retried, counted)
