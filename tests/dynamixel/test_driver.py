@@ -45,8 +45,8 @@ S = DeviceState
 
 TRACKING_LAG_DEG = 4.0
 """At every read while trotting, |goal sent - present position| may exceed the goal's
-own step since the previous tick (the servo cannot have moved toward a goal sent a
-moment ago; up to ~2.5 deg a tick for the seat and wrists at 50 Hz, more when the host
+change since the goals the servo had a whole tick to act on (:func:`acted_goals`; the
+tick's own step is ~2.5 deg at most for the seat and wrists at 50 Hz, more when the host
 is late) by at most this: the servo's lag behind its 6000 deg/s^2 profile through the
 kinks of the rule outputs."""
 TRACKING_WITHIN_LAG = 0.95
