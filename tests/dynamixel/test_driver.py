@@ -25,7 +25,7 @@ from riderlive.devices.status import DeviceStatus
 from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import EmulatedBus
 from riderlive.dynamixel.servo_map import ServoMap, deg_to_pulses, profile_velocity, pulses_to_deg
-from riderlive.dynamixel.tables import Item
+from riderlive.dynamixel.tables import Instruction, Item
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from tests.devices.memory_plug import rider_frame
@@ -45,14 +45,22 @@ S = DeviceState
 
 TRACKING_LAG_DEG = 4.0
 """At every read while trotting, |goal sent - present position| may exceed the goal's
-own step since the previous tick (the servo cannot have moved toward a goal sent a
-moment ago; up to ~2.5 deg a tick for the seat and wrists at 50 Hz, more when the host
+change since the goals the servo had a whole tick to act on (:func:`acted_goals`; the
+tick's own step is ~2.5 deg at most for the seat and wrists at 50 Hz, more when the host
 is late) by at most this: the servo's lag behind its 6000 deg/s^2 profile through the
 kinks of the rule outputs."""
 TRACKING_WITHIN_LAG = 0.95
 """Share of (read, servo) samples that must keep that bound (the 2-core CI box stalls)."""
 TRACKING_MAX_DEG = 10.0
-"""No sample beyond the goal's step + this, host stalls or not."""
+"""No sample beyond the goal's step + this. NOT true whatever the host does (issue 26):
+after a late tick (a host stall of 100+ ms) the goals jump, ``drive`` ticks again at
+once, and the emulator may process the jump late (seen: the jump's goal write reached
+the emulator 30 ms after it was sent and 14 ms before the next read), so the servo had
+~14 ms, not a tick, to act on it: reproduced 14.3 deg against a step of 0.8 deg. So the
+bound is taken from the goal change since the last goal the emulator had a whole tick to
+act on, on its own clock (:func:`acted_goals`)."""
+GOAL_ADDRESS = 116
+"""Goal Position's address (X series)."""
 TRACKING_MEAN_DEG = 1.5
 """Mean |goal sent - present position| over servos and reads."""
 FINAL_TOLERANCE_DEG = 0.5
@@ -69,6 +77,28 @@ def trot() -> Callable[[float], list[float]]:
 
 def extra(status: DeviceStatus, key: str) -> list[Any]:
     return [servo[key] for servo in status.extra["servos"]]
+
+
+def acted_goals(bus: EmulatedBus, period_s: float) -> list[dict[int, list[float]]]:
+    """For each read the emulator served (in order): per servo id, the goals (deg) it may
+    still be acting on at that read: the last goal that reached it at least ``period_s``
+    before the read (on the emulator's own clock) and every goal after it."""
+    writes: list[tuple[float, dict[int, float]]] = []
+    out: list[dict[int, list[float]]] = []
+    for at, raw in list(bus.arrivals):
+        if raw[7] == Instruction.SYNC_WRITE and int.from_bytes(raw[8:10], "little") == GOAL_ADDRESS:
+            body = raw[12:-2]
+            goals = {
+                body[i]: pulses_to_deg(int.from_bytes(body[i + 1 : i + 5], "little", signed=True))
+                for i in range(0, len(body), 5)
+            }
+            writes.append((at, goals))
+        elif raw[7] in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
+            acted = [i for i, (t, _) in enumerate(writes) if t <= at - period_s]
+            window = writes[acted[-1] if acted else 0 :]
+            ids = {sid for _, g in window for sid in g}
+            out.append({sid: [g[sid] for _, g in window if sid in g] for sid in ids})
+    return out
 
 
 def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
@@ -103,6 +133,9 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
     assert len(running) > 40, [s.fault for s in run.statuses if s.fault][:1]
     reads = lagging = missed = 0
     errors: list[float] = []
+    served = acted_goals(bus, 1.0 / rig.bus.tick_hz)
+    served = served[len(served) - sum(1 for s, _ in running[1:] if s.extra["read"]) :]
+    ids = [servo["id"] for servo in running[0][0].extra["servos"]]
     previous = goal_deg(running[0][0])
     transactions = running[0][0].extra["transactions"]
     for status, rider in running[1:]:
@@ -114,14 +147,17 @@ def test_trot_into_full_rider(bus_factory: Callable[..., EmulatedBus]) -> None:
         assert status.extra["transactions"] - transactions == (2 if read else 1)
         transactions = status.extra["transactions"]
         if read:
+            acting = served[reads]
             reads += 1
-            for err, goal, before in zip(extra(status, "tracking_error_deg"), goals, previous, strict=True):
+            for sid, err, goal, before in zip(ids, extra(status, "tracking_error_deg"), goals, previous, strict=True):
                 if err is None:  # that read missed this servo (retried next tick, counted)
                     missed += 1
                     continue
-                assert abs(err) < abs(goal - before) + TRACKING_MAX_DEG
+                assert acting[sid][-1] == pytest.approx(goal, abs=0.1)  # this tick's goal, then this read
+                jump = max([abs(goal - before)] + [abs(goal - g) for g in acting.get(sid, [])])
+                assert abs(err) < jump + TRACKING_MAX_DEG
                 errors.append(abs(err))
-                lagging += abs(err) > abs(goal - before) + TRACKING_LAG_DEG
+                lagging += abs(err) > jump + TRACKING_LAG_DEG
         previous = goals
     assert reads >= len(running) // rig.bus.read_divider - 1
     assert missed <= 0.5 * (len(errors) + missed)  # a loaded 2-core box misses reads (retried, counted)
