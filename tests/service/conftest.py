@@ -16,7 +16,6 @@ realtime_priority = false
 preset_dirs = ["presets"]
 hang_floor = 1.0  # the shared test server is not about supervision: no false restarts under load
 spare = false  # nor about failover: one process (~1.6 s of CPU, more loaded) less per start; see SPARE_CONFIG
-spin = 0.0  # nor about sub-ms pacing: the 1 ms spin before each deadline cost 0.2 of a core per server
 
 [input]
 delay = 0.03
