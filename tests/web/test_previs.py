@@ -41,7 +41,11 @@ def live_page(browser: Any, server: Server) -> Iterator[PageUnderTest]:
 
 def snapshot(p: PageUnderTest) -> tuple[np.ndarray, dict[str, Any]]:
     """The 3D view's pixels right after the page drew a frame, and the poses it drew."""
-    shot = p.page.evaluate("riderlive.snapshot()")
+    return decoded(p.page.evaluate("riderlive.snapshot()"))
+
+
+def decoded(shot: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
+    """A page snapshot's PNG data URL as RGB pixels, and the rest of the snapshot."""
     png = base64.b64decode(shot.pop("image").split(",", 1)[1])
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int), shot
 
@@ -60,11 +64,7 @@ def snapshots_when(p: PageUnderTest, tests: list[str], timeout: float = 10.0) ->
 
 
 def shots_of(p: PageUnderTest, name: str) -> list[tuple[np.ndarray, dict[str, Any]]]:
-    out = []
-    for shot in p.page.evaluate(name):
-        png = base64.b64decode(shot.pop("image").split(",", 1)[1])
-        out.append((np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int), shot))
-    return out
+    return [decoded(shot) for shot in p.page.evaluate(name)]
 
 
 def scene_pixels(p: PageUnderTest) -> np.ndarray:
