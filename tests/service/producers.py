@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import threading
 import time
@@ -70,6 +71,13 @@ class Producer:
         """Whether it drives, once the service has said (its answer to the first frame, or a change)."""
         self.inbox.wait_for(lambda m: m.get("type") == "control", timeout)
         return bool(self.driving())
+
+    def wait_driving(self, expected: bool, timeout: float = 5.0) -> bool:
+        """Whether the service's last word is ``expected``, waiting up to ``timeout`` s for it: the
+        control message travels on this socket, the frames it changed on another, in any order."""
+        with contextlib.suppress(AssertionError):
+            self.inbox.wait_for(lambda m: m.get("type") == "control" and self.driving() is expected, timeout)
+        return self.driving() is expected
 
     def close(self) -> None:
         self.closed.set()

@@ -41,7 +41,7 @@ def test_live_json_frames_drive_and_equal_bake(server: LiveServer, follower: Fol
         for frame in steady:
             np.testing.assert_allclose(frame["horse"], full(POSE), atol=1e-12)
             np.testing.assert_allclose(frame["values"], MODEL.evaluate(full(POSE)), atol=1e-9)
-        assert producer.driving() is True
+        assert producer.wait_driving(True)
     finally:
         producer.close()
 
@@ -84,7 +84,7 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
         assert all(f["horse"][rz] == 1.0 for f in follower.after(told, 40))  # b keeps sending all along
         c = Producer(server.ws, constant({"rearPivot.rz": 3.0}), hello={"name": "c", "priority": 5})
         follower.wait_for(lambda f: f["horse"][rz] == 3.0, timeout=2)
-        assert c.driving() is True
+        assert c.wait_driving(True)
         c.close()
         # c left: a (equal to b) is the one that sends next; either may win, never c's value.
         frame = follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] in (1.0, 2.0), timeout=3)
@@ -92,7 +92,7 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
         loser = b if winner is a else a
         winner.sending.clear()  # silent but connected: the other takes over after producer_timeout
         follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == (2.0 if winner is a else 1.0), 3)
-        assert loser.driving() is True
+        assert loser.wait_driving(True)
     finally:
         for p in (a, b, c):
             if p is not None:
