@@ -162,10 +162,11 @@ def test_replay_from_tc_starts_within_one_tick(server: LiveServer) -> None:
     try:
         for from_tc, offset in (("10:00:01;00", 30 / FPS), ("10:00:02;15", 75 / FPS)):
             body = {"kind": "replay", "take": "tc-replay", "from_tc": from_tc}
+            mark = len(follower.frames)  # the replay's first frames may arrive before the PUT's reply
             response = server.request("PUT", "/api/source", json=body)
             assert response.status_code == 200, response.text
             assert response.json()["from_tc"] == from_tc
-            first = follower.wait_for(lambda f: f["driver"] == "input" and f["source_t"] > 0.5, timeout=5.0)
+            first = follower.wait_for(lambda f: f["driver"] == "input" and f["source_t"] > 0.5, 10.0, mark)
             # the take's rows are 1/120 s apart: the replay starts on the row nearest the label
             assert abs(first["source_t"] - offset) <= 1 / 120, (first["source_t"], offset)
             server.request("PUT", "/api/source", json={"kind": "live"})
