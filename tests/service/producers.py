@@ -164,9 +164,12 @@ class Follower:
                 return i
         return None
 
-    def wait_for(self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 5.0) -> dict[str, Any]:
-        """The first frame from now on that matches (woken by each arrival)."""
-        return self.inbox.wait_for(predicate, timeout, start=len(self.frames))
+    def wait_for(
+        self, predicate: Callable[[dict[str, Any]], bool], timeout: float = 5.0, start: int | None = None
+    ) -> dict[str, Any]:
+        """The first frame from now on (or from index ``start``: a mark taken before what made
+        the frame, which may have come and gone by now) that matches (woken by each arrival)."""
+        return self.inbox.wait_for(predicate, timeout, start=len(self.frames) if start is None else start)
 
     def after(
         self,

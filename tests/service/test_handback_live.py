@@ -42,18 +42,6 @@ def rig_file(tmp_path: Path) -> Path:
     return bench3_file(tmp_path, settings, timeout_margin_ms=40.0)
 
 
-def engine_offset(live: LiveServer) -> float:
-    """This process's perf_counter minus the service's engine time (both CLOCK_MONOTONIC):
-    the quickest of 9 answers of /api/state, good to about half its round trip."""
-    offsets = []
-    for _ in range(9):
-        before = time.perf_counter()
-        engine = live.get("/api/state", headers=AUTH).json()["engine_time"]
-        after = time.perf_counter()
-        offsets.append((after - before, (before + after) / 2 - engine))
-    return min(offsets)[1]
-
-
 @pytest.fixture
 def armed_rig(tmp_path: Path) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
     # the tick at its documented real-time priority (a saturated host starves it otherwise)
@@ -78,7 +66,7 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
         pytest.fail(f"the host failed the tick over before every kill: {live.devices()}")
     # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
     client = Follower(live.ws, horse_channels=None, max_size=None, ping_interval=None)  # closed with the server
-    offset = engine_offset(live)
+    offset = live.engine_offset()
     wait_until(lambda: len(client.frames) >= 50, 10.0, "no rider frames at the client")
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")

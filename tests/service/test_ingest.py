@@ -83,15 +83,15 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
         told = follower.wait_for(lambda f: True)
         assert all(f["horse"][rz] == 1.0 for f in follower.after(told, 40))  # b keeps sending all along
         c = Producer(server.ws, constant({"rearPivot.rz": 3.0}), hello={"name": "c", "priority": 5})
-        follower.wait_for(lambda f: f["horse"][rz] == 3.0, timeout=2)
+        follower.wait_for(lambda f: f["horse"][rz] == 3.0, timeout=10)
         assert c.wait_driving(True)
         c.close()
         # c left: a (equal to b) is the one that sends next; either may win, never c's value.
-        frame = follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] in (1.0, 2.0), timeout=3)
+        frame = follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] in (1.0, 2.0), timeout=10)
         winner = a if frame["horse"][rz] == 1.0 else b
         loser = b if winner is a else a
         winner.sending.clear()  # silent but connected: the other takes over after producer_timeout
-        follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == (2.0 if winner is a else 1.0), 3)
+        follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == (2.0 if winner is a else 1.0), 10)
         assert loser.wait_driving(True)
     finally:
         for p in (a, b, c):
@@ -102,15 +102,21 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
 def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, follower: Follower) -> None:
     neutral = np.array(MODEL.evaluate([0.0] * len(HORSE_NAMES)))
     posed = np.array(MODEL.evaluate(full(POSE)))
+    offset = server.engine_offset()
     producer = Producer(server.ws, constant(POSE))
     try:
         first = follower.wait_for(lambda f: f["driver"] == "input")
         follower.after(first, 40)
         producer.sending.clear()
         stopped = time.perf_counter()
-        first = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
-        assert 0.3 < first["at"] - stopped < 1.2, "held for about `hold` (0.5 s) before easing"
-        back = follower.wait_for(lambda f: f["driver"] == "procedural", timeout=3)
+        first = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=10)
+        # Held for about `hold` (0.5 s) on the tick's own clock: the first easing frame ticked
+        # after 0.3 s, the last held one before 1.2 s. Arrival times charged the web process's
+        # and this follower's lateness, and a tick starved for 2 s (load 14) eases at its next tick.
+        held = [f for f in follower.frames if f["seq"] < first["seq"]][-1]
+        ticked = (held["t"] + offset - stopped, first["t"] + offset - stopped)
+        assert ticked[0] < 1.2 and ticked[1] > 0.3, ("held for about `hold` (0.5 s) before easing", ticked)
+        back = follower.wait_for(lambda f: f["driver"] == "procedural", timeout=10)
         window = [f for f in follower.frames if first["seq"] <= f["seq"] < back["seq"]]
         easing = [np.array(f["values"]) for f in window]
         distance = [np.abs(v - neutral).max() for v in easing]
@@ -129,7 +135,7 @@ def test_disconnect_eases_at_once(server: LiveServer, follower: Follower) -> Non
     first = follower.wait_for(lambda f: f["driver"] == "input")
     follower.after(first, 20)
     producer.close()
-    neutral = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=2)
+    neutral = follower.wait_for(lambda f: f["driver"] == "neutral", timeout=10)
     frames = [f for f in follower.since(first) if f["seq"] < neutral["seq"]]
     last_source = frames[-1]["source_t"]
     held = [f for f in frames if f["source_t"] == last_source]

@@ -39,11 +39,14 @@ def test_hello_then_frames_at_the_tick_rate(server: LiveServer) -> None:
         for _ in range(1000):  # a test before may have left the rider easing to neutral
             if frames(ws, 1)[0]["driver"] == "procedural":
                 break
+        skipped_before = server.metric("riderlive_tick_skipped_total")
         got = frames(ws, 100)
+        skipped = server.metric("riderlive_tick_skipped_total") - skipped_before
     seqs = [f["seq"] for f in got]
     assert all(b > a for a, b in itertools.pairwise(seqs)), "in order"
     # The >= 99 % figure is measured by bench/bench_service.py; here the machine may be saturated.
-    assert seqs[-1] - seqs[0] + 1 <= 117, "an idle client gets >= 85 % of ticks even on a saturated machine"
+    # Of the ticks the tick ran: a deadline it missed (a starved tick, counted) was never a frame.
+    assert seqs[-1] - seqs[0] + 1 - skipped <= 117, f"an idle client gets >= 85 % of ticks ({skipped} skipped)"
     dt = np.diff([f["t"] for f in got]) / np.diff(seqs)
     assert np.allclose(dt, 1 / 200.0, atol=1e-9), "engine time is the tick's deadline"
     assert all(f["driver"] == "procedural" for f in got), "no producer: the procedural horse drives"
@@ -91,16 +94,21 @@ def test_subset_decimation_and_binary(server: LiveServer) -> None:
         a = frames(json_ws, 20)
         b = frames(bin_ws, 20)
         every = frames(every_ws, 80)
+    by_seq = {f["seq"]: f["values"] for f in every}
     phases = set()
     for got in (a, b):
         assert all(len(f["values"]) == 3 for f in got[-10:])
         phase = got[-1]["seq"] % 4
         assert all(f["seq"] % 4 == phase for f in got[-10:]), "one phase per client"
         gaps = np.diff([f["seq"] for f in got[-10:]])
-        assert np.all(gaps % 4 == 0) and np.median(gaps) == 4
+        assert np.all(gaps % 4 == 0)
+        # Every tick of its phase that ran (all of them reach ``every``), not one in 8 or 12; a
+        # gap of 8 is a tick the loaded tick skipped (counted, never a frame for anyone).
+        span = range(got[-10]["seq"], got[-1]["seq"] + 1)
+        ran = {s for s in by_seq if s in span and s % 4 == phase}
+        assert ran and ran <= {f["seq"] for f in got}, (sorted(ran), [f["seq"] for f in got[-10:]])
         phases.add(phase)
     assert phases == {0, 1}, "the clients of one decimation are spread over its phases (docs/protocol.md)"
-    by_seq = {f["seq"]: f["values"] for f in every}
     for got in (a, b):
         common = [f for f in got if f["seq"] in by_seq]
         assert common, "both encodings carry the same ticks"

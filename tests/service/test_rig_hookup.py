@@ -22,11 +22,14 @@ import httpx
 import pytest
 from websockets.sync.client import connect
 
+from tests.service.host_taken import HostTaken
 from tests.service.live_server import LiveServer
 from tests.service.rig_server import RIG_TOKEN, relaxed_rig, serve_rig  # noqa: F401 (relaxed_rig: tests/web, tests/bus)
 from tests.waiting import wait_until
 
 TOKEN = RIG_TOKEN
+RESTART_S = 120.0
+"""A cold restart's bound (as :class:`LiveServer`'s start): no test here times it."""
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
@@ -129,6 +132,9 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     wait_state(live, "estop", timeout=2.0)
     wait_for(lambda: (rig(live).get("estop") or {}).get("source") == "websocket", timeout=2.0)
     assert post(live, "/api/reset").status_code == 200
+    # The reset's reply travels on the command pipe, the state it made in the tick's status
+    # (published later in the same tick): the gauge below is read once the state is in.
+    wait_state(live, "disarmed")
 
     assert refusals(live, "arm", "unauthorized") == 1
     assert refusals(live, "arm", "unknown_device") == 1
@@ -159,17 +165,20 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
 
     first = supervision()
     assert first["guardian"]["alive"] and first["up"]
-    killed = time.perf_counter()
+    taken = HostTaken(live.proc.pid)  # the web process's: its supervisor notices
     os.kill(first["tick_pid"], signal.SIGKILL)
+    killed = time.perf_counter()  # after the signal: a stall of this process is not the service's
     wait_for(lambda: not supervision()["up"], timeout=2.0)
     noticed = supervision()["last_down_at"]
-    assert noticed - killed < 0.01 + 0.05, "a dead tick is noticed within 1 tick + 50 ms"
+    late = taken.seconds()
+    assert noticed - killed < 0.01 + 0.05 + late, f"a dead tick is noticed within 1 tick + 50 ms ({late:.3f} s taken)"
     assert live.get("/readyz").status_code == 503
     # A spare still warming (at nice 10, armed right after the start) is discarded for a cold
     # start: imports and kernels, tens of seconds at load 17 (20 s timed out there twice), as
     # test_platform_hookup waits; a quick restart returns at once. The restart's promptness is
-    # test_failover's (warm) and the detection bound above.
-    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=60.0)
+    # test_failover's (warm) and the detection bound above. A restart took 60.7 s at load 14
+    # (60 s timed out): the bound of a server's start (LiveServer) it is.
+    wait_for(lambda: supervision()["generation"] == 2 and supervision()["up"], timeout=RESTART_S)
     wait_state(live, "disarmed", timeout=20.0)  # back, and not re-armed
     second = supervision()
     assert second["restarts"] == 1 and second["deaths"] == 1 and second["guardian"]["takeovers"] == 1
@@ -185,11 +194,14 @@ def test_a_killed_or_frozen_tick_is_restarted_with_the_rig_parked_and_disarmed(r
     wait_state(live, "running")
     wait_ticks(live, 20)  # most likely still in the new tick's warm-up: a moving rig gets no 1 s grace
     pid = supervision()["tick_pid"]
-    frozen = time.perf_counter()
+    taken = HostTaken(live.proc.pid)
     os.kill(pid, signal.SIGSTOP)
+    frozen = time.perf_counter()  # its last beat was before
     wait_for(lambda: supervision()["hangs"] == 1, timeout=3.0)
     noticed = supervision()["last_down_at"]
-    assert noticed - frozen < 0.25 + 0.01  # tick.hang_floor (no real-time priority here) + a half-tick check
-    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=60.0)
+    late = taken.seconds()  # the supervisor excuses its own lateness: a host stall delays the verdict
+    # tick.hang_floor (no real-time priority here) + a half-tick check
+    assert noticed - frozen < 0.25 + 0.01 + late, f"a frozen tick is noticed at the hang floor ({late:.3f} s taken)"
+    wait_for(lambda: supervision()["generation"] == 3 and supervision()["up"], timeout=RESTART_S)
     wait_state(live, "disarmed", timeout=20.0)
     assert supervision()["guardian"]["takeovers"] == 2
