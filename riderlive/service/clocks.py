@@ -17,13 +17,6 @@ new *segment* starts (a ``segment`` message to the producer):
   ``pause_s`` (a paused game): the service's clock stands in for the producer's (the
   time given goes on from the newest with the service's seconds), so the producer keeps
   driving with its frames as they come;
-- **paced** (steps back, the stand-in, the resume): the time a re-anchored frame is given
-  comes from its receive time, and a host stall delivers frames in a burst (receive times
-  ~0.1 ms apart for frames sent 8 ms apart). Taken as they came, the burst's motion would
-  be squeezed into no time and the rider would jump when the tick reads across it. So a
-  step back is given at least the producer's recent frame interval (:data:`PACE`) after
-  the newest, and the stand-in advances at most :data:`PACE` frame intervals a frame,
-  never past the service's clock (it catches up with it after a burst at 5 % a frame);
 - **resumed** (``clock_resumed``): the clock moves again after a pause: its own ``t``
   again, plus the offset that keeps the time given continuous.
 
@@ -43,11 +36,6 @@ from dataclasses import dataclass, replace
 STEP_S = 0.001
 """A smaller step back is jitter: the frame is dropped as not newer (no segment)."""
 MAX_SEGMENTS_PER_S = 4
-PACE = 1.05
-"""While the service's clock stands in, a frame advances the time given by at most this many
-of the producer's frame intervals (``ProducerClock.interval``): a burst is spread out again."""
-INTERVAL_GAIN = 0.1
-"""Weight of each new step of the producer's clock in ``ProducerClock.interval``."""
 
 
 class ClockEvent(enum.Enum):
@@ -82,9 +70,6 @@ class ProducerClock:
     """While paused: (time given, ``rx``) from which the service's clock stands in."""
     segments: tuple[float, ...] = ()
     """Receive times of the step and pause segments of the last second."""
-    interval: float = 0.0
-    """The producer's recent frame interval by its own clock (s; 0: not known yet), from the
-    frames whose ``t`` moved by less than ``pause_s`` (an average, :data:`INTERVAL_GAIN`)."""
 
 
 @dataclass(frozen=True)
@@ -101,58 +86,39 @@ class ClockStep:
     pauses and resumes keep the stream: the time given stays continuous."""
 
 
-def _fresh(t: float, rx: float, offset: float, segments: tuple[float, ...], interval: float) -> ProducerClock:
-    return ProducerClock(t, rx, rx, offset, t + offset, None, segments, interval)
-
-
-def _paced(clock: ProducerClock, rx: float) -> float:
-    """While paused: the time given for a frame received at ``rx`` (see the module docstring)."""
-    assert clock.standin is not None
-    base, rx0 = clock.standin
-    now = base + (rx - rx0)  # the service's clock, standing in
-    if clock.interval > 0.0:
-        now = min(now, clock.newest_eff + PACE * clock.interval)
-    return max(now, clock.newest_eff)
-
-
-def _interval(clock: ProducerClock, step: float, pause_s: float) -> float:
-    """``clock.interval`` after a frame that moved the producer's clock by ``step``."""
-    if not 0.0 < step < pause_s:
-        return clock.interval
-    if clock.interval <= 0.0:
-        return step
-    return clock.interval + INTERVAL_GAIN * (step - clock.interval)
+def _fresh(t: float, rx: float, offset: float, segments: tuple[float, ...]) -> ProducerClock:
+    return ProducerClock(t, rx, rx, offset, t + offset, None, segments)
 
 
 def clock_step(clock: ProducerClock, t: float, rx: float, jump_s: float, pause_s: float) -> ClockStep:
     """One frame's time; see the module docstring."""
     last = clock.newest_t
     if last is None:
-        return ClockStep(_fresh(t, rx, 0.0, clock.segments, clock.interval), t)
+        return ClockStep(_fresh(t, rx, 0.0, clock.segments), t)
     recent = tuple(s for s in clock.segments if rx - s < 1.0)
     may_segment = len(recent) < MAX_SEGMENTS_PER_S
-    interval = clock.interval
     if clock.standin is not None:
-        now = _paced(clock, rx)
+        base, rx0 = clock.standin
+        now = base + (rx - rx0)  # the service's clock, standing in
         if t > last:  # it moves again: its own clock, continuous with the stand-in
             drift = (t - last) - (rx - clock.moved_rx)
-            return ClockStep(_fresh(t, rx, now - t, recent, interval), now, ClockEvent.RESUMED, drift, last)
+            return ClockStep(_fresh(t, rx, now - t, recent), now, ClockEvent.RESUMED, drift, last)
         if t < last - STEP_S and may_segment:
-            step = _fresh(t, rx, now - t, (*recent, rx), interval)
+            step = _fresh(t, rx, now - t, (*recent, rx))
             return ClockStep(step, now, ClockEvent.BACKWARD, t - last, last)
         return ClockStep(replace(clock, last_rx=rx, newest_eff=now, segments=recent), now)
     drift = (t - last) - (rx - clock.last_rx)
     if abs(drift) > jump_s:
         event = ClockEvent.FORWARD if drift > 0 else ClockEvent.BACKWARD
-        return ClockStep(_fresh(t, rx, 0.0, recent, interval), t, event, drift, last, new_stream=True)
+        return ClockStep(_fresh(t, rx, 0.0, recent), t, event, drift, last, new_stream=True)
     if t > last:
-        return ClockStep(_fresh(t, rx, clock.offset, recent, _interval(clock, t - last, pause_s)), t + clock.offset)
+        return ClockStep(_fresh(t, rx, clock.offset, recent), t + clock.offset)
     since = rx - clock.moved_rx
     if t < last - STEP_S and may_segment:  # re-anchored: on from the newest with the service's clock
-        now = clock.newest_eff + max(since, interval)  # a burst's frames were sent an interval apart
-        return ClockStep(_fresh(t, rx, now - t, (*recent, rx), interval), now, ClockEvent.BACKWARD, t - last, last)
+        now = clock.newest_eff + since
+        return ClockStep(_fresh(t, rx, now - t, (*recent, rx)), now, ClockEvent.BACKWARD, t - last, last)
     if since >= pause_s and may_segment:
         now = clock.newest_eff + since
-        paused = ProducerClock(last, rx, clock.moved_rx, clock.offset, now, (now, rx), (*recent, rx), interval)
+        paused = ProducerClock(last, rx, clock.moved_rx, clock.offset, now, (now, rx), (*recent, rx))
         return ClockStep(paused, now, ClockEvent.PAUSED, -since, last)
     return ClockStep(replace(clock, last_rx=rx, segments=recent), t + clock.offset)
