@@ -32,15 +32,15 @@ IN_FLIGHT_S = 0.1
 def unsent(frames: list[dict[str, Any]], sent: list[float]) -> list[bool]:
     """Per frame: ticked while this test's own sender had sent nothing for ``STALE_S`` (its
     last ``IN_FLIGHT_S`` aside: a sample then had not reached the tick yet). The sender
-    and the ``/ws/rider`` follower share this process: a stall of it (a full suite's garbage
-    collection) silences the producer, and the stream's going stale then is the documented
-    behaviour, not the clock case's. In a full run (fresh clone, quiet) the sender fell
-    silent ~1.3 s in the settle before a freeze (the follower, in the same process, was
-    0.98 s behind when the case began: 768 frames in its 2.95 s window at 200 Hz); the
-    rider went neutral 0.75 s after the last sample, as specified, and drove again at the
-    next. ``sent``: send times (perf_counter s) in order; a frame's tick time on this
-    process's clock is its engine ``t`` plus the least ``at - t`` of the run (both
-    CLOCK_MONOTONIC; the least delivery, ~1 ms, early)."""
+    and the ``/ws/rider`` follower share this process: a stall of it (descheduled, or held
+    by a garbage collection; the cause was not kept) silences the producer, and the
+    stream's going stale then is the documented behaviour, not the clock case's. In a full
+    run (fresh clone, quiet) the sender fell silent ~1.3 s in the settle before a freeze
+    (the follower, in the same process, was 0.98 s behind when the case began: 768 frames
+    in its 2.95 s window at 200 Hz); the rider went neutral 0.75 s after the last sample,
+    as specified, and drove again at the next. ``sent``: send times (perf_counter s) in
+    order; a frame's tick time on this process's clock is its engine ``t`` plus the least
+    ``at - t`` of the run (both CLOCK_MONOTONIC; the least delivery, ~1 ms, early)."""
     offset = min(f["at"] - f["t"] for f in frames)
     out: list[bool] = []
     for f in frames:
