@@ -32,12 +32,14 @@ RIG_TOKEN = "rig-token-123"
 
 
 def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: float) -> Path:
-    """``config/rigs/bench3.toml`` with each ``key = value`` of ``settings`` replaced and the
-    bus's ``timeout_margin_ms`` set, written to ``tmp_path``."""
+    """``config/rigs/bench3.toml`` with each ``key = value`` of ``settings`` replaced (a bus
+    key the file leaves at its default is added to ``[bus]``) and the bus's
+    ``timeout_margin_ms`` set, written to ``tmp_path``."""
     text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
-    for key, value in settings.items():
-        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
-    text = text.replace("[bus]\n", f"[bus]\ntimeout_margin_ms = {timeout_margin_ms}\n", 1)
+    for key, value in (settings | {"timeout_margin_ms": str(timeout_margin_ms)}).items():
+        text, found = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+        if not found:
+            text = text.replace("[bus]\n", f"[bus]\n{key} = {value}\n", 1)
     path = tmp_path / "bench3.toml"
     path.write_text(text)
     return path
