@@ -47,10 +47,18 @@ def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: 
 
 @contextlib.contextmanager
 def rig_server(
-    tmp_path: Path, path: Path, tick: str, token: str, *, record_arrivals: bool = False, log_lines: int = 60
+    tmp_path: Path,
+    path: Path,
+    tick: str,
+    token: str,
+    *,
+    record_arrivals: bool = False,
+    log_lines: int = 60,
+    kernel_workers: int = 0,
 ) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
     """The server with the rig of ``path`` on a fresh emulator; ``tick`` is the ``[tick]``
-    table's body (TOML lines); ``record_arrivals`` keeps every packet of the run, timed."""
+    table's body (TOML lines); ``record_arrivals`` keeps every packet of the run, timed;
+    ``kernel_workers``: ``[host] kernel_workers_priority`` (0: the default, off)."""
     rig = load_rig(path)
     switch = sys.getswitchinterval()
     sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
@@ -62,6 +70,7 @@ def rig_server(
     with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
         os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
     config = f'[tick]\n{tick}[security]\ntoken = "{token}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
+    config += f"[host]\nkernel_workers_priority = {kernel_workers}\n" if kernel_workers else ""
     live = LiveServer(config, tmp_path, token=token)
     try:
         yield live, emu, rig
