@@ -15,7 +15,7 @@ import time
 from types import FrameType
 
 from riderlive.service.hostcheck import advise, gather
-from riderlive.service.kworkers import MAX_PRIORITY, RESCAN_S, KernelWorkers, check_priority
+from riderlive.service.kworkers import MAX_PRIORITY, RESCAN_S, KernelWorkers, WorkerStats, check_priority
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,6 +39,14 @@ def _stop(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
+def _report(stats: WorkerStats) -> None:
+    print(
+        f"riderlive host: {stats.workers} unbound kernel workers, {stats.raised} raised to SCHED_FIFO "
+        f"{stats.priority}, {stats.below} left below it{f' ({stats.last_error})' if stats.below else ''}",
+        flush=True,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     if args.action == "check":
         advice = advise(gather(args.port), tick_realtime=True, web_priority=10)
@@ -52,16 +60,13 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"riderlive host: --kernel-workers: {exc}", file=sys.stderr)
         return 2
-    stats = workers.scan()
-    print(
-        f"riderlive host: {stats.workers} unbound kernel workers, {stats.raised} raised to SCHED_FIFO "
-        f"{stats.priority}, {stats.below} left below it{f' ({stats.last_error})' if stats.below else ''}",
-        flush=True,
-    )
     if not args.watch:
+        stats = workers.scan()
+        _report(stats)
         return 1 if stats.below else 0
-    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGTERM, _stop)  # before the first raise: from here a SIGTERM puts back what was raised
     try:
+        _report(workers.scan())
         while True:
             time.sleep(RESCAN_S)
             workers.scan()

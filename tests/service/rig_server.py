@@ -32,12 +32,14 @@ RIG_TOKEN = "rig-token-123"
 
 
 def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: float) -> Path:
-    """``config/rigs/bench3.toml`` with each ``key = value`` of ``settings`` replaced and the
-    bus's ``timeout_margin_ms`` set, written to ``tmp_path``."""
+    """``config/rigs/bench3.toml`` with each ``key = value`` of ``settings`` replaced (a bus
+    key the file leaves at its default is added to ``[bus]``) and the bus's
+    ``timeout_margin_ms`` set, written to ``tmp_path``."""
     text = (ROOT / "config" / "rigs" / "bench3.toml").read_text()
-    for key, value in settings.items():
-        text = re.sub(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
-    text = text.replace("[bus]\n", f"[bus]\ntimeout_margin_ms = {timeout_margin_ms}\n", 1)
+    for key, value in (settings | {"timeout_margin_ms": str(timeout_margin_ms)}).items():
+        text, found = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, flags=re.M)
+        if not found:
+            text = text.replace("[bus]\n", f"[bus]\n{key} = {value}\n", 1)
     path = tmp_path / "bench3.toml"
     path.write_text(text)
     return path
@@ -45,10 +47,18 @@ def bench3_file(tmp_path: Path, settings: Mapping[str, str], timeout_margin_ms: 
 
 @contextlib.contextmanager
 def rig_server(
-    tmp_path: Path, path: Path, tick: str, token: str, *, record_arrivals: bool = False, log_lines: int = 60
+    tmp_path: Path,
+    path: Path,
+    tick: str,
+    token: str,
+    *,
+    record_arrivals: bool = False,
+    log_lines: int = 60,
+    kernel_workers: int = 0,
 ) -> Iterator[tuple[LiveServer, EmulatedBus, RigConfig]]:
     """The server with the rig of ``path`` on a fresh emulator; ``tick`` is the ``[tick]``
-    table's body (TOML lines); ``record_arrivals`` keeps every packet of the run, timed."""
+    table's body (TOML lines); ``record_arrivals`` keeps every packet of the run, timed;
+    ``kernel_workers``: ``[host] kernel_workers_priority`` (0: the default, off)."""
     rig = load_rig(path)
     switch = sys.getswitchinterval()
     sys.setswitchinterval(0.0002)  # the emulator's thread answers the tick's SDK in time
@@ -60,6 +70,7 @@ def rig_server(
     with contextlib.suppress(PermissionError, OSError):  # hardware is not starved by the host's load
         os.sched_setscheduler(emu._thread.native_id, os.SCHED_FIFO, os.sched_param(30))
     config = f'[tick]\n{tick}[security]\ntoken = "{token}"\n[rig]\nfile = "{path}"\nport = "{emu.port}"\n'
+    config += f"[host]\nkernel_workers_priority = {kernel_workers}\n" if kernel_workers else ""
     live = LiveServer(config, tmp_path, token=token)
     try:
         yield live, emu, rig
