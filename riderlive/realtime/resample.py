@@ -21,7 +21,9 @@ past ``hold`` the stream went stale (at 60 Hz: 79 % of ticks neutral). So the ra
 estimated: the least-delayed frame of each window of :data:`RATE_EVERY_S` of source time
 is kept (the last :data:`RATE_WINDOWS`: 10 s), and at the end of each window, once they
 span :data:`RATE_SPAN_S`, ``rate = 1 + d(receive - t) / dt`` between the least-delayed
-of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`. At each new
+of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`; a change of the
+producer's rate (the newest two thirds' slope :data:`RATE_CHANGE` from the whole one's)
+restarts the baseline from the newest third, so the rate follows in seconds. At each new
 estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
 toward the line (at that rate) through the least-delayed frame of the last second (lowered
 by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
@@ -48,6 +50,12 @@ RATE_EVERY_S = 0.25
 """Source time between two estimates (s), each a window whose least-delayed frame is kept."""
 RATE_WINDOWS = 40
 """Windows kept for the rate (10 s of source time at most): the baseline of the estimate."""
+RATE_CHANGE = 0.01
+"""A slope between the least-delayed frames of the middle and the newest third of the windows
+this far from the whole baseline's is a change of the producer's rate (a game that slows when
+the host gets busy): the baseline restarts from the newest third, so the estimate follows in
+seconds, not the baseline's 10 s. Delivery stalls do not reach it: the least-delayed frame of
+a third (a second or more) is an on-time one."""
 
 
 @dataclass
@@ -134,7 +142,15 @@ class ClockMap:
         tb, ob = min(windows[-third:], key=lambda w: w[1])
         if tb - ta < RATE_SPAN_S / 2:
             return
-        skew = min(MAX_SKEW, max(-MAX_SKEW, (ob - oa) / (tb - ta)))
+        skew = (ob - oa) / (tb - ta)
+        if third >= 2 and len(windows) > 2 * third:
+            tm, om = min(windows[third:-third], key=lambda w: w[1])
+            if tb - tm >= RATE_SPAN_S / 2 and abs((ob - om) / (tb - tm) - skew) > RATE_CHANGE:
+                # the clock's rate changed within the baseline: it restarts from the newest third
+                for _ in range(len(windows) - third):
+                    self.windows.popleft()
+                skew = (ob - om) / (tb - tm)
+        skew = min(MAX_SKEW, max(-MAX_SKEW, skew))
         rate = 1.0 + skew
         before = self.offset if self.anchor is None else self.anchor
         assert before is not None  # a frame was pushed

@@ -88,48 +88,78 @@ def estimate_row(state: State, t: float) -> tuple[float, ...]:
     return (float(LOCKS.index(found.lock)), float(gait), found.stride_hz, found.phase, age)
 
 
+Arrival = tuple[float, float]
+"""A sample's source time and its raw offset, ``received - t`` (s)."""
+
+
+def _late(most: Arrival, least: Arrival, skew: float) -> float:
+    """How much later ``most`` arrived than ``least``, on a clock running ``1 + skew`` x ours (s)."""
+    return (most[1] - least[1]) - skew * (most[0] - least[0])
+
+
 @dataclass
 class Lateness:
     """The latest arrival of a stream's samples over its last :data:`LATE_MEMORY_S` (s of
     source time), each against the least-delayed of its own :data:`LATE_WINDOW_S` window and
-    the one before (so a clock rate still being tracked adds at most its residual over 0.5 s,
-    while a stall's burst is measured against the on-time samples before it); a few
-    comparisons a sample."""
+    the one before (so a rate still being tracked adds at most its residual over 0.5 s, while
+    a stall's burst is measured against the on-time samples before it). Each window keeps its
+    latest and least-delayed arrivals and the clock's rate then, not a number: its lateness
+    is the lesser judged on that rate and on the rate *as now known* (``skew``: rate - 1).
+    So the ramp that a change of the producer's rate put into the windows before the
+    estimate followed it leaves the delay once it has (a 5 % change held the delay ~25 ms up
+    for the whole memory), the windows before the change stay as they were, and a stall's
+    lateness, far beyond either rate's, stays. A few comparisons a sample; the closed
+    windows are judged again only when a window closes or the rate changes."""
 
-    windows: deque[float] = field(default_factory=lambda: deque(maxlen=round(LATE_MEMORY_S / LATE_WINDOW_S)))
-    """The latest arrival of each closed window (s)."""
-    least: float = math.inf
-    """The least offset of the window under way (s)."""
-    most: float = -math.inf
-    """The largest offset of the window under way (s)."""
-    least_before: float = math.inf
-    """The least offset of the window before it (s)."""
+    windows: deque[tuple[Arrival, Arrival, Arrival, float]] = field(
+        default_factory=lambda: deque(maxlen=round(LATE_MEMORY_S / LATE_WINDOW_S))
+    )
+    """Each closed window's latest arrival, its least-delayed, the one before's, and the skew then."""
+    most: Arrival | None = None
+    least: Arrival | None = None
+    least_before: Arrival | None = None
     started: float | None = None
     """Source time the window under way started at (None: no sample yet)."""
+    _closed: tuple[float, float] | None = None
+    """(skew, latest of the closed windows) last judged."""
 
     def clear(self) -> None:
         self.windows.clear()
-        self.least, self.most, self.least_before = math.inf, -math.inf, math.inf
+        self.most = self.least = self.least_before = None
         self.started = None
+        self._closed = None
 
-    def add(self, t: float, offset: float) -> None:
-        """A sample at source time ``t`` arrived ``offset`` s after the mapping's line at ``t``."""
+    def add(self, t: float, offset: float, skew: float) -> None:
+        """A sample at source time ``t`` arrived ``offset`` (= received - t) s after it, on a
+        clock estimated at ``1 + skew`` x ours (which arrival is a window's latest is judged so)."""
         if self.started is None:
             self.started = t
-        elif t - self.started >= LATE_WINDOW_S:
-            self.windows.append(self._current())
-            self.least_before, self.least, self.most, self.started = self.least, math.inf, -math.inf, t
-        self.least = min(self.least, offset)
-        self.most = max(self.most, offset)
+        elif t - self.started >= LATE_WINDOW_S and self.most is not None and self.least is not None:
+            self.windows.append((self.most, self.least, self.least_before or self.least, skew))
+            self._closed = None
+            self.least_before, self.least, self.most, self.started = self.least, None, None, t
+        here = (t, offset)
+        if self.least is None or _late(here, self.least, skew) < 0.0:
+            self.least = here
+        if self.most is None or _late(here, self.most, skew) > 0.0:
+            self.most = here
 
-    def _current(self) -> float:
-        return self.most - min(self.least, self.least_before)
+    def _current(self, skew: float) -> float:
+        assert self.most is not None and self.least is not None
+        before = self.least_before or self.least
+        return max(_late(self.most, self.least, skew), _late(self.most, before, skew))
 
-    def latest(self) -> float | None:
-        """The latest arrival remembered (s), None before the first sample."""
-        if self.started is None:
+    def latest(self, skew: float) -> float | None:
+        """The latest arrival remembered (s) on a clock at ``1 + skew`` x ours, None before the first sample."""
+        if self.most is None:
             return None
-        return max(self._current(), *self.windows) if self.windows else self._current()
+        if self.windows and (self._closed is None or self._closed[0] != skew):
+            closed = max(
+                min(max(_late(m, a, k), _late(m, b, k)) for k in (then, skew)) for m, a, b, then in self.windows
+            )
+            self._closed = (skew, closed)
+        current = self._current(skew)
+        return max(current, self._closed[1]) if self._closed is not None else current
 
 
 @dataclass(frozen=True)
@@ -162,11 +192,7 @@ class SaddleInput:
         self.clock = ClockMap(_OFFSETS)
         """The producer's clock mapped onto the engine's (rate tracked)."""
         self.lateness = Lateness()
-        """The recent samples' arrival after the mapping's line at their time, when each arrived (s)."""
-        self._rate_known = False
-        """Whether ``lateness`` was measured with the clock's rate estimated (the first estimate
-        forgets what was measured before it: a drifting clock's error, not the stream's lateness,
-        which would hold the delay up for LATE_MEMORY_S)."""
+        """The recent samples' arrivals, judged on the clock's rate as it is known (s)."""
         self.history: deque[State] = deque(maxlen=_HISTORY)
         """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
         self.times: deque[float] = deque(maxlen=_HISTORY)
@@ -201,7 +227,6 @@ class SaddleInput:
         self.state = State()
         self.clock.clear()
         self.lateness.clear()
-        self._rate_known = False
         self.history.clear()
         self.times.clear()
         self._frames.clear()
@@ -275,12 +300,7 @@ class SaddleInput:
         clock = self.clock
         clock.push(t, received)
         self._drain(t, previous, received)
-        if clock.anchor is not None and not self._rate_known:
-            self.lateness.clear()  # measured against a mapping that did not know the rate yet
-            self._rate_known = True
-        mapped = clock.line_time(t)
-        assert mapped is not None  # a sample was pushed
-        self.lateness.add(t, received - mapped)
+        self.lateness.add(t, received - t, clock.rate - 1.0)
         self.stale = False
         return True
 
@@ -290,7 +310,7 @@ class SaddleInput:
 
     def _move_delay(self, now: float) -> None:
         """Toward the base delay plus the recent samples' lateness (see the module docstring)."""
-        late = self.lateness.latest()
+        late = self.lateness.latest(self.clock.rate - 1.0)
         if late is None:
             return
         target = min(self.base_delay + max(0.0, late), MAX_DELAY)

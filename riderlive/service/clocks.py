@@ -12,11 +12,18 @@ new *segment* starts (a ``segment`` message to the producer):
   but less than a jump (a clock stepped by NTP, a game's time scale reset). Without a
   re-anchor the tick would drop every frame until ``t`` passed its old newest, and its
   clock mapping would stay ``step`` off for seconds. Re-anchored: the time given goes
-  on from the newest with the service's clock, ``t`` plus an offset from then on;
+  on from the newest with the service's clock (at least one typical clock step: a frame
+  of a burst after a delivery stall arrives ~0 s after the one before, though the
+  producer made it a step later), ``t`` plus an offset from then on;
 - **paused** (``clock_paused``): frames keep coming but ``t`` has not moved for
-  ``pause_s`` (a paused game): the service's clock stands in for the producer's (the
-  time given goes on from the newest with the service's seconds), so the producer keeps
-  driving with its frames as they come;
+  :data:`PAUSE_STEPS` of the producer's own clock steps (the median of its last
+  :data:`STEPS_KEPT`; at least :data:`MIN_PAUSE_S`, at most ``pause_s``): a paused game, a
+  frozen sensor timestamp. The service's clock stands in for the producer's (the time
+  given goes on from the newest with the service's seconds), so the producer keeps
+  driving with its frames as they come. Frames of a freeze before it is noticed are
+  dropped as not newer: noticed within a few frames, the tick's read (which trails the
+  newest sample by its delivery) never runs past the samples into a held pose that then
+  steps to the stand-in's (a fixed 0.1 s did at 200 Hz: docs/performance.md);
 - **resumed** (``clock_resumed``): the clock moves again after a pause: its own ``t``
   again, plus the offset that keeps the time given continuous.
 
@@ -36,6 +43,12 @@ from dataclasses import dataclass, replace
 STEP_S = 0.001
 """A smaller step back is jitter: the frame is dropped as not newer (no segment)."""
 MAX_SEGMENTS_PER_S = 4
+PAUSE_STEPS = 4
+"""A clock that stands still this many of its typical steps while frames keep coming is paused."""
+MIN_PAUSE_S = 0.01
+"""The least stand-still taken for a pause (s): a 1000 Hz producer's duplicated frame is not one."""
+STEPS_KEPT = 9
+"""The producer's clock steps (between frames whose ``t`` moved) its typical step is the median of."""
 
 
 class ClockEvent(enum.Enum):
@@ -70,6 +83,21 @@ class ProducerClock:
     """While paused: (time given, ``rx``) from which the service's clock stands in."""
     segments: tuple[float, ...] = ()
     """Receive times of the step and pause segments of the last second."""
+    steps: tuple[float, ...] = ()
+    """The last :data:`STEPS_KEPT` forward steps of the producer's ``t`` (s)."""
+
+    def typical_step(self) -> float | None:
+        """The median of :attr:`steps` (s; None before the clock moved): the producer's frame
+        interval on its own clock, whatever its delivery's bursts."""
+        if not self.steps:
+            return None
+        ordered = sorted(self.steps)
+        return ordered[len(ordered) // 2]
+
+    def pause_after(self, pause_s: float) -> float:
+        """How long ``t`` may stand still while frames come before it is paused (s)."""
+        typical = self.typical_step()
+        return pause_s if typical is None else min(pause_s, max(MIN_PAUSE_S, PAUSE_STEPS * typical))
 
 
 @dataclass(frozen=True)
@@ -86,12 +114,19 @@ class ClockStep:
     pauses and resumes keep the stream: the time given stays continuous."""
 
 
-def _fresh(t: float, rx: float, offset: float, segments: tuple[float, ...]) -> ProducerClock:
-    return ProducerClock(t, rx, rx, offset, t + offset, None, segments)
+def _fresh(
+    t: float, rx: float, offset: float, segments: tuple[float, ...], steps: tuple[float, ...] = ()
+) -> ProducerClock:
+    return ProducerClock(t, rx, rx, offset, t + offset, None, segments, steps)
+
+
+def _stepped(clock: ProducerClock, step: float) -> tuple[float, ...]:
+    return (*clock.steps[1 - STEPS_KEPT :], step)
 
 
 def clock_step(clock: ProducerClock, t: float, rx: float, jump_s: float, pause_s: float) -> ClockStep:
-    """One frame's time; see the module docstring."""
+    """One frame's time; see the module docstring (``pause_s``: the longest stand-still
+    before a pause, whatever the producer's rate)."""
     last = clock.newest_t
     if last is None:
         return ClockStep(_fresh(t, rx, 0.0, clock.segments), t)
@@ -102,23 +137,25 @@ def clock_step(clock: ProducerClock, t: float, rx: float, jump_s: float, pause_s
         now = base + (rx - rx0)  # the service's clock, standing in
         if t > last:  # it moves again: its own clock, continuous with the stand-in
             drift = (t - last) - (rx - clock.moved_rx)
-            return ClockStep(_fresh(t, rx, now - t, recent), now, ClockEvent.RESUMED, drift, last)
+            resumed = _fresh(t, rx, now - t, recent, _stepped(clock, t - last))
+            return ClockStep(resumed, now, ClockEvent.RESUMED, drift, last)
         if t < last - STEP_S and may_segment:
-            step = _fresh(t, rx, now - t, (*recent, rx))
+            step = _fresh(t, rx, now - t, (*recent, rx), clock.steps)
             return ClockStep(step, now, ClockEvent.BACKWARD, t - last, last)
         return ClockStep(replace(clock, last_rx=rx, newest_eff=now, segments=recent), now)
     drift = (t - last) - (rx - clock.last_rx)
     if abs(drift) > jump_s:
         event = ClockEvent.FORWARD if drift > 0 else ClockEvent.BACKWARD
-        return ClockStep(_fresh(t, rx, 0.0, recent), t, event, drift, last, new_stream=True)
+        return ClockStep(_fresh(t, rx, 0.0, recent, clock.steps), t, event, drift, last, new_stream=True)
     if t > last:
-        return ClockStep(_fresh(t, rx, clock.offset, recent), t + clock.offset)
+        return ClockStep(_fresh(t, rx, clock.offset, recent, _stepped(clock, t - last)), t + clock.offset)
     since = rx - clock.moved_rx
     if t < last - STEP_S and may_segment:  # re-anchored: on from the newest with the service's clock
+        now = clock.newest_eff + max(since, clock.typical_step() or 0.0)
+        stepped = _fresh(t, rx, now - t, (*recent, rx), clock.steps)
+        return ClockStep(stepped, now, ClockEvent.BACKWARD, t - last, last)
+    if since >= clock.pause_after(pause_s) and may_segment:
         now = clock.newest_eff + since
-        return ClockStep(_fresh(t, rx, now - t, (*recent, rx)), now, ClockEvent.BACKWARD, t - last, last)
-    if since >= pause_s and may_segment:
-        now = clock.newest_eff + since
-        paused = ProducerClock(last, rx, clock.moved_rx, clock.offset, now, (now, rx), (*recent, rx))
+        paused = ProducerClock(last, rx, clock.moved_rx, clock.offset, now, (now, rx), (*recent, rx), clock.steps)
         return ClockStep(paused, now, ClockEvent.PAUSED, -since, last)
     return ClockStep(replace(clock, last_rx=rx, segments=recent), t + clock.offset)

@@ -39,8 +39,9 @@ from riderlive.timecode import TimecodeError
 
 log = logging.getLogger(__name__)
 PAUSE_S = 0.1
-"""A clock that stands still this long (or half ``input.hold``, if less) while frames
-keep coming is paused: the service's clock stands in before the tick's hold runs out."""
+"""The longest a clock may stand still (or half ``input.hold``, if less) while frames keep
+coming before it is paused (sooner at a high rate: ``clocks.ProducerClock.pause_after``):
+the service's clock stands in before the tick's hold runs out."""
 LENGTH_SCALE_RANGE = (1e-6, 1e6)
 """Accepted ``length_scale`` of a producer's hello (thesis rig units per its length unit)."""
 

@@ -214,14 +214,17 @@ def test_stalls_seconds_apart_are_waited_for_not_extrapolated() -> None:
     assert worst[1] >= 0.99, worst
 
 
-def _ride_drifting(rate: float, seconds: float = 12.0) -> tuple[SaddleInput, np.ndarray]:
-    """A 200 Hz trot whose producer clock runs ``rate`` x ours (engine = t / rate, each sample
-    2 ms late plus an exponential jitter of mean 3 ms), ticked at 120 Hz by a fake clock from
-    3 s on (the rate estimated): per tick (source time read, newest sample's time, delay)."""
+def _ride_drifting(rate: float, seconds: float = 12.0, change_at: float = 0.0) -> tuple[SaddleInput, np.ndarray]:
+    """A 200 Hz trot whose producer clock runs ``rate`` x ours from ``change_at`` s on (ours
+    before; engine = t / rate, each sample 2 ms late plus an exponential jitter of mean 3 ms),
+    ticked at 120 Hz by a fake clock from 3 s on: per tick (source time read, newest sample's
+    time, delay)."""
     trot = record(gait_script("trot", seconds, seed=6), 200.0, seed=6)
     times, values = trot.saddle.t.tolist(), trot.saddle.values.tolist()
     rng = np.random.default_rng(6)
-    received = np.maximum.accumulate(np.array(times) / rate + 0.002 + rng.exponential(0.003, len(times)))
+    t = np.array(times)
+    engine = np.where(t < change_at, t, change_at + (t - change_at) / rate)
+    received = np.maximum.accumulate(engine + 0.002 + rng.exponential(0.003, len(times)))
     live = make_saddle_input(25.0, SaddlePoint(), 0.01)
     out, k = [], 0
     for n in range(int(received[-1] * 120.0)):
@@ -257,6 +260,24 @@ def test_a_drifting_saddle_clock_is_tracked_by_the_horse_resamplers_clock_map(ra
     settled = 2 * 120  # from 5 s on: the lateness of the first second, before any estimate, has aged out
     assert delay[settled:].max() <= steady[settled:, 2].max() + 0.005, (delay[settled:].max(), steady[:, 2].max())
     ahead, steady_ahead = np.mean(shown > newest), np.mean(steady[:, 0] > steady[:, 1])
+    assert ahead <= steady_ahead + 0.05, (ahead, steady_ahead)
+
+
+@pytest.mark.parametrize("rate", [0.95, 1.05])
+def test_a_change_of_the_saddle_clocks_rate_leaves_the_delay_once_the_rate_follows(rate: float) -> None:
+    """Ours for 3 s, then 5 % slow or fast: the change ramps the samples' offsets inside the
+    lateness windows before the rate follows it (~25 ms over a window pair). Each window is
+    judged again on the rate as it becomes known, so from 5 s after the change the delay is
+    within 3 ms of a steady clock's (old code: the ramp stayed in the delay for the whole
+    ``LATE_MEMORY_S``: +20 ms 9 s after a 5 % slowing, live and here), and the read past the
+    newest sample on no more ticks than a steady clock's share + 5 %."""
+    live, ticks = _ride_drifting(rate, 16.0, change_at=3.0)
+    _, steady = _ride_drifting(1.0, 16.0)
+    assert abs(live.clock.rate * rate - 1.0) < 0.003, live.clock.rate
+    later = slice(5 * 120, None)  # ticks from 8 s (engine) on: 5 s after the change
+    assert ticks[later, 2].max() <= steady[later, 2].max() + 0.003, (ticks[later, 2].max(), steady[later, 2].max())
+    ahead = np.mean(ticks[later, 0] > ticks[later, 1])
+    steady_ahead = np.mean(steady[later, 0] > steady[later, 1])
     assert ahead <= steady_ahead + 0.05, (ahead, steady_ahead)
 
 

@@ -3,20 +3,29 @@ a clock that stands still, its resume, and the cap on segments."""
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from riderlive.service.clocks import MAX_SEGMENTS_PER_S, STEP_S, ClockEvent, ClockStep, ProducerClock, clock_step
+from riderlive.service.clocks import (
+    MAX_SEGMENTS_PER_S,
+    MIN_PAUSE_S,
+    STEP_S,
+    ClockEvent,
+    ClockStep,
+    ProducerClock,
+    clock_step,
+)
 
 JUMP, PAUSE = 0.5, 0.1
 DT = 1 / 120
 
 
-def feed(frames: list[tuple[float, float]]) -> list[ClockStep]:
+def feed(frames: list[tuple[float, float]], pause: float = PAUSE) -> list[ClockStep]:
     """(producer t, receive time) per frame -> each frame's step."""
     clock, out = ProducerClock(), []
     for t, rx in frames:
-        step = clock_step(clock, t, rx, JUMP, PAUSE)
+        step = clock_step(clock, t, rx, JUMP, pause)
         clock = step.clock
         out.append(step)
     return out
@@ -42,7 +51,7 @@ def test_a_jump_either_way_starts_a_segment() -> None:
     assert steps[10].previous_t == 100.0 + 9 * DT and steps[10].jump < -100.0 and steps[20].jump > 4000.0
 
 
-def test_a_clock_that_stands_still_is_paused_within_pause_s_and_the_service_clock_stands_in() -> None:
+def test_a_clock_that_stands_still_is_paused_after_4_of_its_steps_and_the_service_clock_stands_in() -> None:
     frames = [(10.0 + i * DT, i * DT) for i in range(60)]
     paused_at = frames[-1][0]
     frames += [(paused_at, (60 + i) * DT) for i in range(1, 200)]  # the game paused; frames keep coming
@@ -50,9 +59,9 @@ def test_a_clock_that_stands_still_is_paused_within_pause_s_and_the_service_cloc
     steps = feed(frames)
     (p, paused), (r, resumed) = events(steps)
     assert paused is ClockEvent.PAUSED and resumed is ClockEvent.RESUMED and r == 259
-    # paused once the clock stood still for PAUSE_S, not later than one frame after
+    # paused once the clock stood still for 4 of its 1/120 s steps (33 ms), not a frame later
     still = frames[p][1] - frames[59][1]
-    assert PAUSE - 1e-9 <= still < PAUSE + DT and steps[p].jump == -still
+    assert 4 * DT - 1e-9 <= still < 5 * DT and steps[p].jump == -still
     # from the pause on, the time given to the tick goes on from the last frame that moved
     # with the service's clock: continuous, the same stream (no blend)
     given = [s.t for s in steps[p:]]
@@ -66,6 +75,50 @@ def test_a_clock_that_stands_still_is_paused_within_pause_s_and_the_service_cloc
     times = [s.t for s in steps]
     assert all(b >= a for a, b in zip(times, times[1:])), "the time given never goes back"
     assert all(b > a for a, b in zip(times[p - 1 :], times[p:])), "nor stands still once paused"
+
+
+@pytest.mark.parametrize(
+    ("hz", "still"),
+    [(1000.0, MIN_PAUSE_S), (200.0, 0.02), (60.0, 4 / 60), (30.0, PAUSE), (10.0, PAUSE)],
+)
+def test_the_stand_still_taken_for_a_pause_is_4_steps_of_the_producer_within_10_ms_and_pause_s(
+    hz: float, still: float
+) -> None:
+    """At 200 Hz a frozen timestamp is noticed after 20 ms, not 0.1 s: the 0.1 s of frames
+    dropped before then let the tick read past the newest sample into a held pose, then step
+    (the live 1.6x step, docs/performance.md). Never before 10 ms; never after ``pause_s``."""
+    dt = 1 / hz
+    frames = [(5.0 + i * dt, 2.0 + i * dt) for i in range(40)]
+    frames += [(frames[-1][0], 2.0 + (40 + i) * dt) for i in range(round(0.3 * hz))]
+    steps = feed(frames)
+    (p, paused), *_ = events(steps)
+    assert paused is ClockEvent.PAUSED
+    stood = frames[p][1] - frames[39][1]  # paused at the first frame after ``still``, not later
+    assert still - 1e-9 <= stood < still + dt + 1e-9 and -steps[p].jump == pytest.approx(stood)
+
+
+def test_a_clock_coarser_than_its_frames_and_duplicated_frames_are_no_pause() -> None:
+    """240 frames a second on a clock that moves at 120 Hz (every t twice), and a 1000 Hz
+    stream whose every tenth frame comes twice: the stand-still never reaches 4 steps."""
+    coarse = [(1.0 + (i // 2) / 120, i / 240) for i in range(600)]
+    doubled = [(1.0 + i / 1000, i / 1000 + (0.0005 if i % 10 == 0 else 0.0)) for i in range(2000)]
+    doubled = [f for i, f in enumerate(doubled) for _ in range(2 if i % 10 == 0 else 1)]
+    assert events(feed(coarse)) == [] and events(feed(doubled)) == []
+
+
+def test_a_step_back_in_a_burst_after_a_delivery_stall_advances_one_step_of_the_producer() -> None:
+    """A 200 Hz producer whose delivery stalled 60 ms: its frames then arrive 0.1 ms apart,
+    and the one stepped back 0.2 s is given one of its 5 ms steps after the newest, as the
+    producer made it, not the 0.1 ms of the burst (which crowded the pose of 5 ms into 0.1
+    ms: a one-tick step of the rider)."""
+    dt = 1 / 200
+    frames = [(1.0 + i * dt, i * dt) for i in range(40)]
+    burst = 40 * dt + 0.06
+    frames += [(1.0 + (40 + i) * dt, burst + i * 1e-4) for i in range(12)]
+    frames += [(1.0 + 52 * dt - 0.2, burst + 12e-4)]
+    steps = feed(frames)
+    assert events(steps) == [(52, ClockEvent.BACKWARD)]
+    assert steps[52].t - steps[51].t == pytest.approx(dt)
 
 
 def test_small_backward_steps_are_re_anchored() -> None:

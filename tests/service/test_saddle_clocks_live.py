@@ -115,7 +115,7 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
     """As the horse's (``test_clocks_live``): 6 s of a saddle clock at 0.95 and 1.05 x ours,
     120 samples a second, against a steady clock in the same run: no segment, every frame
     driven by the saddle, every sample stepped (none refused), the rate the same in
-    /api/state (within 0.1 %) and /metrics, at least half way from 1 to 1 / rate; the read
+    /api/state (within 0.1 %) and /metrics, within 10 % of the change from 1 to 1 / rate; the read
     past the newest sample, once settled (from 3 s on), on at most 1 % more frames than the steady clock's, the lateness
     never growing: median and last second's median within 20 ms of the steady clock's,
     largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
@@ -163,8 +163,10 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
         assert segments == [], (rate, segments)
         assert all(driven(f) for f in frames), (rate, drivers(frames))
         assert taken == [0.0, 0.0], ("every sample stepped once, none refused", rate, taken)
-        # the 10 s baseline still holds the steady clock's first 2 s: at least half way to 1 / rate
-        assert 0.5 <= (rates[0] - 1.0) / (1.0 / rate - 1.0) <= 1.1, (rate, rates)
+        # the baseline restarts at the change of rate (resample.RATE_CHANGE): within 10 % of
+        # 1 / rate 6 s on (measured 0.999-1.001, quiet; old code, one 10 s baseline holding
+        # the steady clock's 2 s: 0.5-0.7)
+        assert 0.9 <= (rates[0] - 1.0) / (1.0 / rate - 1.0) <= 1.1, (rate, rates)
         ahead, late = ahead_and_late(frames, stamps, sent)
         figures = (rate, ahead, steady_ahead, np.median(late), late.max(), np.median(steady_late), steady_late.max())
         # Read past the newest sample: only while the new stream's mapping settles. Measured
