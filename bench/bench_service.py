@@ -12,7 +12,10 @@ Starts the real ``riderlive serve`` on a loopback port, once per *variant* and r
   (normal scheduling, the asyncio loop, no phase lock): the baseline, measured in the same run;
 - ``unlocked`` (``--unlocked``): ``design`` without the phase lock (``tick.phase_lock = false``),
   to see what the lock alone changes;
-- ``thread`` (``--thread``): the tick in a thread of the web process (``tick.isolation``).
+- ``thread`` (``--thread``): the tick in a thread of the web process (``tick.isolation``);
+- ``normal`` and ``nospin`` (``--nospin``): ``today`` with the tick at normal priority too
+  (``tick.realtime_priority = false``: a host where the service may not raise it), with its
+  default 1 ms spin before each deadline and with ``tick.spin = 0``: what that CPU buys.
 
 Each run: one producer (a process of its own) streams horse frames at ``--producer-rate`` (120 Hz by
 default: into a 500 Hz tick that is 25 frames every 6 ticks, no phase to lock to, so there a frame
@@ -62,12 +65,17 @@ ROOT = Path(__file__).resolve().parents[1]
 COALESCED = "riderlive_ticks_coalesced_total"
 TOKEN = "bench-token-1"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
+_TODAY: dict[str, object] = {"isolation": "process", "realtime_priority": 0, "loop": "asyncio", "phase_lock": "false"}
 VARIANTS: dict[str, dict[str, object]] = {
     "design": {"isolation": "process", "realtime_priority": 10, "loop": "auto", "phase_lock": "true"},
-    "today": {"isolation": "process", "realtime_priority": 0, "loop": "asyncio", "phase_lock": "false"},
+    "today": _TODAY,
     "unlocked": {"isolation": "process", "realtime_priority": 10, "loop": "auto", "phase_lock": "false"},
     "thread": {"isolation": "thread", "realtime_priority": 0, "loop": "asyncio", "phase_lock": "false"},
+    "normal": {**_TODAY, "tick_realtime": "false"},
+    "nospin": {**_TODAY, "tick_realtime": "false", "spin": 0.0},
 }
+_TICK_KEYS = (("spin", "spin"), ("tick_realtime", "realtime_priority"))
+"""A variant's optional ``[tick]`` settings: (name in ``VARIANTS``, key in the config)."""
 HISTOGRAMS = ("ingest_to_send", "ingest_to_wire", "ingest_to_tick", "tick_lateness")
 
 
@@ -80,7 +88,9 @@ def start_server(
         f'[server]\nlog_level = "warning"\nnice = {nice}\nrealtime_priority = {settings["realtime_priority"]}\n'
         f'loop = "{settings["loop"]}"\n[security]\ntoken = "{TOKEN}"\n'
         f'[tick]\nrate = {rate}\nisolation = "{settings["isolation"]}"\nphase_lock = {settings["phase_lock"]}\n'
-        "[publish]\nsend_timeout = 2.0\nmax_clients = 1000\n" + rig
+        + "".join(f"{key} = {settings[name]}\n" for name, key in _TICK_KEYS if name in settings)
+        + "[publish]\nsend_timeout = 2.0\nmax_clients = 1000\n"
+        + rig
     )
     return serving.start_server(config, min_ticks=rate, timeout=60.0)
 
@@ -404,6 +414,7 @@ def main() -> None:
     parser.add_argument("--rig", action="store_true", help="drive a 3-servo rig on the emulated bus (ingest->wire)")
     parser.add_argument("--thread", action="store_true", help="also the tick-in-a-thread baseline")
     parser.add_argument("--unlocked", action="store_true", help="also the design without the phase lock")
+    parser.add_argument("--nospin", action="store_true", help="also today's settings without the tick's spin")
     parser.add_argument("--no-burner", action="store_true")
     parser.add_argument(
         "--burners", type=int, default=1, help="normal-priority busy loops (2: both cores, a render-like load)"
@@ -412,6 +423,7 @@ def main() -> None:
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="bench-service-"))
     variants = ["design", "today", *(["unlocked"] if args.unlocked else []), *(["thread"] if args.thread else [])]
+    variants += ["normal", "nospin"] if args.nospin else []
     total = len(variants) * len(args.rates) * (args.seconds + 40)
     results: dict[tuple[str, float], dict[str, float]] = {}
     burners = 0 if args.no_burner else args.burners
