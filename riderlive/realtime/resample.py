@@ -54,8 +54,9 @@ RATE_CHANGE = 0.01
 """A slope between the least-delayed frames of the middle and the newest third of the windows
 this far from the whole baseline's is a change of the producer's rate (a game that slows when
 the host gets busy): the baseline restarts from the newest third, so the estimate follows in
-seconds, not the baseline's 10 s. Delivery stalls do not reach it: the least-delayed frame of
-a third (a second or more) is an on-time one."""
+seconds, not the baseline's 10 s. Judged only once each third spans a second and the two
+least-delayed frames compared lie a second apart: the least-delayed frame of a second is an
+on-time one, so delivery stalls and a stream's bursty first seconds do not reach it."""
 
 
 @dataclass
@@ -143,9 +144,9 @@ class ClockMap:
         if tb - ta < RATE_SPAN_S / 2:
             return
         skew = (ob - oa) / (tb - ta)
-        if third >= 2 and len(windows) > 2 * third:
+        if third * RATE_EVERY_S >= RATE_SPAN_S and len(windows) > 2 * third:  # thirds of a second or more
             tm, om = min(windows[third:-third], key=lambda w: w[1])
-            if tb - tm >= RATE_SPAN_S / 2 and abs((ob - om) / (tb - tm) - skew) > RATE_CHANGE:
+            if tb - tm >= RATE_SPAN_S and abs((ob - om) / (tb - tm) - skew) > RATE_CHANGE:
                 # the clock's rate changed within the baseline: it restarts from the newest third
                 for _ in range(len(windows) - third):
                     self.windows.popleft()

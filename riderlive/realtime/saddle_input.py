@@ -193,6 +193,10 @@ class SaddleInput:
         """The producer's clock mapped onto the engine's (rate tracked)."""
         self.lateness = Lateness()
         """The recent samples' arrivals, judged on the clock's rate as it is known (s)."""
+        self._rate_known = False
+        """Whether ``lateness`` was measured with the clock's rate estimated (the first estimate
+        forgets what was measured before it: the stream's start, against a mapping that knew
+        no rate)."""
         self.history: deque[State] = deque(maxlen=_HISTORY)
         """The estimator's state after each recent sample (its ``t`` is that sample's time)."""
         self.times: deque[float] = deque(maxlen=_HISTORY)
@@ -227,6 +231,7 @@ class SaddleInput:
         self.state = State()
         self.clock.clear()
         self.lateness.clear()
+        self._rate_known = False
         self.history.clear()
         self.times.clear()
         self._frames.clear()
@@ -300,6 +305,9 @@ class SaddleInput:
         clock = self.clock
         clock.push(t, received)
         self._drain(t, previous, received)
+        if clock.anchor is not None and not self._rate_known:
+            self.lateness.clear()
+            self._rate_known = True
         self.lateness.add(t, received - t, clock.rate - 1.0)
         self.stale = False
         return True
