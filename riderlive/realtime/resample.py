@@ -22,8 +22,9 @@ estimated: the least-delayed frame of each window of :data:`RATE_EVERY_S` of sou
 is kept (the last :data:`RATE_WINDOWS`: 10 s), and at the end of each window, once they
 span :data:`RATE_SPAN_S`, ``rate = 1 + d(receive - t) / dt`` between the least-delayed
 of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`; a change of the
-producer's rate (the newest two thirds' slope :data:`RATE_CHANGE` from the whole one's)
-restarts the baseline from the newest third, so the rate follows in seconds. At each new
+producer's rate (the slope from the middle third's least-delayed frame to the newest
+third's :data:`RATE_CHANGE` from the whole one's) restarts the baseline from the newest
+third, so the rate follows in seconds. At each new
 estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
 toward the line (at that rate) through the least-delayed frame of the last second (lowered
 by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
@@ -167,14 +168,6 @@ class ClockMap:
         if self.offset is None:
             return None
         return t + self.offset
-
-    def line_time(self, t: float) -> float | None:
-        """The engine time producer time ``t`` maps to on the line the mapping moves toward
-        (``target``; ``engine_time`` while no rate is estimated): a frame's lateness against
-        it is the stream's, not the mapping's catching up."""
-        if self.anchor is not None:
-            return self.target + self.rate * t
-        return self.engine_time(t)
 
     def source_time(self, now: float, delay: float) -> float | None:
         """The producer time the tick at engine time ``now`` shows, ``delay`` (s) behind the mapping."""

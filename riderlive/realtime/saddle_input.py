@@ -9,8 +9,8 @@ Pure (no clocks, no I/O); every time argument is seconds, engine or producer as 
   clock mapping, :class:`~riderlive.realtime.resample.ClockMap`: the least-delayed
   sample of the last 256, then the producer's clock rate tracked, docs/protocol.md
   "Clocks that drift") less a **delay**: ``input.delay``, raised by the stream's recent
-  lateness (the latest arrival against the mapping, each taken against the mapping when
-  it arrived, over the last :data:`LATE_MEMORY_S` of the stream: :class:`Lateness`) up
+  lateness (the latest arrival over the last :data:`LATE_MEMORY_S` of the stream, judged
+  on the producer's clock rate as it is known: :class:`Lateness`) up
   to :data:`MAX_DELAY`, and changed
   by at most :data:`DELAY_SLEW` seconds per second (the stream slowed or sped up by
   that fraction, never stepped). Within the samples received the frame is the one an
