@@ -54,7 +54,7 @@ import numpy as np
 from riderlive.channels import HORSE_NAMES
 from riderlive.horse import ProceduralHorse
 from riderlive.realtime.edges import UnitEdges
-from riderlive.realtime.layout import InputKind
+from riderlive.realtime.layout import InputKind, InputRecord
 from riderlive.realtime.resample import Resampler
 from riderlive.realtime.saddle_input import NO_ESTIMATE
 from riderlive.rules.animator import DamperState, SpringState, damper_start, damper_step, spring_step
@@ -191,14 +191,30 @@ class TickCore:
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
 
+    def push_record(self, record: InputRecord) -> bool:
+        """:meth:`push_input` of one input ring record."""
+        r = record
+        return self.push_input(r.producer, r.t, r.received, r.values, r.kind, rebased=r.rebased)
+
     def push_input(
-        self, producer: int, t: float, received: float, values: list[float], kind: InputKind = InputKind.HORSE
+        self,
+        producer: int,
+        t: float,
+        received: float,
+        values: list[float],
+        kind: InputKind = InputKind.HORSE,
+        *,
+        rebased: bool = False,
     ) -> bool:
         """Buffer one input frame (or step the estimator with one saddle sample); a new
         producer replaces the old one's buffer and estimator.
 
         Frames of a producer that has gone are ignored: its last frames may still be
-        in the ring when the tick learns that it left.
+        in the ring when the tick learns that it left. ``rebased``: the service re-anchored
+        the producer's clock at this frame (``service/clocks.py``: a pause, a resume, a step
+        back), its time given from one arrival: the clock rate's baseline starts over from it
+        (``ClockMap.restart_rate``), as the offsets before and after are not comparable (a
+        delivery stall across a resume made a ±10 % rate of the step).
         """
         if producer in self._gone:
             return False
@@ -210,7 +226,11 @@ class TickCore:
             self.producer = producer
             self.input_kind = kind
         if kind is InputKind.SADDLE:
+            if rebased:
+                self.saddle.clock.restart_rate(t)
             return self.saddle.push(t, received, values)
+        if rebased:
+            self.resampler.clock.restart_rate(t)
         return self.resampler.push(t, received, values)
 
     def producer_gone(self, producer: int) -> None:

@@ -206,9 +206,7 @@ def replay_inputs(core: TickCore, ring: SharedRing, until: int) -> int:
         record = ring.read(k)
         if record is None:
             continue
-        values = record[L.IN_VALUES :].tolist()
-        kind = L.InputKind(int(record[L.IN_KIND]))
-        core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), float(record[L.IN_RECEIVED]), values, kind)
+        core.push_record(L.InputRecord.of(record))
         replayed += 1
     return replayed
 

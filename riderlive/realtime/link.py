@@ -268,15 +268,12 @@ class TickLink(TickMemory):
         received: float,
         values: list[float] | np.ndarray,
         kind: L.InputKind = L.InputKind.HORSE,
+        *,
+        rebased: bool = False,
     ) -> None:
-        """Hand one validated horse frame, or saddle sample (six values), in service length units to the tick."""
-        record = np.full(L.INPUT_WIDTH, np.nan)
-        record[L.IN_PRODUCER] = producer
-        record[L.IN_T] = t
-        record[L.IN_RECEIVED] = received
-        record[L.IN_KIND] = kind
-        record[L.IN_VALUES : L.IN_VALUES + len(values)] = values
-        self.inputs.write(record)
+        """Hand one validated horse frame, or saddle sample (six values), in service length units to
+        the tick (``rebased``: the producer's clock was re-anchored at it, ``service/clocks.py``)."""
+        self.inputs.write(L.InputRecord(producer, t, received, list(values), kind, rebased).row())
 
     def input_pending(self, received: float | None) -> None:
         """An input received at ``received`` (``perf_counter`` seconds) is being turned into a

@@ -125,10 +125,12 @@ class ClockMap:
                 self._estimate_rate(t)
 
     def restart_rate(self, t: float) -> None:
-        """Forget the rate's windows, not the mapping: the frames up to producer time ``t`` came
-        as a backlog (each window's least-delayed frame was late, a rate from them would be off
-        by the backlog's lateness over the span: bound to 1 +- MAX_SKEW). The saddle input's,
-        after a delivery stall (``realtime/saddle_input.py``); the horse path never calls it."""
+        """Forget the rate's windows, not the mapping or the rate in use: the offsets up to
+        producer time ``t`` are not comparable with those after it, and a rate from windows on
+        both sides would take the step for a slope (bound to 1 +- MAX_SKEW). The saddle input's
+        after a delivery stall (its backlog's windows were all late: ``realtime/saddle_input.py``);
+        both paths' at a frame where the service re-anchored the producer's clock (a pause, a
+        resume, a step back: its time given from one arrival, ``TickCore.push_input``)."""
         self.windows.clear()
         self.least = None
         self.estimated_at = t

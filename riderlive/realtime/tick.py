@@ -214,16 +214,14 @@ class TickLoop(TickControl):
         counter = self.counter
         self._await_pending(now + self.setup.start)
         for record in self.inputs.read_new():
-            values = record[L.IN_VALUES :].tolist()
-            rx = float(record[L.IN_RECEIVED])
-            kind = L.InputKind(int(record[L.IN_KIND]))
-            producer = int(record[L.IN_PRODUCER])
-            switched = producer != self.core.producer
-            if self.core.push_input(producer, float(record[L.IN_T]), rx, values, kind):
+            frame = L.InputRecord.of(record)
+            rx = frame.received
+            switched = frame.producer != self.core.producer
+            if self.core.push_record(frame):
                 counter.input_frames += 1
                 if switched:  # only the new driver's frames count for the phase lock
                     arrivals.clear()
-                if kind is L.InputKind.HORSE:
+                if frame.kind is L.InputKind.HORSE:
                     arrivals.append(rx)
             else:
                 counter.input_out_of_order += 1

@@ -113,6 +113,13 @@ class ClockStep:
     """A jump: the tick maps the producer's clock afresh (a new stream, a blend). Steps back,
     pauses and resumes keep the stream: the time given stays continuous."""
 
+    @property
+    def rebased(self) -> bool:
+        """A step back, a pause or a resume: the stream goes on, but the time given is now
+        ``t`` plus an offset taken from this one frame's arrival (its delivery delay, a stall's
+        included), so the tick's clock rate starts its baseline over here."""
+        return self.event is not None and not self.new_stream
+
 
 def _fresh(
     t: float, rx: float, offset: float, segments: tuple[float, ...], steps: tuple[float, ...] = ()

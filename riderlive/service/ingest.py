@@ -185,7 +185,8 @@ class IngestEndpoint:
         drives = arbiter.drives(producer, now)
         producer.last_frame_at = now
         if drives:
-            self.service.link.push_input(producer.stream, step.t, now - self.service.link.start, values, spec.kind)
+            received = now - self.service.link.start
+            self.service.link.push_input(producer.stream, step.t, received, values, spec.kind, rebased=step.rebased)
         return drives
 
     def timecode(self, producer: Producer, t: float, obj: dict[str, Any], now: float) -> None:

@@ -45,9 +45,17 @@ class TickPort(Protocol):
     def engine_time(self) -> float: ...
 
     def push_input(
-        self, producer: int, t: float, received: float, values: list[float] | np.ndarray, kind: InputKind = ...
+        self,
+        producer: int,
+        t: float,
+        received: float,
+        values: list[float] | np.ndarray,
+        kind: InputKind = ...,
+        *,
+        rebased: bool = ...,
     ) -> None:
-        """One validated frame (service units) for the tick; ``received`` in engine seconds."""
+        """One validated frame (service units) for the tick; ``received`` in engine seconds;
+        ``rebased``: the producer's clock was re-anchored at it (``ClockStep.rebased``)."""
 
     def input_pending(self, received: float | None) -> None:
         """A frame received at ``received`` (``perf_counter`` seconds) is on its way (None: no longer)."""

@@ -39,18 +39,13 @@ def horse_frame(t: float) -> list[float]:
 
 
 def push(ring: SharedRing, producer: int, t: float, received: float) -> None:
-    record = np.full(L.INPUT_WIDTH, np.nan)
-    record[[L.IN_PRODUCER, L.IN_T, L.IN_RECEIVED, L.IN_KIND]] = producer, t, received, L.InputKind.HORSE
-    record[L.IN_VALUES :] = horse_frame(t)
-    ring.write(record)
+    ring.write(L.InputRecord(producer, t, received, list(horse_frame(t))).row())
 
 
 def tick(core: TickCore, ring: SharedRing, now: float) -> list[float]:
     """What ``TickLoop.run`` does with the ring and the core each tick."""
     for record in ring.read_new():
-        kind = L.InputKind(int(record[L.IN_KIND]))
-        values = record[L.IN_VALUES :].tolist()
-        core.push_input(int(record[L.IN_PRODUCER]), float(record[L.IN_T]), float(record[L.IN_RECEIVED]), values, kind)
+        core.push_record(L.InputRecord.of(record))
     return core.step(now).rider
 
 

@@ -40,6 +40,7 @@ class Pushed:
     received: float
     values: list[float]
     kind: InputKind
+    rebased: bool = False
 
 
 @dataclass
@@ -67,8 +68,10 @@ class FakeTick:
         received: float,
         values: list[float] | np.ndarray,
         kind: InputKind = InputKind.HORSE,
+        *,
+        rebased: bool = False,
     ) -> None:
-        self.pushed.append(Pushed(producer, t, received, list(values), kind))
+        self.pushed.append(Pushed(producer, t, received, list(values), kind, rebased))
 
     def input_pending(self, received: float | None) -> None:
         """Nothing waits on it here (the real tick's pickup does)."""

@@ -3,10 +3,17 @@ a clock that stands still, its resume, and the cap on segments."""
 
 from __future__ import annotations
 
+import random
+
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from riderlive.channels import HORSE_NAMES
+from riderlive.horse import ProceduralHorse
+from riderlive.realtime.core import Driver, TickCore, Timing
+from riderlive.rules import RiderModel
 from riderlive.service.clocks import (
     MAX_SEGMENTS_PER_S,
     MIN_PAUSE_S,
@@ -184,3 +191,41 @@ def test_invariants(moves: list[tuple[float, float]]) -> None:
         if s.event is not None and not s.new_stream and previous is not None:
             assert s.t >= previous.newest_eff - 1e-9, "a re-anchor never goes back"
         previous = s.clock
+
+
+@pytest.mark.parametrize("stall", [(1.0, 0.2), (2.4, 0.2), (2.45, 0.1), (2.5, 0.2)])
+def test_a_delivery_stall_across_a_pause_or_its_resume_leaves_the_clock_rate_alone(
+    stall: tuple[float, float],
+) -> None:
+    """A game at 120 Hz on a steady clock pauses at 1.0 s and resumes at 2.5 s (its time) while
+    its frames stand still in delivery (``stall``: from, for how long, s; 2 ms of jitter) and
+    come in a burst: the time given at the pause or the resume is then taken from a late
+    arrival, a step in the offsets. Fed through ``clock_step`` to the tick's core as the
+    ingest does (``rebased``), the clock rate stays within 0.5 % of 1 and the producer drives
+    every tick (the stall is shorter than ``hold``). Before the rate's baseline started over at
+    a re-anchor, the step was taken for a slope: the rate went to 0.90-0.94 (the bound 0.90)
+    and the read ran up to 10 % fast for seconds."""
+    start, length = stall
+    rng = random.Random(7)
+    arrivals = []
+    for n in range(int(5.0 / DT)):
+        sent = n * DT
+        t = 1000.0 + min(sent, 1.0) + max(0.0, sent - 2.5)
+        rx = sent + 0.001 + 0.002 * rng.random()
+        if start <= sent < start + length:
+            rx = start + length + 0.001 + 0.00001 * n  # held, then delivered in order
+        arrivals.append((t, rx))
+    core = TickCore(RiderModel(scale=25.0), Timing(delay=0.03, hold=0.25), ProceduralHorse())
+    clock, rates, drivers, k = ProducerClock(), [], set(), 0
+    for now in np.arange(0.0, 5.0, 0.005):
+        while k < len(arrivals) and arrivals[k][1] <= now:
+            t, rx = arrivals[k]
+            step = clock_step(clock, t, rx, JUMP, PAUSE)
+            clock, k = step.clock, k + 1
+            core.push_input(1, step.t, rx, [0.0] * len(HORSE_NAMES), rebased=step.rebased)
+        result = core.step(float(now))
+        if now > 0.1:
+            drivers.add(result.driver)
+            rates.append(core.resampler.rate)
+    assert drivers == {Driver.INPUT}
+    assert max(abs(r - 1.0) for r in rates) < 0.005, (min(rates), max(rates))

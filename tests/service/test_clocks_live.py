@@ -79,12 +79,69 @@ def drivers(frames: list[dict]) -> list[tuple[str, int, float]]:
     return runs
 
 
-def largest_step(frames: list[dict]) -> float:
+HOLD, DELAY = 0.5, 0.03
+"""``input.hold`` and ``input.delay`` of the test server (tests/service/conftest.py): a producer
+silent longer than HOLD is stale; silent longer than DELAY, the tick holds its newest frame."""
+IN_FLIGHT_S = 0.1
+"""Allowed for a frame sent to reach the tick (the web process's receive, the ring, a tick)."""
+
+
+def excused(frames: list[dict[str, Any]], sent: list[float], silent_for: float) -> list[bool]:
+    """Per ``/ws/rider`` frame: ticked after a silence of more than ``silent_for`` s that is not
+    the service's clock handling, whose effect (a held frame and the step after it past
+    ``input.delay``, the ease to neutral past ``input.hold``) is then documented behaviour,
+    not the case's:
+
+    - this test's own sender had sent nothing for ``silent_for`` (or had just sent again:
+      ``IN_FLIGHT_S`` for its frame to reach the tick). The sender and the follower share
+      this process: a stall of it (descheduled, or held by a garbage collection) silences the
+      producer. In a full run (fresh clone, quiet) the saddle's sender fell silent ~1.3 s in
+      a settle (the follower, in the same process, was 0.98 s behind); the rider went neutral
+      as specified, and drove again at the next frame;
+    - the follower got nothing for ``silent_for`` before it, or ``IN_FLIGHT_S`` before it:
+      the service's web process was descheduled (it forwards the producer's frames to the
+      tick and the tick's to the follower: both came in a burst). CI once saw 13 neutral
+      frames 0.5 s after a resume, the cause not kept (test_clocks_live, 2026-11-28).
+
+    ``sent``: send times (perf_counter s) in order; a frame's tick time on this process's
+    clock is its engine ``t`` plus the least ``at - t`` of the run (both CLOCK_MONOTONIC;
+    the least delivery, ~1 ms, early)."""
+    offset = min(f["at"] - f["t"] for f in frames)
+    ats = [f["at"] for f in frames]
+    sender = [(a, b) for a, b in zip(sent, sent[1:]) if b - a > silent_for]
+    resumed = [b for a, b in zip(ats, ats[1:]) if b - a > silent_for]
+    out: list[bool] = []
+    for f in frames:
+        ticked = f["t"] + offset
+        silent = (
+            not sent
+            or ticked <= sent[0] + IN_FLIGHT_S
+            or any(a + silent_for < ticked <= b + IN_FLIGHT_S for a, b in sender)
+        )
+        k = bisect.bisect_right(resumed, f["at"])
+        out.append(bool(silent or (k > 0 and f["at"] - resumed[k - 1] <= IN_FLIGHT_S)))
+    return out
+
+
+def driven_while_sent(frames: list[dict[str, Any]], sent: list[float], stale: float = HOLD) -> tuple[bool, Any]:
+    """Whether the producer drove every frame but those :func:`excused` for a silence over
+    ``stale`` (the stream's hold), and for the message the driver runs and the frames excused."""
+    out = excused(frames, sent, stale)
+    ok = all(f["driver"] == "input" or gone for f, gone in zip(frames, out, strict=True))
+    return ok, (drivers(frames), "frames ticked after a silence not the service's:", sum(out))
+
+
+def largest_step(frames: list[dict[str, Any]], sent: list[float], held: float = DELAY) -> float:
     """The largest change of the rider's lower back per tick between consecutive /ws/rider
-    frames (deg; a frame the follower missed makes a two-tick step, counted as two)."""
+    frames (deg; a frame the follower missed makes a two-tick step, counted as two), over
+    the steps between two frames not :func:`excused` for a silence over ``held`` (the read
+    passed the newest frame and held it: the step when frames come again is the hold's; a
+    68 ms sender stall, loaded, made one of 3 x a steady clock's)."""
     back = np.array([f["values"][BACK] for f in frames])
     seq = np.array([f["seq"] for f in frames])
-    return float((np.abs(np.diff(back)) / np.diff(seq)).max())
+    kept = ~np.array(excused(frames, sent, held))
+    steps = (np.abs(np.diff(back)) / np.diff(seq))[kept[1:] & kept[:-1]]
+    return float(steps.max())
 
 
 def steps_back(stamps: list[float]) -> list[tuple[float, float]]:
@@ -138,22 +195,27 @@ def run(
 
 
 def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: LiveServer) -> None:
-    baseline, none, _ = run(server, 2.0, lambda e: e, game=True)
-    assert none == [] and all(f["driver"] == "input" for f in baseline)
-    bound = largest_step(baseline)
+    sent: list[float] = []
+    baseline, none, _ = run(server, 2.0, lambda e: e, game=True, sent=sent)
+    ok, runs = driven_while_sent(baseline, sent)
+    assert none == [] and ok, runs
+    bound = largest_step(baseline, sent)
 
     paused_before = server.metric("riderlive_clock_jumps_total", 'direction="paused"')
     # the game pauses after 0.5 s for 1.5 s (its clock stands still, frames keep coming), then resumes
-    paused, segments, _ = run(server, 3.0, lambda e: min(e, 0.5) + max(0.0, e - 2.0), game=True)
+    sent = []
+    paused, segments, _ = run(server, 3.0, lambda e: min(e, 0.5) + max(0.0, e - 2.0), game=True, sent=sent)
     reasons = [s["reason"] for s in segments]
     assert reasons == ["clock_paused", "clock_resumed"], segments
-    assert all(f["driver"] == "input" for f in paused), ("the producer kept control throughout", drivers(paused))
+    ok, runs = driven_while_sent(paused, sent)
+    assert ok, ("the producer kept control throughout", runs)
     assert -0.5 <= segments[0]["jump"] < 0.0  # it stood still for less than 0.5 s before the segment
-    assert largest_step(paused) <= 1.5 * bound, (largest_step(paused), bound)
+    assert largest_step(paused, sent) <= 1.5 * bound, (largest_step(paused, sent), bound)
     assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
 
     # 0.2 s back every second (the issue: every 2 s; twice as many steps here)
-    stepping, segments, stamps = run(server, 3.5, lambda e: e - 0.2 * math.floor(e), game=False)
+    sends: list[float] = []
+    stepping, segments, stamps = run(server, 3.5, lambda e: e - 0.2 * math.floor(e), game=False, sent=sends)
     sent = steps_back(stamps)
     # 3 steps sent, unless the sender was late across one (seen once in a full suite on a loaded host)
     assert len(sent) >= 2, ("the sender was late across more than one step", sent)
@@ -163,8 +225,9 @@ def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: 
     # the step is 0.2 s less the time between the two frames (8 ms at 120 Hz, more when the
     # sender is late: by 0.15 s, -0.05 s; the two stamps are checked exactly above)
     assert all(s["jump"] == s["t"] - s["previous_t"] and -0.2 < s["jump"] < 0.0 for s in segments), segments
-    assert all(f["driver"] == "input" for f in stepping)
-    assert largest_step(stepping) <= 1.5 * bound, (largest_step(stepping), bound)
+    ok, runs = driven_while_sent(stepping, sends)
+    assert ok, runs
+    assert largest_step(stepping, sends) <= 1.5 * bound, (largest_step(stepping, sends), bound)
 
 
 def held_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -> tuple[float, np.ndarray]:

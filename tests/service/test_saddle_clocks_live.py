@@ -16,7 +16,7 @@ import numpy as np
 from riderlive.realtime.tick_control import RATE_SHOWN
 from riderlive.saddle import Model
 from tests.service.live_server import LiveServer
-from tests.service.test_clocks_live import BACK, drivers, run, steps_back
+from tests.service.test_clocks_live import driven_while_sent, drivers, largest_step, run, steps_back
 from tests.service.test_saddle_live import _trot_saddle
 from tests.waiting import wait_until
 
@@ -25,49 +25,6 @@ SETTLE = 2.0
 STALE_S = Model().hold + Model().ease
 """A saddle stream with no sample for this long is stale, and the rider eases to neutral
 (``realtime/saddle_input.py``): what the service must do when its producer falls silent."""
-IN_FLIGHT_S = 0.1
-"""Allowed for a sample sent to reach the tick (the web process's receive, the ring, a tick)."""
-
-
-def unsent(frames: list[dict[str, Any]], sent: list[float]) -> list[bool]:
-    """Per frame: ticked while this test's own sender had sent nothing for ``STALE_S`` (its
-    last ``IN_FLIGHT_S`` aside: a sample then had not reached the tick yet). The sender
-    and the ``/ws/rider`` follower share this process: a stall of it (descheduled, or held
-    by a garbage collection; the cause was not kept) silences the producer, and the
-    stream's going stale then is the documented behaviour, not the clock case's. In a full
-    run (fresh clone, quiet) the sender fell silent ~1.3 s in the settle before a freeze
-    (the follower, in the same process, was 0.98 s behind when the case began: 768 frames
-    in its 2.95 s window at 200 Hz); the rider went neutral 0.75 s after the last sample,
-    as specified, and drove again at the next. ``sent``: send times (perf_counter s) in
-    order; a frame's tick time on this process's clock is its engine ``t`` plus the least
-    ``at - t`` of the run (both CLOCK_MONOTONIC; the least delivery, ~1 ms, early)."""
-    offset = min(f["at"] - f["t"] for f in frames)
-    out: list[bool] = []
-    for f in frames:
-        ticked = f["t"] + offset
-        i = bisect.bisect_right(sent, ticked - IN_FLIGHT_S)
-        out.append(bool(i == 0 or sent[i - 1] < ticked - STALE_S))
-    return out
-
-
-def driven_while_sent(frames: list[dict[str, Any]], sent: list[float]) -> tuple[bool, Any]:
-    """Whether the saddle drove every frame ticked while the test kept sending (see
-    :func:`unsent`), and for the message the driver runs and the frames excused."""
-    excused = unsent(frames, sent)
-    ok = all(driven(f) or gone for f, gone in zip(frames, excused, strict=True))
-    return ok, (drivers(frames), "frames ticked after the sender's own silence:", sum(excused))
-
-
-def largest_step(frames: list[dict[str, Any]], sent: list[float]) -> float:
-    """The largest change of the rider's lower back per tick between consecutive /ws/rider
-    frames (deg; a frame the follower missed makes a two-tick step, counted as two), over
-    the steps between two frames ticked while the test kept sending (:func:`unsent`: the
-    ease to neutral after the sender's own silence and the switch back are not the case's)."""
-    back = np.array([f["values"][BACK] for f in frames])
-    seq = np.array([f["seq"] for f in frames])
-    kept = ~np.array(unsent(frames, sent))
-    steps = (np.abs(np.diff(back)) / np.diff(seq))[kept[1:] & kept[:-1]]
-    return float(steps.max())
 
 
 def saddle_frame(t: float, at: float) -> dict[str, Any]:
@@ -187,14 +144,14 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     ``clock_resumed``, each step back one ``clock_backward`` re-anchored; the saddle drives
     every frame (never neutral, never the procedural horse) and the rider's per-tick step
     stays within 1.5 x a steady clock's. Frames ticked after this test's own sender fell
-    silent longer than the stream's hold are not the clock's (:func:`unsent`)."""
+    silent longer than the stream's hold are not the clock's (``test_clocks_live.excused``)."""
     # as long as the longest run compared with it: the largest step of a shorter window is
     # biased low (a 2 s baseline put the 3.5 s stepping run at 1.55 x once, quiet host)
     sent: list[float] = []
     baseline, none, _ = run(server, 3.5, lambda e: e, False, sent, path="/ws/saddle", make=saddle_frame, settle=SETTLE)
-    ok, runs = driven_while_sent(baseline, sent)
+    ok, runs = driven_while_sent(baseline, sent, STALE_S)
     assert none == [] and ok, runs
-    bound = largest_step(baseline, sent)
+    bound = largest_step(baseline, sent, STALE_S)
 
     paused_before = server.metric("riderlive_clock_jumps_total", 'direction="paused"')
     sent = []
@@ -210,9 +167,9 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     )
     assert [s["reason"] for s in segments] == ["clock_paused", "clock_resumed"], segments
     assert -0.5 <= segments[0]["jump"] < 0.0, segments  # a segment within 0.5 s of the freeze
-    ok, runs = driven_while_sent(paused, sent)
+    ok, runs = driven_while_sent(paused, sent, STALE_S)
     assert ok, ("the saddle kept control throughout", runs)
-    assert largest_step(paused, sent) <= 1.5 * bound, (largest_step(paused, sent), bound)
+    assert largest_step(paused, sent, STALE_S) <= 1.5 * bound, (largest_step(paused, sent, STALE_S), bound)
     assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
 
     sent = []
@@ -223,6 +180,6 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     assert len(back) >= 2, ("the sender was late across more than one step", back)
     assert [s["reason"] for s in segments] == ["clock_backward"] * len(back), (segments, back)
     assert [(s["previous_t"], s["t"]) for s in segments] == back, (segments, back)
-    ok, runs = driven_while_sent(stepping, sent)
+    ok, runs = driven_while_sent(stepping, sent, STALE_S)
     assert ok, runs
-    assert largest_step(stepping, sent) <= 1.5 * bound, (largest_step(stepping, sent), bound)
+    assert largest_step(stepping, sent, STALE_S) <= 1.5 * bound, (largest_step(stepping, sent, STALE_S), bound)
