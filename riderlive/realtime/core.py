@@ -191,9 +191,8 @@ class TickCore:
     def set_mode(self, mode: Mode, now: float) -> None:
         self.mode = mode
 
-    def push_record(self, record: InputRecord) -> bool:
+    def push_record(self, r: InputRecord) -> bool:
         """:meth:`push_input` of one input ring record."""
-        r = record
         return self.push_input(r.producer, r.t, r.received, r.values, r.kind, rebased=r.rebased)
 
     def push_input(
@@ -210,11 +209,8 @@ class TickCore:
         producer replaces the old one's buffer and estimator.
 
         Frames of a producer that has gone are ignored: its last frames may still be
-        in the ring when the tick learns that it left. ``rebased``: the service re-anchored
-        the producer's clock at this frame (``service/clocks.py``: a pause, a resume, a step
-        back), its time given from one arrival: the clock rate's baseline starts over from it
-        (``ClockMap.restart_rate``), as the offsets before and after are not comparable (a
-        delivery stall across a resume made a ±10 % rate of the step).
+        in the ring when the tick learns that it left. ``rebased`` (``ClockStep.rebased``: the
+        producer's clock re-anchored at this frame): the clock rate's baseline starts over.
         """
         if producer in self._gone:
             return False
@@ -225,13 +221,10 @@ class TickCore:
                 self._start_blend(received, self.timing.blend_time)
             self.producer = producer
             self.input_kind = kind
-        if kind is InputKind.SADDLE:
-            if rebased:
-                self.saddle.clock.restart_rate(t)
-            return self.saddle.push(t, received, values)
+        saddle = kind is InputKind.SADDLE
         if rebased:
-            self.resampler.clock.restart_rate(t)
-        return self.resampler.push(t, received, values)
+            (self.saddle.clock if saddle else self.resampler.clock).restart_rate(t)
+        return self.saddle.push(t, received, values) if saddle else self.resampler.push(t, received, values)
 
     def producer_gone(self, producer: int) -> None:
         """The producer disconnected: its stream is stale from now on."""

@@ -36,8 +36,9 @@ from riderlive.realtime import layout as L
 from riderlive.realtime.core import Driver, TickCore, TickResult
 from riderlive.realtime.counters import COUNTERS, TickCounters
 from riderlive.realtime.frame import frame_of
+from riderlive.realtime.intake import Intake
 from riderlive.realtime.output import TickDevices
-from riderlive.realtime.pacing import DeadlineClock, bucket_of, pickup_until
+from riderlive.realtime.pacing import DeadlineClock, bucket_of
 from riderlive.realtime.phase_follow import PhaseFollower
 from riderlive.realtime.record import LayoutMismatch, RecordLayout
 from riderlive.realtime.setup import TickSetup
@@ -85,8 +86,6 @@ class TickLoop(TickControl):
         slots = latency.slot_names(latency.TICK_HISTOGRAMS)
         self.histogram_block = SharedCounters(slots, name=names.get("histograms"))
         self.histograms = latency.views(self.histogram_block.values, latency.TICK_HISTOGRAMS)
-        self._arrivals: list[float] = []
-        """Receive times of the driving producer's horse frames taken this tick (the phase lock's input)."""
         self._snapshot_every = max(1, round(setup.rate / handover.SNAPSHOT_RATE))
         self._status_every = max(1, round(setup.rate / 30.0))
         self._last_driver = Driver.NEUTRAL
@@ -109,6 +108,7 @@ class TickLoop(TickControl):
         self.core = TickCore(
             model, setup.timing, self.horse, setup.mode, setup.rider_bounds, saddle_point=setup.saddle_point
         )
+        self.intake = Intake(self.inputs, self.core, self.counter, self.histograms["ingest_to_tick"], 1.0 / setup.rate)
         self._saddle_seen = (-1, -1)
         """Lock and gait codes of the last status (a change makes the status dirty)."""
         self._horse_seen: tuple[str, str | None] = ("", None)
@@ -165,7 +165,7 @@ class TickLoop(TickControl):
             deadline, lateness = woke
             now = deadline - self.setup.start
             self._stop_and_commands(deadline, now)
-            newest_rx = self._read_input(now)
+            newest_rx = self.intake.read(now, deadline, self.devices)
             result = self._rules(now)
             self._tick_devices(result, clock.tick, now, deadline, newest_rx)
             physics = self._step_physics(now, result)  # after the rig's transaction: the bus never waits on the tail
@@ -205,46 +205,6 @@ class TickLoop(TickControl):
         if self.devices is not None:
             self.devices.act_on_stop(deadline)
         self._poll_commands(now)
-
-    def _read_input(self, now: float) -> float:
-        """Take the new input records into the core; the newest receive time (-1: none)."""
-        newest_rx = -1.0
-        arrivals = self._arrivals
-        arrivals.clear()
-        counter = self.counter
-        self._await_pending(now + self.setup.start)
-        for record in self.inputs.read_new():
-            frame = L.InputRecord.of(record)
-            rx = frame.received
-            switched = frame.producer != self.core.producer
-            if self.core.push_record(frame):
-                counter.input_frames += 1
-                if switched:  # only the new driver's frames count for the phase lock
-                    arrivals.clear()
-                if frame.kind is L.InputKind.HORSE:
-                    arrivals.append(rx)
-            else:
-                counter.input_out_of_order += 1
-            newest_rx = max(newest_rx, rx)
-        counter.input_lapped = self.inputs.lapped
-        if newest_rx >= 0.0:
-            self.histograms["ingest_to_tick"].observe(now - newest_rx)
-        return newest_rx
-
-    def _await_pending(self, deadline: float) -> None:
-        """A frame the web process received before this deadline (``perf_counter`` seconds) and is
-        still writing: spin until its record is in the ring, at most ``pacing.PICKUP_GRACE``.
-        An e-stop requested meanwhile is acted on at once (as in the clock's spin)."""
-        inputs = self.inputs
-        received = inputs.pending()
-        until = pickup_until(deadline, received, 1.0 / self.setup.rate)
-        if until < 0.0:
-            return
-        self.counter.input_pickup_waits += 1
-        devices = self.devices
-        while inputs.pending() == received and time.perf_counter() < until:
-            if devices is not None and devices.stop_pending():
-                devices.act_on_stop(time.perf_counter())
 
     def _rules(self, now: float) -> TickResult:
         """Step the rules (never raising, never non-finite); their faults and counters out."""
@@ -323,7 +283,7 @@ class TickLoop(TickControl):
     def _after_output(self, clock: DeadlineClock, now: float, result: TickResult) -> None:
         """Off the latency path: the phase lock, the hand-over snapshot, the status."""
         if self.phase.enabled:
-            self._follow_phase(clock, now, self._arrivals)
+            self._follow_phase(clock, now, self.intake.arrivals)
         if self.handover_blob is not None and clock.tick % self._snapshot_every == 0:
             self._write_snapshot(clock, now)
         if result.driver is not self._last_driver:
