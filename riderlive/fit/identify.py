@@ -12,7 +12,9 @@
 - **identified** (:attr:`Status.IDENTIFIED`): in no null direction.
 - **within the noise** (:attr:`Status.WEAK`, by :func:`weak` after a fit): identified in
   principle, but its uncertainty is above :data:`WEAK_UNCERTAINTY` of its value (a gain of
-  0.0001 under millimetres of noise). Held at the starting preset's value.
+  0.0001 under millimetres of noise), or the fit took it more than :data:`RUNAWAY` scales
+  from the starting preset (the takes barely pin it and it ran along a flat valley). Held
+  at the starting preset's value.
 """
 
 from __future__ import annotations
@@ -33,6 +35,13 @@ NULL_TOLERANCE = 1e-10
 WEAK_UNCERTAINTY = 0.01
 """Uncertainty, relative to the value (at least :data:`WEAK_FLOOR`), above which a fitted parameter is held."""
 WEAK_FLOOR = 1e-3
+RUNAWAY = 10.0
+"""A fitted value this many scales (the starting value's magnitude, at least 1) from the
+starting preset's is not what the takes show but a run along a flat valley: ``child`` under
+mocap noise took ``wrists.back_gain`` from 0.0001 to -1173 or -8816 and ``back_limit`` from
+17 to -3e8 or -2.6e9, by the BLAS kernel (Haswell or AVX-512, 2026-11-28); the relative
+uncertainty then read 67 % or 0.76 %, on either side of :data:`WEAK_UNCERTAINTY`. No move of
+the recovery cases comes near (a gain from 0.0001 to 2, a limit from 17 to 45)."""
 MEMBER_TOLERANCE = 1e-6
 """Entry of the projector onto the null space above which two parameters are linked."""
 
@@ -125,14 +134,25 @@ def uncertainty(normal: FloatArray, free: Sequence[int], cost: float, rows: int)
     return np.sqrt(np.clip(np.diag(inverse), 0.0, None) * variance)
 
 
-def weak(ident: Identification, normal: FloatArray, values: FloatArray, cost: float, rows: int) -> Identification:
+def weak(
+    ident: Identification,
+    normal: FloatArray,
+    values: FloatArray,
+    cost: float,
+    rows: int,
+    *,
+    start: FloatArray | None = None,
+) -> Identification:
     """``ident`` with each identified parameter whose uncertainty at the fitted ``values`` (``cost`` over
-    ``rows``) exceeds :data:`WEAK_UNCERTAINTY` of its value marked :attr:`Status.WEAK`. A parameter fitted
-    for its group stays: its value stands for the group's combination, which holding it would get wrong."""
+    ``rows``) exceeds :data:`WEAK_UNCERTAINTY` of its value, or which lies more than :data:`RUNAWAY`
+    scales from its ``start`` value, marked :attr:`Status.WEAK`. A parameter fitted for its group stays:
+    its value stands for the group's combination, which holding it would get wrong."""
     free = ident.free
     sigma = uncertainty(normal, free, cost, rows)
     status = list(ident.status)
     for k, s in zip(free, sigma, strict=True):
-        if status[k] is Status.IDENTIFIED and s > WEAK_UNCERTAINTY * max(abs(float(values[k])), WEAK_FLOOR):
+        value = float(values[k])
+        ran = start is not None and abs(value - start[k]) > RUNAWAY * max(abs(float(start[k])), 1.0)
+        if status[k] is Status.IDENTIFIED and (ran or s > WEAK_UNCERTAINTY * max(abs(value), WEAK_FLOOR)):
             status[k] = Status.WEAK
     return Identification(tuple(status), ident.groups)

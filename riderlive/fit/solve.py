@@ -8,7 +8,8 @@ preset's values; a probe of the clamps the starting preset never reaches (each i
 toward 0 by a few factors and kept where the cost drops: the takes then show the clamp);
 the fine clock offset; and the analysis again at the solution, refitting until the set of
 fitted parameters settles (a parameter that ends up without effect, or within the noise,
-goes back to its starting value). Uncertainty: ``sqrt(diag((J^T J)^-1) s^2)``, ``s^2`` the weighted residual
+or that ran away along a flat valley, goes back to its starting value).
+Uncertainty: ``sqrt(diag((J^T J)^-1) s^2)``, ``s^2`` the weighted residual
 variance, per fitted parameter (optimistic when residuals are correlated in time, as
 mocap residuals are).
 """
@@ -181,7 +182,7 @@ def _fit(pairs: Sequence[TakePair], start: RuleParams, options: FitOptions) -> S
         takes = [align(pair, off, options.drift) for pair, off in zip(pairs, offsets, strict=True)]
     for _ in range(MAX_ROUNDS):
         lin = linearise(takes, from_vector(start, names, x), names, held)
-        settled = weak(identify(lin.normal, x, lin.rows), lin.normal, x, lin.cost, lin.rows)
+        settled = weak(identify(lin.normal, x, lin.rows), lin.normal, x, lin.cost, lin.rows, start=x0)
         if settled.free == ident.free and not refit:
             break
         refit = False

@@ -209,8 +209,12 @@ def test_batch_fit_equals_scalar_fit(name: str) -> None:
     assert (lam_batch < 1.0).sum() > 50  # the test covers the scale-back
     for k in range(0, 400, 3):
         q, lam = ws.fit(tuple(poses[k]))  # type: ignore[arg-type]
-        assert lam == pytest.approx(lam_batch[k], abs=1e-12)
-        assert np.asarray(q) == pytest.approx(q_batch[k], abs=1e-12)
+        # A pose scaled back is searched to the boundary, where the margin is flat and a rotary
+        # arm at full reach ill-conditioned: an ulp of difference in a primitive (NumPy's
+        # AVX-512 exp/atan2/tan against libm's, docs/testing.md) moved one scale 6e-11 and its
+        # angles 1e-8 rad (2026-11-28, AVX-512 host). Within the workspace: 1e-12.
+        assert lam == pytest.approx(lam_batch[k], abs=1e-12 if lam_batch[k] == 1.0 else 1e-9)
+        assert np.asarray(q) == pytest.approx(q_batch[k], abs=1e-12 if lam_batch[k] == 1.0 else 1e-6)
 
 
 def test_scale_back_is_continuous_along_a_path() -> None:
