@@ -5,6 +5,7 @@ the web process is still writing."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from riderlive.realtime import layout as L
@@ -18,25 +19,18 @@ if TYPE_CHECKING:
     from riderlive.realtime.shm import SharedRing
 
 
+@dataclass
 class Intake:
     """Reads ``inputs`` into ``core``, counting in ``counter`` and ``ingest_to_tick`` (s);
     ``period``: the tick's (s), the longest a pending frame is waited for."""
 
-    def __init__(
-        self,
-        inputs: SharedRing,
-        core: TickCore,
-        counter: TickCounters,
-        ingest_to_tick: LatencyHistogram,
-        period: float,
-    ) -> None:
-        self.inputs = inputs
-        self.core = core
-        self.counter = counter
-        self.ingest_to_tick = ingest_to_tick
-        self.period = period
-        self.arrivals: list[float] = []
-        """Receive times of the driving producer's horse frames taken this tick (the phase lock's input)."""
+    inputs: SharedRing
+    core: TickCore
+    counter: TickCounters
+    ingest_to_tick: LatencyHistogram
+    period: float
+    arrivals: list[float] = field(default_factory=list)
+    """Receive times of the driving producer's horse frames taken this tick (the phase lock's input)."""
 
     def read(self, now: float, deadline: float, devices: TickDevices | None) -> float:
         """Take the new input records into the core at engine time ``now`` (the tick's
