@@ -225,7 +225,9 @@ class Device:
         self._last_now = now
         return self.status(now, wrote)
 
-    def status(self, now: float, wrote: bool = False) -> DeviceStatus:
+    def status(self, now: float, wrote: bool = False, *, drain: bool = True) -> DeviceStatus:
+        """The device at ``now``; ``drain``: take the lifecycle's transitions since the last
+        (the tick's status does; a look between ticks, after a request, leaves them)."""
         return DeviceStatus(
             name=self.name,
             kind=self.plug.kind,
@@ -237,7 +239,7 @@ class Device:
             outputs_off_confirmed=self.readback.confirmed and not self.state.moving,
             estop=self.last_stop,
             wrote=wrote,
-            transitions=self.life.drain(),
+            transitions=self.life.drain() if drain else (),
             counters={**self.counters, **self.plug.counters},
             extra=self.plug.status(),
         )

@@ -133,13 +133,17 @@ class TickDevices:
     # -- requests ------------------------------------------------------------------------
 
     def request(self, command: cmd.Request) -> cmd.Reply:
-        """Apply an operator's request; refusals come back in the reply, never raised."""
+        """Apply an operator's request; refusals come back in the reply, never raised. The
+        devices' statuses are taken again at once, so :meth:`status` says what the reply says."""
         try:
             message = self._apply(command)
-            return cmd.Reply(command.request, True, self.states(), None, message)
+            reply = cmd.Reply(command.request, True, self.states(), None, message)
         except Refused as exc:
             log.warning("refused %s: %s", type(command).__name__.lower(), exc)
-            return cmd.Reply(command.request, False, self.states(), exc.reason.value, str(exc))
+            reply = cmd.Reply(command.request, False, self.states(), exc.reason.value, str(exc))
+        now = time.perf_counter()
+        self.statuses = [device.status(now, drain=False) for device in self.devices]
+        return reply
 
     def _apply(self, command: cmd.Request) -> str:
         if isinstance(command, cmd.Arm):

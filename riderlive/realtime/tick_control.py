@@ -116,14 +116,18 @@ class TickControl:
         self._status_dirty = True
 
     def _request(self, command: cmd.Request) -> None:
-        """An operator's request: applied by the devices, answered on the command pipe."""
+        """An operator's request: applied by the devices, answered on the command pipe after the
+        status blob says what the reply says (a ``GET /api/devices`` right after a ``200`` to
+        ``POST /api/arm`` read ``disarmed`` for up to a tick: the bench's retry then armed twice)."""
         if self.devices is not None:
             reply = self.devices.request(command)
+            self.device_status = self.devices.status()
         elif isinstance(command, cmd.Reset):
             self.latch.clear()
             reply = cmd.Reply(command.request, True, {}, None, "reset: no devices")
         else:
             reply = cmd.Reply(command.request, False, {}, "unknown_device", "no devices are configured")
+        self._publish_status()
         if command.request:
             with contextlib.suppress(OSError, ValueError):
                 self.commands.send(reply)

@@ -96,6 +96,7 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     armed = post(live, "/api/arm", {"device": "bench3", "by": "test"})
     assert armed.status_code == 200, armed.text
     assert armed.json()["states"] == {"bench3": "soft_start"}
+    assert rig(live)["state"] in ("soft_start", "running")  # the status says what the reply said, at once
     wait_state(live, "running")
     assert rig(live)["armed_by"] == "rest 127.0.0.1 (test)"
     double = post(live, "/api/arm", {"device": "bench3"})
@@ -119,6 +120,7 @@ def test_nothing_moves_until_armed_and_every_bad_request_is_refused(rig_server: 
     assert post(live, "/api/arm", {"device": "bench3"}).status_code == 200
     wait_state(live, "running")
     assert post(live, "/api/disarm", {"device": "bench3"}).status_code == 200
+    assert rig(live)["state"] in ("parking", "parked")  # at once, as the reply
     wait_state(live, "parked", timeout=5.0)
     reloaded = post(live, "/api/reload", {"device": "bench3"})
     assert reloaded.status_code == 200
