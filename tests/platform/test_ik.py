@@ -246,3 +246,27 @@ def test_axis_ranges_end_on_the_boundary(name: str) -> None:
             assert 0.0 <= margin(*pose)[1] < 1e-7
             pose[axis] += sign * 1e-6
             assert margin(*pose)[1] < 0.0
+
+
+def test_a_line_that_leaves_and_enters_the_workspace_again_is_scaled_back_to_its_first_exit() -> None:
+    """Two neighbouring poses far outside (hypothesis found them, 2026-11-28): along the line
+    from home the margin goes out at ~0.25 and in again at ~0.65. The scale-back keeps the
+    first exit for both (before: 0.70 and 0.13, a jump of the target between two frames), and
+    the whole way from home to the kept pose is inside."""
+    g = geometry("stewart_linear")
+    ws, margin = Workspace(g), make_margin(g, SCALAR)
+    poses = [
+        (0.0, 0.5667187499999999, 0.0390625, -0.5, 1.0, 51.0),
+        (0.0, 0.5628124999999999, 0.0390625, -0.5, 0.0, 52.0),
+    ]  # noqa: E501
+    lams = []
+    for pose in poses:
+        _, lam = ws.fit(pose)
+        lams.append(lam)
+        way = [tuple(h + s * (p - h) for h, p in zip(g.home, pose, strict=True)) for s in np.linspace(0, lam, 50)]
+        along = [margin(*kept)[1] for kept in way]
+        assert min(along) >= 0.0, (pose, lam)
+        assert 0.2 < lam < 0.3, (pose, lam)
+    assert abs(lams[0] - lams[1]) < 0.01, lams
+    _, lam_batch = ws.fit_batch(np.array(poses))
+    assert lam_batch.tolist() == pytest.approx(lams, abs=1e-12)
