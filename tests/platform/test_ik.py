@@ -258,7 +258,7 @@ def test_a_line_that_leaves_and_enters_the_workspace_again_is_scaled_back_to_its
     poses = [
         (0.0, 0.5667187499999999, 0.0390625, -0.5, 1.0, 51.0),
         (0.0, 0.5628124999999999, 0.0390625, -0.5, 0.0, 52.0),
-    ]  # noqa: E501
+    ]
     lams = []
     for pose in poses:
         _, lam = ws.fit(pose)
