@@ -95,9 +95,18 @@ def test_a_saddle_recording_rides_like_the_full_horse(
     _, horse = evaluate(truth_model, script.start(truth_model), np.array([f["source_t"] for f in later]))
     truth = MODEL.evaluate_batch(horse)
     live = np.array([f["values"] for f in later])
+    # what a failure needs to be explained (seen twice in full runs, 0.42 and 0.71 on
+    # lower_back.rz for the strap, never alone): the service's messages, the frames' reading
+    seen = {
+        "messages": stream.messages[1:],
+        "frames": len(later),
+        "largest source step": float(np.diff(source).max()),
+        "largest arrival gap": float(np.diff([f["at"] for f in frames]).max()),
+        "r": {c: float(np.corrcoef(truth[:, RIDER_INDEX[c]], live[:, RIDER_INDEX[c]])[0, 1]) for c in COMPARED},
+    }
     for channel in COMPARED:
         i = RIDER_INDEX[channel]
-        assert np.corrcoef(truth[:, i], live[:, i])[0, 1] >= floor, channel
+        assert np.corrcoef(truth[:, i], live[:, i])[0, 1] >= floor, (channel, seen)
     # The published saddle is the saddle of the horse the rules rode (the rebuilt one).
     for f in later[::50]:
         np.testing.assert_allclose(f["saddle"], saddle_from_horse(f["horse"]), atol=1e-9)
