@@ -32,7 +32,7 @@ from pathlib import Path
 
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
-from riderlive.dynamixel.protocol import PacketReader, encode_fast_status
+from riderlive.dynamixel.emulator.protocol import PacketReader, encode_fast_status
 
 REPO = Path(__file__).resolve().parents[1]
 MODELS = ("XM430-W350", "XL430-W250", "XL330-M288")

@@ -30,8 +30,8 @@ import numpy as np
 from riderlive.horse import generate, load_script
 from riderlive.horse.script import gait_script
 from riderlive.platform import PlatformModel, bake, initial, shipped_platforms, step
-from riderlive.platform.geometry import Geometry
 from riderlive.platform.link import Target, encode
+from riderlive.platform.mechanism.geometry import Geometry
 from riderlive.platform.plug_link import position_units, target_counts
 from riderlive.platform.saddle_input import saddle_pose
 

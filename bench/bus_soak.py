@@ -44,7 +44,7 @@ import numpy as np
 from websockets.sync.client import connect
 
 from bench.rig_fixtures import Emulator, bench_rig, other_core_busy
-from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec
+from riderlive.dynamixel.emulator.faults import FaultKind, FaultSpec
 from riderlive.service.kworkers import census
 from tests.service.live_server import LiveServer
 

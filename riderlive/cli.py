@@ -14,7 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "horse": ("riderlive.horse.cli", "write a procedural horse take (gait or shot script)"),
     "saddle": ("riderlive.saddle.cli", "write the saddle pose of a horse; rebuild a horse from a saddle"),
     "plot": ("riderlive.plot", "plot channels of a frame file over time"),
-    "servo-emu": ("riderlive.dynamixel.emulator_cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
+    "servo-emu": ("riderlive.dynamixel.emulator.cli", "run an emulated Dynamixel bus on a pseudo-terminal"),
     "firmware-emu": ("riderlive.platform.firmware_host", "run firmware_proto's host build on a pseudo-terminal"),
     "platform": ("riderlive.platform.cli", "bake a take to motion-platform actuator tracks; describe a platform"),
     "tail": ("riderlive.physics.cli", "run the horse tail and rider braid physics on a horse take"),

@@ -152,3 +152,25 @@ def test_no_import_goes_up_a_layer() -> None:
     assert upward == set(), "imports from a lower layer to a higher one (docs/architecture.md)"
     stale = {(a, b) for a, b in UPWARD_EXCEPTIONS if b not in edges.get(a, set())}
     assert stale == set(), "an upward import was removed: drop it from UPWARD_EXCEPTIONS"
+
+
+def test_the_emulator_and_the_platform_mechanism_stand_apart() -> None:
+    """Issue 26's folders: nothing outside the emulator imports it (the live bus never loads it),
+    and the platform's mechanism imports only the pure core, the vocabulary and the firmware's
+    vocabulary (not the link, the device or the CLI beside it)."""
+    edges = graph()
+    emulator = "riderlive.dynamixel.emulator"
+    users = {
+        a for a, targets in edges.items() for b in targets if b.startswith(emulator) and not a.startswith(emulator)
+    }
+    assert users == set()
+    mechanism = "riderlive.platform.mechanism"
+    allowed = {"riderlive.platform.link_vocab"}
+    reach = {
+        b
+        for a, targets in edges.items()
+        if a.startswith(mechanism)
+        for b in targets
+        if not b.startswith(mechanism) and b not in allowed
+    }
+    assert {b for b in reach if layer(b) > 1} == set()

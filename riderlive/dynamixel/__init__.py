@@ -1,13 +1,10 @@
-"""Dynamixel Protocol 2.0: hardware tables, the packet codec and a bus emulator.
+"""Dynamixel Protocol 2.0: the live bus over the ROBOTIS SDK, and an emulator to test it against.
 
-- :mod:`~riderlive.dynamixel.tables`: instructions, error bits, X-series control tables.
-- :mod:`~riderlive.dynamixel.protocol`: pure packet encode/decode, CRC-16, byte stuffing.
-- :mod:`~riderlive.dynamixel.emulator`: an emulated bus on a pseudo-terminal that the
-  unmodified ``dynamixel_sdk.PortHandler`` opens by path; its parts are
-  ``emulator_servo`` (register memory, watchdog, shutdown), ``emulator_registers``
-  (struct layouts), ``emulator_motion`` (profile and thermal model),
-  ``emulator_instructions`` (what each instruction does), ``emulator_faults`` (fault
-  injection) and ``emulator_cli`` (``riderlive servo-emu``).
+- :mod:`~riderlive.dynamixel.tables`: instructions, error bits, X-series control tables (data).
+- ``sdkbus``, ``driver``, ``readback``, ``bringup``, ``rig``, ``servo_map``: the live bus,
+  spoken through ``dynamixel_sdk``, and the rig device over it.
+- :mod:`~riderlive.dynamixel.emulator`: a bus of emulated servos on a pseudo-terminal, with
+  the packet codec only it needs (the live path uses the SDK's).
 """
 
 from __future__ import annotations

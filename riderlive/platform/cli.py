@@ -28,10 +28,10 @@ import numpy as np
 from riderlive.configfile import ConfigError
 from riderlive.framefile import DEFAULT_RATE, FrameFileError, FrameTable, read_frames, write_frames
 from riderlive.frameunits import METRES, recorded_scale
-from riderlive.platform.config import PlatformConfig, load_platform
-from riderlive.platform.geometry import POSE_AXES
-from riderlive.platform.ik import axis_ranges
-from riderlive.platform.pipeline import Bake, PlatformModel, bake
+from riderlive.platform.mechanism.config import PlatformConfig, load_platform
+from riderlive.platform.mechanism.geometry import POSE_AXES
+from riderlive.platform.mechanism.ik import axis_ranges
+from riderlive.platform.mechanism.pipeline import Bake, PlatformModel, bake
 from riderlive.platform.saddle_input import saddle_pose
 from riderlive.saddle.takes import add_point_arguments, point_of
 from riderlive.units import metres_per_unit

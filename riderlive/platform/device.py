@@ -1,7 +1,7 @@
 """The motion platform as a device: the plug that puts firmware_proto on a serial link into the lifecycle.
 
 :class:`PlatformPlug` is what :class:`~riderlive.devices.device.Device` drives (see
-:mod:`riderlive.devices.plug`). The pure pipeline (:mod:`riderlive.platform.pipeline`:
+:mod:`riderlive.devices.plug`). The pure pipeline (:mod:`riderlive.platform.mechanism.pipeline`:
 cueing, IK with the workspace scale-back, the safety follower) computes one target per
 actuator a tick; the checked link (:mod:`riderlive.platform.serial_link`) carries it to
 the firmware, which applies its own soft, speed and acceleration limits, soft start,
@@ -43,10 +43,11 @@ from riderlive.devices.latch import StopView
 from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply, Rejected
 from riderlive.devices.plug import Motion, Move, PlugBase, Steps
 from riderlive.devices.registry import DeviceInfo, DeviceSpec
-from riderlive.platform import link, pipeline, plug_status
-from riderlive.platform.config import load_platform
+from riderlive.platform import link, plug_status
 from riderlive.platform.link_vocab import Flag, LinkState, Profile, config_refusal
-from riderlive.platform.pipeline import PlatformModel, PlatformState
+from riderlive.platform.mechanism import pipeline
+from riderlive.platform.mechanism.config import load_platform
+from riderlive.platform.mechanism.pipeline import PlatformModel, PlatformState
 from riderlive.platform.plug_link import config_values, lifecycle_errors, position_units, target_counts
 from riderlive.platform.plug_status import fault_names
 from riderlive.platform.serial_link import Health, SerialPlatformLink

@@ -24,7 +24,7 @@ import numpy as np
 from riderlive.devices.lifecycle import Mismatch, NoReply, PortBusy, PortLost, Rejected
 from riderlive.platform import link
 from riderlive.platform.link_vocab import ConfigKey
-from riderlive.platform.pipeline import FloatArray, PlatformModel
+from riderlive.platform.mechanism.pipeline import FloatArray, PlatformModel
 from riderlive.platform.serial_link import CommandRefused, NoAnswer, PlatformLinkError, VersionMismatch
 from riderlive.platform.serial_link import PortBusy as LinkBusy
 from riderlive.platform.serial_link import PortLost as LinkLost

@@ -11,10 +11,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from riderlive.platform import link, pipeline
-from riderlive.platform.geometry import Geometry, rotation
+from riderlive.platform import link
 from riderlive.platform.link_vocab import Fault, Flag
-from riderlive.platform.pipeline import PlatformModel, PlatformState
+from riderlive.platform.mechanism import pipeline
+from riderlive.platform.mechanism.geometry import Geometry, rotation
+from riderlive.platform.mechanism.pipeline import PlatformModel, PlatformState
 from riderlive.platform.serial_link import SerialPlatformLink
 
 

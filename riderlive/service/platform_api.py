@@ -4,7 +4,7 @@
     PATCH /api/platform {"intensity": 60, ...}        live cueing parameters, blended in
 
 The PATCH body takes the platform's device name (optional when there is one platform) and
-any of the cueing parameters of ``riderlive.platform.cueing_params.CueingParams`` (ranges checked
+any of the cueing parameters of ``riderlive.platform.mechanism.cueing_params.CueingParams`` (ranges checked
 here: 422; checked again against the whole set by the tick: 422 ``bad_config``). It needs
 the token whenever one is configured, like arming: it changes how far the platform moves
 (checked before the body by ``auth.WriteGuard``, ``auth.WRITE_RULES``).

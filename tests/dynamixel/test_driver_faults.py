@@ -36,8 +36,8 @@ from riderlive.devices.stall import HostClock, lost_between
 from riderlive.devices.status import DeviceStatus
 from riderlive.dynamixel.driver import rig_device
 from riderlive.dynamixel.emulator import ServoSetup
-from riderlive.dynamixel.emulator_faults import FaultKind as EmuFault
-from riderlive.dynamixel.emulator_faults import FaultSpec
+from riderlive.dynamixel.emulator.faults import FaultKind as EmuFault
+from riderlive.dynamixel.emulator.faults import FaultSpec
 from riderlive.dynamixel.rig import RigConfig
 from riderlive.dynamixel.servo_map import pulses_to_deg
 from riderlive.dynamixel.tables import HardwareError, Instruction, Item

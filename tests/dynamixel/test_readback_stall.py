@@ -14,8 +14,8 @@ from riderlive.devices.budget import ReplyTimer
 from riderlive.devices.lifecycle import NoReply
 from riderlive.devices.stall import HostSample
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.emulator_faults import FaultKind as EmuFault
-from riderlive.dynamixel.emulator_faults import FaultSpec
+from riderlive.dynamixel.emulator.faults import FaultKind as EmuFault
+from riderlive.dynamixel.emulator.faults import FaultSpec
 from riderlive.dynamixel.readback import Readback
 from riderlive.dynamixel.sdkbus import SdkBus
 from tests.dynamixel.rig_harness import servo_setups, short_rig

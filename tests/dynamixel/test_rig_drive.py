@@ -152,7 +152,7 @@ def test_an_orphan_guardian_gives_up_on_a_silent_bus(
     from riderlive.devices.latch import StopLatch
     from riderlive.devices.lifecycle import DeviceState
     from riderlive.devices.registry import DeviceSpec
-    from riderlive.dynamixel.emulator_faults import parse_fault
+    from riderlive.dynamixel.emulator.faults import parse_fault
 
     path = rig_file(tmp_path)
     rig = load_rig(path)

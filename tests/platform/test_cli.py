@@ -70,7 +70,7 @@ def test_the_saddle_point_is_the_live_services_and_lengths_come_in_their_recorde
     from riderlive.framefile import horse_matrix
     from riderlive.frameunits import record_scale
     from riderlive.platform.cli import tracks_table
-    from riderlive.platform.pipeline import PlatformModel, bake
+    from riderlive.platform.mechanism.pipeline import PlatformModel, bake
     from riderlive.saddle import SaddlePoint, saddle_from_horse
 
     table = generate(gait_script("canter", 2.0), rate=100.0)

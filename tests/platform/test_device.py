@@ -21,7 +21,7 @@ from riderlive.horse import ProceduralHorse
 from riderlive.platform import link_vocab
 from riderlive.platform.device import PlatformPlug, describe
 from riderlive.platform.firmware_host import FirmwareHost
-from riderlive.platform.pipeline import PlatformModel
+from riderlive.platform.mechanism.pipeline import PlatformModel
 from riderlive.saddle import SaddlePoint, saddle_from_horse
 from riderlive.tickframe import Flag, Part, TickFrame
 from tests.platform.fake_device import FakeDevice, reply_hello

@@ -15,7 +15,7 @@ from riderlive.devices.device import Device
 from riderlive.devices.latch import StopLatch
 from riderlive.devices.registry import DeviceSpec, plan
 from riderlive.platform.device import PlatformPlug
-from riderlive.platform.pipeline import PlatformModel
+from riderlive.platform.mechanism.pipeline import PlatformModel
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.output import TickDevices
 from riderlive.service.config import load_config

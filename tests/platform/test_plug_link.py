@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 
 from riderlive.devices.lifecycle import Mismatch, NoReply, PortBusy, PortLost, Rejected
 from riderlive.platform import link
-from riderlive.platform.config import PLATFORM_DIR
 from riderlive.platform.link_vocab import ConfigKey, FrameType, LinkState, Reason
-from riderlive.platform.pipeline import PlatformModel
+from riderlive.platform.mechanism.config import PLATFORM_DIR
+from riderlive.platform.mechanism.pipeline import PlatformModel
 from riderlive.platform.plug_link import config_values, lifecycle_errors, position_units, target_counts
 from riderlive.platform.serial_link import CommandRefused, NoAnswer, VersionMismatch
 from riderlive.platform.serial_link import PortBusy as LinkBusy

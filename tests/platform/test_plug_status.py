@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from riderlive.platform.config import PLATFORM_DIR
 from riderlive.platform.link_vocab import Fault
-from riderlive.platform.pipeline import Aim, PlatformModel
+from riderlive.platform.mechanism.config import PLATFORM_DIR
+from riderlive.platform.mechanism.pipeline import Aim, PlatformModel
 from riderlive.platform.plug_status import closeness, fault_names, joints
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.emulator_faults import parse_fault
+from riderlive.dynamixel.emulator.faults import parse_fault
 from riderlive.dynamixel.rig import RigConfig
 from tests.service.live_server import LiveServer
 from tests.service.rig_server import arm_running, bench3_file, rig_server

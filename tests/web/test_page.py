@@ -382,7 +382,7 @@ def test_the_platform_is_drawn_with_its_actuators_coloured_by_closeness(live_pag
     """A status with the platform's real ``status()`` (one actuator at its soft limit) fills the
     platform panel and draws base, top and actuators in the 3D view."""
     from riderlive.platform.device import PlatformPlug
-    from riderlive.platform.pipeline import PlatformModel
+    from riderlive.platform.mechanism.pipeline import PlatformModel
 
     assert live_page.page.locator("#platform").is_hidden()  # no platform attached to this service
     plug = PlatformPlug(PlatformModel.load("stewart_compact"), "/dev/null")

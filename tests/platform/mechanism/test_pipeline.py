@@ -8,11 +8,12 @@ from functools import cache
 import numpy as np
 import pytest
 
-from riderlive.platform import PlatformModel, bake, initial, limits, pipeline, shipped_platforms
-from riderlive.platform.ik import forward
-from riderlive.platform.pipeline import Bake
+from riderlive.platform import PlatformModel, bake, initial, shipped_platforms
+from riderlive.platform.mechanism import limits, pipeline
+from riderlive.platform.mechanism.ik import forward
+from riderlive.platform.mechanism.pipeline import Bake
 
-from .takes import RATE, SHOTS, gait, shot
+from ..takes import RATE, SHOTS, gait, shot
 
 PLATFORMS = tuple(shipped_platforms())
 DT = 1.0 / RATE

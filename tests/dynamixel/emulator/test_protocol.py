@@ -7,8 +7,9 @@ from dynamixel_sdk.protocol2_packet_handler import Protocol2PacketHandler
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from riderlive.dynamixel import protocol, tables
-from riderlive.dynamixel.protocol import (
+from riderlive.dynamixel import tables
+from riderlive.dynamixel.emulator import protocol
+from riderlive.dynamixel.emulator.protocol import (
     CrcError,
     Garbage,
     HeaderError,

@@ -3,7 +3,7 @@
 Derived from the control tables (tables.py) at import: one ``struct`` format per item,
 and contiguous groups of items (goals, limits, present values) read or written with a
 single struct call, which is what keeps the emulator cheap per packet. :func:`profile_of`
-reads the goal and limit blocks as the motion model's :class:`~riderlive.dynamixel.emulator_motion.Profile`
+reads the goal and limit blocks as the motion model's :class:`~riderlive.dynamixel.emulator.motion.Profile`
 (pulses, pulses/s, pulses/s^2).
 """
 
@@ -13,7 +13,7 @@ import math
 import struct
 from dataclasses import dataclass
 
-from riderlive.dynamixel import emulator_motion as motion
+from riderlive.dynamixel.emulator import motion
 from riderlive.dynamixel.tables import (
     MODELS,
     POSITION_MODES,

@@ -14,11 +14,11 @@ import pytest
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite
 
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
-from riderlive.dynamixel.emulator_cli import parse_servo
+from riderlive.dynamixel.emulator.cli import parse_servo
 from riderlive.dynamixel.tables import Item
 from tests.waiting import wait_until
 
-from .conftest import open_sdk, rider_servos
+from ..conftest import open_sdk, rider_servos
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -116,7 +116,7 @@ def test_cli_refuses_no_servos() -> None:
 
 def test_cli_reads_a_rig(tmp_path: Path) -> None:
     rig = pytest.importorskip("riderlive.dynamixel.rig")
-    from riderlive.dynamixel.emulator_cli import servos_from_rig
+    from riderlive.dynamixel.emulator.cli import servos_from_rig
 
     path = rig.RIG_DIR / "bench3.toml"
     servos, baud = servos_from_rig(str(path))

@@ -20,9 +20,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from riderlive.dynamixel.emulator import DEFAULT_BAUD, EmulatedBus
-from riderlive.dynamixel.emulator_faults import FaultSpec, parse_fault
-from riderlive.dynamixel.emulator_servo import ServoSetup
+from riderlive.dynamixel.emulator.bus import DEFAULT_BAUD, EmulatedBus
+from riderlive.dynamixel.emulator.faults import FaultSpec, parse_fault
+from riderlive.dynamixel.emulator.servo import ServoSetup
 from riderlive.dynamixel.tables import PULSES_PER_TURN, model_spec
 
 

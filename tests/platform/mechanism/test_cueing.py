@@ -9,9 +9,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from riderlive.platform import cueing as C
-from riderlive.platform.cueing import CueingModel
-from riderlive.platform.cueing_params import PRESETS, CueingParams
+from riderlive.platform.mechanism import cueing as C
+from riderlive.platform.mechanism.cueing import CueingModel
+from riderlive.platform.mechanism.cueing_params import PRESETS, CueingParams
 
 DT = 1.0 / 120.0
 ROOM = ((0.15, 0.15), (0.15, 0.15), (0.15, 0.15), (15.0, 15.0), (18.0, 18.0), (16.0, 16.0))

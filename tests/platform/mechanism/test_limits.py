@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from riderlive.platform import limits as L
-from riderlive.platform.limits import SafetyModel, SafetyState
+from riderlive.platform.mechanism import limits as L
+from riderlive.platform.mechanism.limits import SafetyModel, SafetyState
 
 LOWER, UPPER = np.array([0.005, 0.005, -58.0]), np.array([0.245, 0.245, 58.0])
 VMAX, AMAX = np.array([0.8, 0.5, 400.0]), np.array([20.0, 8.0, 8000.0])

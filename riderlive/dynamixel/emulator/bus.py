@@ -5,7 +5,7 @@
         ...
 
 A background thread reads instruction packets from the pty master, runs them against
-:class:`~riderlive.dynamixel.emulator_servo.EmulatedServo` register memories and writes
+:class:`~riderlive.dynamixel.emulator.servo.EmulatedServo` register memories and writes
 the status packets back. With ``wire_timing`` every packet occupies the bus for its
 bytes x 10 / baud, and every reply waits for the servo's Return Delay Time, so rates
 measured on the emulator are those of a real half-duplex bus at that baud (the host's
@@ -30,10 +30,9 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
 
-from riderlive.dynamixel.emulator_faults import REPLY_FAULTS, FaultKind, FaultSpec, ServoFaults, corrupt
-from riderlive.dynamixel.emulator_instructions import Reply, dispatch
-from riderlive.dynamixel.emulator_servo import EmulatedServo, ServoSetup
-from riderlive.dynamixel.protocol import (
+from riderlive.dynamixel.emulator.faults import REPLY_FAULTS, FaultKind, FaultSpec, ServoFaults, corrupt
+from riderlive.dynamixel.emulator.instructions import Reply, dispatch
+from riderlive.dynamixel.emulator.protocol import (
     CrcError,
     Garbage,
     PacketReader,
@@ -41,6 +40,7 @@ from riderlive.dynamixel.protocol import (
     decode_instruction,
     encode_status,
 )
+from riderlive.dynamixel.emulator.servo import EmulatedServo, ServoSetup
 from riderlive.dynamixel.tables import BROADCAST_ID, HardwareError, Instruction, Item, StatusError
 
 log = logging.getLogger(__name__)

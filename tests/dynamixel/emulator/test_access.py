@@ -1,10 +1,10 @@
-"""The emulated servo's write checks (riderlive/dynamixel/emulator_access.py), on a register dict."""
+"""The emulated servo's write checks (riderlive/dynamixel/emulator/access.py), on a register dict."""
 
 from __future__ import annotations
 
 import pytest
 
-from riderlive.dynamixel.emulator_access import write_error
+from riderlive.dynamixel.emulator.access import write_error
 from riderlive.dynamixel.tables import HardwareError, Item, OperatingMode, StatusError, model_spec
 
 SPEC = model_spec("XL430-W250")

@@ -1,8 +1,8 @@
 """Inverse kinematics, written once for Python floats (the tick) and NumPy arrays (a bake).
 
-:func:`make_ik` binds a :class:`~riderlive.platform.geometry.Geometry` into a function
+:func:`make_ik` binds a :class:`~riderlive.platform.mechanism.geometry.Geometry` into a function
 of a pose ``(tx, ty, tz, rx, ry, rz)`` of the cue centre (m, deg, base frame; see
-:mod:`riderlive.platform.geometry`) that returns every actuator's position and how far
+:mod:`riderlive.platform.mechanism.geometry`) that returns every actuator's position and how far
 the pose is from the rotary arms' reach. Only the primitives in :class:`Ops` differ
 between the scalar and the array form, as in :mod:`riderlive.rules.kuhnel2003`.
 
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.platform.geometry import Geometry, Pose
+from riderlive.platform.mechanism.geometry import Geometry, Pose
 
 FloatArray = npt.NDArray[np.float64]
 DEG = math.pi / 180.0

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from riderlive.platform.config import build_geometry, load_platform
-from riderlive.platform.geometry import Geometry, Kind, hexagon, rotation, tangential_arms
-from riderlive.platform.ik import ARRAY, SCALAR, Workspace, axis_ranges, forward, make_ik, make_margin
+from riderlive.platform.mechanism.config import build_geometry, load_platform
+from riderlive.platform.mechanism.geometry import Geometry, Kind, hexagon, rotation, tangential_arms
+from riderlive.platform.mechanism.ik import ARRAY, SCALAR, Workspace, axis_ranges, forward, make_ik, make_margin
 
 PLATFORMS = ("stewart_linear", "stewart_rotary", "heave_pitch_roll")
 

@@ -12,10 +12,10 @@ import pytest
 from dynamixel_sdk import COMM_PORT_BUSY, COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS, GroupSyncRead
 
 from riderlive.dynamixel.emulator import EmulatedBus
-from riderlive.dynamixel.emulator_faults import FaultKind, FaultSpec, parse_fault
+from riderlive.dynamixel.emulator.faults import FaultKind, FaultSpec, parse_fault
 from riderlive.dynamixel.tables import ALERT_BIT, HardwareError, Item, StatusError
 
-from .conftest import ManualClock, SdkLink
+from ..conftest import ManualClock, SdkLink
 
 PRESENT = 132
 

@@ -2,11 +2,11 @@
 
 One frame (the tick, :func:`step`) and a whole take (:func:`bake`) run the same
 sources: the cueing and limit kernels (compiled from their Python source) and the IK
-of :mod:`riderlive.platform.ik` on floats or on arrays. They agree to 1e-9 (tested).
+of :mod:`riderlive.platform.mechanism.ik` on floats or on arrays. They agree to 1e-9 (tested).
 
 :func:`aim` is the first half (cue, pose, actuator targets, workspace share); the
 device lifecycle uses it while soft-starting, blending from where the actuators are to
-these targets (:func:`riderlive.platform.limits.eased`) before the safety stage.
+these targets (:func:`riderlive.platform.mechanism.limits.eased`) before the safety stage.
 """
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from riderlive.platform import cueing, limits
-from riderlive.platform.config import PlatformConfig, build_geometry, load_platform
-from riderlive.platform.cueing import CueingModel, CueingState
-from riderlive.platform.geometry import Geometry
-from riderlive.platform.ik import SCALAR, Workspace, axis_ranges, make_ik
-from riderlive.platform.limits import SafetyModel, SafetyState
+from riderlive.platform.mechanism import cueing, limits
+from riderlive.platform.mechanism.config import PlatformConfig, build_geometry, load_platform
+from riderlive.platform.mechanism.cueing import CueingModel, CueingState
+from riderlive.platform.mechanism.geometry import Geometry
+from riderlive.platform.mechanism.ik import SCALAR, Workspace, axis_ranges, make_ik
+from riderlive.platform.mechanism.limits import SafetyModel, SafetyState
 
 FloatArray = npt.NDArray[np.float64]
 CHUNK = 8192
@@ -135,7 +135,7 @@ def step(
     """One frame: saddle pose in (6 values, m and deg), actuator commands out (actuator units).
 
     During the soft start ``ease = (start positions, elapsed s)`` blends the targets from
-    where the actuators were (:func:`riderlive.platform.limits.eased`) before the safety stage.
+    where the actuators were (:func:`riderlive.platform.mechanism.limits.eased`) before the safety stage.
     """
     cue_state, target = aim(model, state.cueing, saddle, dt)
     targets: Sequence[float] = target.targets

@@ -14,7 +14,7 @@ rotary actuator's arm angle above the horizontal (deg). Limits, speeds and
 accelerations are in those units, per actuator.
 
 :class:`Geometry` is built from a validated platform file by
-:func:`riderlive.platform.config.load_platform`; :func:`hexagon` lays out the usual
+:func:`riderlive.platform.mechanism.config.load_platform`; :func:`hexagon` lays out the usual
 6-6 Stewart joints.
 """
 

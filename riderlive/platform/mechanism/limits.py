@@ -25,7 +25,7 @@ pose). :func:`ease_seconds` is the shortest blend that respects the limits (peak
 speed ``15/8 D/T``, peak acceleration ``10/sqrt(3) D/T^2`` for a move ``D``).
 
 The per-frame kernel :func:`follow_frame` is plain Python, compiled by numba for the
-tick and for a bake, like :mod:`riderlive.platform.cueing`.
+tick and for a bake, like :mod:`riderlive.platform.mechanism.cueing`.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.fastpath import jit
-from riderlive.platform.geometry import Geometry
+from riderlive.platform.mechanism.geometry import Geometry
 
 FloatArray = npt.NDArray[np.float64]
 PEAK_SPEED = 15.0 / 8.0

@@ -1,6 +1,6 @@
 """The emulated servo's write checks (pure): which WRITE the ROBOTIS e-manual refuses, and why.
 
-:func:`write_error` answers for :class:`~riderlive.dynamixel.emulator_servo.EmulatedServo`
+:func:`write_error` answers for :class:`~riderlive.dynamixel.emulator.servo.EmulatedServo`
 (WRITE, REG_WRITE) from its control table and its registers' present values (``get``),
 before anything changes; the status error is the reply's ERR byte:
 

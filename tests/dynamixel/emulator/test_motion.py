@@ -11,11 +11,10 @@ from dynamixel_sdk import COMM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from riderlive.dynamixel import emulator_motion as motion
-from riderlive.dynamixel.emulator import EmulatedBus
+from riderlive.dynamixel.emulator import EmulatedBus, motion
 from riderlive.dynamixel.tables import Item
 
-from .conftest import ManualClock, SdkLink
+from ..conftest import ManualClock, SdkLink
 
 
 def run(

@@ -1,5 +1,5 @@
 """The cueing's parameters (validated at load: ``[platform.cueing]``, ``PATCH /api/platform``)
-and its shipped presets; the filters that use them are :mod:`riderlive.platform.cueing`."""
+and its shipped presets; the filters that use them are :mod:`riderlive.platform.mechanism.cueing`."""
 
 from __future__ import annotations
 

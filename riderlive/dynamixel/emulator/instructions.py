@@ -11,8 +11,8 @@ import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from riderlive.dynamixel.emulator_servo import CLEAR_FIRMWARE, EmulatedServo
-from riderlive.dynamixel.protocol import InstructionPacket, encode_status, fast_status_chunks, le_int
+from riderlive.dynamixel.emulator.protocol import InstructionPacket, encode_status, fast_status_chunks, le_int
+from riderlive.dynamixel.emulator.servo import CLEAR_FIRMWARE, EmulatedServo
 from riderlive.dynamixel.tables import BROADCAST_ID, Instruction, Item, StatusError
 
 READ_INSTRUCTIONS = frozenset(

@@ -3,7 +3,7 @@
 No I/O and no clock of its own: the bus passes ``now`` (seconds, monotonic) to every
 call. Register semantics follow the ROBOTIS e-manual:
 
-- Writes are checked before anything changes (:mod:`riderlive.dynamixel.emulator_access`):
+- Writes are checked before anything changes (:mod:`riderlive.dynamixel.emulator.access`):
   EEPROM items (address < 64) only with Torque Enable 0, read-only items and bytes outside
   any item refused (Access, Data Length), values outside a range (Data Range, Data Limit).
 - A hardware error whose bit is in Shutdown (63) turns torque off; every status then
@@ -19,9 +19,9 @@ import math
 import struct
 from dataclasses import dataclass, replace
 
-from riderlive.dynamixel import emulator_motion as motion
-from riderlive.dynamixel.emulator_access import write_error
-from riderlive.dynamixel.emulator_registers import BLOCKS, LAYOUTS, profile_of
+from riderlive.dynamixel.emulator import motion
+from riderlive.dynamixel.emulator.access import write_error
+from riderlive.dynamixel.emulator.registers import BLOCKS, LAYOUTS, profile_of
 from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,

@@ -14,11 +14,11 @@ from dynamixel_sdk import (
 )
 
 from riderlive.dynamixel.emulator import EmulatedBus, ServoSetup
-from riderlive.dynamixel.protocol import PacketReader, decode_status, encode_instruction, encode_status
+from riderlive.dynamixel.emulator.protocol import PacketReader, decode_status, encode_instruction, encode_status
 from riderlive.dynamixel.tables import ALERT_BIT, HardwareError, Instruction, Item, StatusError
 from tests.waiting import wait_until
 
-from .conftest import SdkLink, open_sdk
+from ..conftest import SdkLink, open_sdk
 
 GOAL, PRESENT = 116, 132
 
@@ -242,7 +242,7 @@ def test_bulk_write_and_bulk_read(bus: EmulatedBus, sdk: SdkLink) -> None:
 
 
 def test_alert_bit_shutdown_and_reboot(bus: EmulatedBus, sdk: SdkLink) -> None:
-    from riderlive.dynamixel.emulator_faults import parse_fault
+    from riderlive.dynamixel.emulator.faults import parse_fault
 
     assert sdk.ph.write1ByteTxRx(sdk.port, 2, 64, 1) == (COMM_SUCCESS, 0)
     bus.apply(parse_fault("overload:2"))
@@ -255,7 +255,7 @@ def test_alert_bit_shutdown_and_reboot(bus: EmulatedBus, sdk: SdkLink) -> None:
 
 
 def test_an_error_outside_the_shutdown_mask_keeps_torque(bus: EmulatedBus, sdk: SdkLink) -> None:
-    from riderlive.dynamixel.emulator_faults import parse_fault
+    from riderlive.dynamixel.emulator.faults import parse_fault
 
     assert sdk.ph.write1ByteTxRx(sdk.port, 1, 63, 0x20) == (COMM_SUCCESS, 0)  # only overload shuts down
     assert sdk.ph.write1ByteTxRx(sdk.port, 1, 64, 1) == (COMM_SUCCESS, 0)
@@ -336,7 +336,7 @@ def test_clear_resets_the_multi_turn_count_only_when_stopped(bus: EmulatedBus, s
 
 
 def test_voltage_outside_the_limits_is_an_input_voltage_error(bus: EmulatedBus, sdk: SdkLink) -> None:
-    from riderlive.dynamixel.emulator_faults import parse_fault
+    from riderlive.dynamixel.emulator.faults import parse_fault
 
     bus.apply(parse_fault("voltage:3:6.5"))  # XL330: 3.5 .. 7.0 V by default
     assert sdk.ph.read2ByteTxRx(sdk.port, 3, 144) == (65, COMM_SUCCESS, 0)

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from riderlive.configfile import ConfigError, read_toml
-from riderlive.platform.config import (
+from riderlive.platform.mechanism.config import (
     PLATFORM_DIR,
     build_geometry,
     load_platform,
@@ -17,8 +17,8 @@ from riderlive.platform.config import (
     platform_problems,
     shipped_platforms,
 )
-from riderlive.platform.cueing_params import PRESETS
-from riderlive.platform.geometry import Kind
+from riderlive.platform.mechanism.cueing_params import PRESETS
+from riderlive.platform.mechanism.geometry import Kind
 
 
 def data(name: str) -> dict[str, Any]:
@@ -114,7 +114,7 @@ def test_joint_and_actuator_shapes() -> None:
 def test_per_actuator_limits_are_kept() -> None:
     d = data("stewart_linear")
     d["actuators"]["max_speed"] = [0.8, 0.7, 0.8, 0.7, 0.8, 0.7]
-    from riderlive.platform.config import build_geometry
+    from riderlive.platform.mechanism.config import build_geometry
 
     assert build_geometry(platform_from_dict(d)).max_speed == (0.8, 0.7, 0.8, 0.7, 0.8, 0.7)
 

@@ -6,7 +6,7 @@ spreads, or explicit ``base`` and ``platform`` joint lists), its ``[actuators]``
 (stroke or arm limits, soft margins, per-actuator ``max_speed`` and ``max_accel``),
 the ``[home]`` and ``[park]`` poses of the platform's origin, the ``[centre]`` the cue
 turns about, the soft start and park times, and a ``[cueing]`` table (a ``preset``
-plus any overrides of :class:`~riderlive.platform.cueing_params.CueingParams`). See
+plus any overrides of :class:`~riderlive.platform.mechanism.cueing_params.CueingParams`). See
 ``docs/platform.md``.
 
 Beyond the schema (unknown keys, ranges), :func:`platform_problems` refuses what cannot
@@ -28,11 +28,11 @@ import pydantic
 from pydantic import Field
 
 from riderlive.configfile import CONFIG_DIR, ConfigError, StrictModel, read_toml, validate
-from riderlive.platform.cueing_params import PRESETS, CueingParams
-from riderlive.platform.geometry import Geometry, Kind, Pose, Vec3, hexagon, rotation, tangential_arms
-from riderlive.platform.ik import SCALAR, axis_ranges, make_ik
-from riderlive.platform.limits import ease_seconds
 from riderlive.platform.link_vocab import PARK_BOUND_S, PARK_SCALE, firmware_park_s
+from riderlive.platform.mechanism.cueing_params import PRESETS, CueingParams
+from riderlive.platform.mechanism.geometry import Geometry, Kind, Pose, Vec3, hexagon, rotation, tangential_arms
+from riderlive.platform.mechanism.ik import SCALAR, axis_ranges, make_ik
+from riderlive.platform.mechanism.limits import ease_seconds
 
 PLATFORM_DIR = CONFIG_DIR / "platforms"
 """The shipped platform files (the repository's ``config/platforms``)."""

@@ -55,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from riderlive.fastpath import jit
-from riderlive.platform.cueing_params import PRESETS, CueingParams
+from riderlive.platform.mechanism.cueing_params import PRESETS, CueingParams
 
 FloatArray = npt.NDArray[np.float64]
 GRAVITY = 9.80665
@@ -220,7 +220,7 @@ class CueingModel:
     """Static cueing: the parameters and the room each axis has.
 
     ``ranges`` are ``(down, up)`` per pose axis: how far the axis reaches alone from
-    home (m, deg; :func:`riderlive.platform.ik.axis_ranges`); ``axes`` says which axes
+    home (m, deg; :func:`riderlive.platform.mechanism.ik.axis_ranges`); ``axes`` says which axes
     the mechanism moves (the others get no cue; tilt still goes to pitch and roll).
     """
 
