@@ -198,6 +198,7 @@ class TickLink(TickMemory):
 
     @property
     def start(self) -> float:
+        """The host's ``CLOCK_MONOTONIC`` (s; ``time.perf_counter`` on Linux) at engine time 0."""
         return self.setup.start
 
     @property
@@ -213,6 +214,7 @@ class TickLink(TickMemory):
         return int(self.process.sentinel)
 
     def engine_time(self) -> float:
+        """Seconds since the service started (every generation's tick keeps it)."""
         return time.perf_counter() - self.setup.start
 
     def send(self, command: cmd.Command) -> None:

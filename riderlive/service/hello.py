@@ -20,9 +20,10 @@ from riderlive.units import metres_per_unit
 if TYPE_CHECKING:
     from riderlive.service.ports import PublishPort
 
-HELLO_VERSION = 3
+HELLO_VERSION = 4
 """1: ``length_unit`` was a sentence. 2: it is a unit symbol (``"m"``), with ``metres_per_length_unit``,
-``time_unit`` and ``pose``. 3: ``saddle`` (the saddle subscription) (docs/protocol.md, "Hello versions")."""
+``time_unit`` and ``pose``. 3: ``saddle`` (the saddle subscription). 4: ``engine_epoch`` (docs/protocol.md,
+"Hello versions")."""
 
 
 @functools.cache
@@ -59,6 +60,7 @@ def hello(service: PublishPort) -> dict[str, Any]:
         "session": service.session,
         "tick_rate": config.tick.rate,
         "engine_time": service.link.engine_time(),
+        "engine_epoch": service.link.start,
         "channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in _channels(service)],
         "rider_part_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in RIDER_PARTS],
         "horse_channels": [{"name": c.name, "unit": c.unit, "meaning": c.meaning} for c in HORSE],

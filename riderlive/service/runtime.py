@@ -354,6 +354,7 @@ class Service:
         return {
             "session": self.session,
             "engine_time": link.engine_time(),
+            "engine_epoch": link.start,
             "tick_alive": link.alive(),
             "supervision": self.supervisor.snapshot(),
             "tick": link.status(),

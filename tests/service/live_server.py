@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -151,18 +150,6 @@ class LiveServer:
 
     def request(self, method: str, path: str, **kwargs: object) -> httpx.Response:
         return HTTP.request(method, self.base + path, timeout=10.0, **kwargs)  # type: ignore[arg-type]
-
-    def engine_offset(self) -> float:
-        """This process's perf_counter minus the service's engine time (both CLOCK_MONOTONIC):
-        the quickest of 9 answers of /api/state, good to about half its round trip. A frame's
-        ``t + offset`` is when it was ticked, on this process's clock (``Follower.first_ticked_after``)."""
-        offsets = []
-        for _ in range(9):
-            before = time.perf_counter()
-            engine = self.get("/api/state", headers=self.auth).json()["engine_time"]
-            after = time.perf_counter()
-            offsets.append((after - before, (before + after) / 2 - engine))
-        return min(offsets)[1]
 
     def metric(self, name: str, labels: str = "") -> float:
         """One sample of /metrics (0 when absent)."""

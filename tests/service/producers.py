@@ -126,14 +126,17 @@ def constant(values: dict[str, float]) -> Callable[[float], dict[str, Any]]:
 
 class Follower:
     """Every frame of /ws/rider in a thread, each a dict as sent (``t``: the service's engine
-    time s, ``values``: the rider's channels) with ``at``, its arrival (this process's
-    perf_counter s); tests wait on its arrivals. ``horse_channels``: the horse channels asked
+    time s, ``values``: the rider's channels) with ``at``, its arrival, and ``ticked``, its
+    tick (``t`` plus the hello's ``engine_epoch``), both this process's perf_counter s (one
+    host: the service's and this process's clocks are both CLOCK_MONOTONIC); tests wait on
+    its arrivals. ``horse_channels``: the horse channels asked
     for beside the rider's (every one by default; only frames carrying them are kept), None for
     the rider's alone (every frame kept). ``connect_kwargs`` go to websockets' ``connect``."""
 
     def __init__(self, url: str, horse_channels: Sequence[str] | None = HORSE_NAMES, **connect_kwargs: Any) -> None:
         self.ws = connect(url + "/ws/rider", **connect_kwargs).__enter__()
         self.hello = json.loads(self.ws.recv(timeout=10))
+        self.epoch: float = self.hello["engine_epoch"]
         subscribe: dict[str, Any] = {"type": "subscribe"}
         if horse_channels is not None:
             subscribe["horse_channels"] = list(horse_channels)
@@ -150,17 +153,17 @@ class Follower:
                 obj = json.loads(message)
                 if obj.get("type") == "frame" and ("horse" in obj or not self._horse):
                     obj["at"] = at
+                    obj["ticked"] = obj["t"] + self.epoch
                     self.inbox.append(obj)
         except Exception:
             pass
 
-    def first_ticked_after(self, at: float, offset: float, start: int = 0) -> int | None:
-        """Index of the first frame (from ``start``) ticked after ``at`` (perf_counter s): its
-        ``t + offset`` is past ``at``, ``offset`` being this process's perf_counter minus the
-        service's engine time (0 on one host: both CLOCK_MONOTONIC). A frame the stopped or
-        killed tick wrote before ``at`` but that arrives after is not one. None if none yet."""
+    def first_ticked_after(self, at: float, start: int = 0) -> int | None:
+        """Index of the first frame (from ``start``) ticked after ``at`` (perf_counter s). A frame
+        the stopped or killed tick wrote before ``at`` but that arrives after is not one. None if
+        none yet."""
         for i, frame in enumerate(list(self.frames[start:]), start):
-            if frame["t"] + offset > at:
+            if frame["ticked"] > at:
                 return i
         return None
 

@@ -103,16 +103,14 @@ def excused(frames: list[dict[str, Any]], sent: list[float], silent_for: float) 
       tick and the tick's to the follower: both came in a burst). CI once saw 13 neutral
       frames 0.5 s after a resume, the cause not kept (test_clocks_live, 2026-11-28).
 
-    ``sent``: send times (perf_counter s) in order; a frame's tick time on this process's
-    clock is its engine ``t`` plus the least ``at - t`` of the run (both CLOCK_MONOTONIC;
-    the least delivery, ~1 ms, early)."""
-    offset = min(f["at"] - f["t"] for f in frames)
+    ``sent``: send times (perf_counter s) in order; a frame's ``ticked`` is its tick time on
+    this process's clock (:class:`~tests.service.producers.Follower`)."""
     ats = [f["at"] for f in frames]
     sender = [(a, b) for a, b in zip(sent, sent[1:]) if b - a > silent_for]
     resumed = [b for a, b in zip(ats, ats[1:]) if b - a > silent_for]
     out: list[bool] = []
     for f in frames:
-        ticked = f["t"] + offset
+        ticked = f["ticked"]
         silent = (
             not sent
             or ticked <= sent[0] + IN_FLIGHT_S

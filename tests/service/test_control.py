@@ -274,8 +274,8 @@ def test_a_restarted_tick_keeps_preset_animator_and_source_and_requests_never_fa
         # The new generation beats; it goes on with the dead one's blends (the preset's 0.5 s
         # parameter blend begun just before the kill) and blends from the last frame for 0.2 s.
         restarted = time.perf_counter()
-        offset = live.engine_offset()  # a frame ticked 0.8 s after, not one that arrived then (a loaded follower lags)
-        frame = follower.wait_for(lambda f: f["t"] + offset > restarted + 0.8, timeout=10.0)
+        # a frame ticked 0.8 s after, not one that arrived then (a loaded follower lags)
+        frame = follower.wait_for(lambda f: f["ticked"] > restarted + 0.8, timeout=10.0)
         model = RiderModel(params=load_preset("child"), scale=25.0)
         expected = np.asarray(model.evaluate(frame["horse"]))
         expected[HEAD] += 3.0  # the animator's offset

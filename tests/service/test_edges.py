@@ -179,3 +179,24 @@ def test_every_subscribe_field_is_range_checked_and_the_client_keeps_its_frames(
         assert next_of(ws, "subscribed")["decimation"] == 1
         frames = [next_of(ws, "frame") for _ in range(20)]
         assert len({f["seq"] for f in frames}) == 20
+
+
+def test_engine_time_plus_the_epoch_is_this_hosts_monotonic_clock(server: LiveServer) -> None:
+    """``engine_epoch`` (hello and /api/state) maps engine time onto CLOCK_MONOTONIC exactly:
+    a pong's engine time, read between the ping's send and the pong's arrival, lands between
+    them on this process's perf_counter; a frame is ticked (``t``) before it arrives."""
+    with connect(server.ws + "/ws/rider") as ws:
+        hello = json.loads(ws.recv(timeout=5))
+        assert hello["hello_version"] >= 4
+        epoch = hello["engine_epoch"]
+        assert epoch == server.get("/api/state").json()["engine_epoch"]
+        for i in range(5):
+            sent = time.perf_counter()
+            ws.send(json.dumps({"type": "ping", "id": i}))
+            pong = next_of(ws, "pong")
+            arrived = time.perf_counter()
+            assert pong["id"] == i
+            assert sent <= pong["engine_time"] + epoch <= arrived, (sent, pong["engine_time"] + epoch, arrived)
+        ws.send(json.dumps({"type": "subscribe"}))
+        frame = next_of(ws, "frame")
+        assert frame["t"] + epoch <= time.perf_counter()

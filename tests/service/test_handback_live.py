@@ -66,7 +66,6 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
         pytest.fail(f"the host failed the tick over before every kill: {live.devices()}")
     # now: minutes of warm-up beside a FIFO emulator thread could leave it behind
     client = Follower(live.ws, horse_channels=None, max_size=None, ping_interval=None)  # closed with the server
-    offset = live.engine_offset()
     wait_until(lambda: len(client.frames) >= 50, 10.0, "no rider frames at the client")
     running = len(goal_writes(emu))
     wait_until(lambda: len(goal_writes(emu)) >= running + 50, 10.0, "the rig is not driven")
@@ -82,7 +81,7 @@ def test_kill_9_with_the_rig_armed_frames_flow_before_the_park_ends_and_the_rig_
         return any(t > killed and is_torque_off_write(raw) for t, raw in list(emu.arrivals))
 
     wait_until(torque_off_since_kill, 60.0, lambda: samples[-1], poll=0.03)
-    first = client.first_ticked_after(killed + 0.002, offset)  # the offset is good to about half a round trip
+    first = client.first_ticked_after(killed)
     first_frame = None if first is None else client.frames[first]["at"]
     goals, off = parked_since(emu, rig, killed)  # eased to park, torque off, no goal after, read back off
     park_ended = off[0]

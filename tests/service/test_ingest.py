@@ -102,7 +102,6 @@ def test_takeover_by_priority_and_by_silence(server: LiveServer, follower: Follo
 def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, follower: Follower) -> None:
     neutral = np.array(MODEL.evaluate([0.0] * len(HORSE_NAMES)))
     posed = np.array(MODEL.evaluate(full(POSE)))
-    offset = server.engine_offset()
     producer = Producer(server.ws, constant(POSE))
     try:
         first = follower.wait_for(lambda f: f["driver"] == "input")
@@ -114,7 +113,7 @@ def test_timeout_eases_to_neutral_then_procedural_resumes(server: LiveServer, fo
         # after 0.3 s, the last held one before 1.2 s. Arrival times charged the web process's
         # and this follower's lateness, and a tick starved for 2 s (load 14) eases at its next tick.
         held = [f for f in follower.frames if f["seq"] < first["seq"]][-1]
-        ticked = (held["t"] + offset - stopped, first["t"] + offset - stopped)
+        ticked = (held["ticked"] - stopped, first["ticked"] - stopped)
         assert ticked[0] < 1.2 and ticked[1] > 0.3, ("held for about `hold` (0.5 s) before easing", ticked)
         back = follower.wait_for(lambda f: f["driver"] == "procedural", timeout=10)
         window = [f for f in follower.frames if first["seq"] <= f["seq"] < back["seq"]]
