@@ -43,7 +43,7 @@ from riderlive.service.arbiter import Arbiter, Producer, next_producer_id
 from riderlive.service.codecs import BadFrame, parse_message
 from riderlive.service.devices_api import AnyDeviceRequest, DeviceRequest
 from riderlive.service.ingest import IngestEndpoint
-from riderlive.service.ports import ControlPort
+from riderlive.service.ports import ControlPort, StopCounts
 
 log = logging.getLogger(__name__)
 ARMING = frozenset({"arm", "reset", "reload"})
@@ -81,6 +81,11 @@ class InboundPort(ControlPort, Protocol):
 
     @property
     def saddle_ingest(self) -> IngestEndpoint: ...
+
+    @property
+    def device_metrics(self) -> StopCounts:
+        """E-stops and refusals counted for ``/metrics``, whichever path they came by."""
+        ...
 
 
 ProducerKey = tuple[str, str]
@@ -218,9 +223,7 @@ class Control:
 
     def refuse(self, action: str, reason: Refusal | str, message: str) -> dict[str, Any]:
         reason = str(reason)
-        counts = getattr(self.service, "device_metrics", None)
-        if counts is not None:
-            counts.refusals[(action, reason)] += 1
+        self.service.device_metrics.refusals[(action, reason)] += 1
         return {"ok": False, "action": action, "refusal": reason, "message": message}
 
     async def handle(self, msg: Message) -> dict[str, Any]:
@@ -243,9 +246,7 @@ class Control:
         if action == "estop":  # never locked (service/estop_first.py): latched first, token or not
             latched = service.supervisor.estop(StopSource.NATS)
             authorized = not self._needs_token(action) or auth.token_matches(service.config.security.token, token)
-            counts = getattr(service, "device_metrics", None)
-            if counts is not None:
-                counts.estops[(StopSource.NATS.label, authorized)] += 1
+            service.device_metrics.estops[(StopSource.NATS.label, authorized)] += 1
             return {"ok": True, "action": "estop", "latched_at": latched, "authorized": authorized}
         if self._needs_token(action) and not auth.token_matches(service.config.security.token, token):
             service.metrics.bad_frames["unauthorized"] += 1

@@ -96,11 +96,7 @@ class TickControl:
             self.terrain = ground.describe(self.horse.set_terrain(ground.terrain()))
             self.settings = dataclasses.replace(self.settings, terrain=command.terrain)
         elif isinstance(command, cmd.Perform):
-            perform = getattr(self.horse, "perform", None)
-            if perform is None:
-                self.events.append(f"this procedural horse cannot perform {command.move!r}")
-            else:
-                perform(command.move)
+            self.horse.perform(command.move)  # an unknown move: ValueError, an event (_poll_commands)
         elif isinstance(command, cmd.SetModel):
             model = RiderModel(params=command.params, scale=self.setup.length_scale, animator=command.animator)
             self.core.set_model(model)
@@ -111,6 +107,7 @@ class TickControl:
                 self.devices.act_on_stop(time.perf_counter())
         elif isinstance(command, cmd.Arm | cmd.Disarm | cmd.Reset | cmd.Reload | cmd.Tune):
             self._request(command)
+            return  # its status is written already, before the reply
         elif isinstance(command, cmd.Stop):
             self._begin_stop(now)
         self._status_dirty = True
@@ -156,7 +153,7 @@ class TickControl:
             "mode": core.mode.value,
             "producer": core.producer,
             "gait": self.horse.gait,
-            "move": getattr(self.horse, "move", None),
+            "move": self.horse.move,
             "speed": self.horse.speed,
             "terrain": self.terrain,
             "estop": self.latch.latched,

@@ -140,9 +140,8 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
 
     @app.post("/api/horse/perform", summary="Ask the procedural horse for a move")
     async def perform(body: PerformRequest) -> dict[str, Any]:
-        moves = getattr(horse_module, "MOVES", None)
-        if moves is not None and body.move not in moves:
-            raise HTTPException(422, f"unknown move {body.move!r}; choose one of {', '.join(moves)}")
+        if body.move not in horse_module.MOVES:
+            raise HTTPException(422, f"unknown move {body.move!r}; choose one of {', '.join(horse_module.MOVES)}")
         if not service.link.tell(cmd.Perform(body.move)):
             raise HTTPException(503, "the tick is restarting: the move was not queued; ask again")
         return {"move": body.move, "queued": True}

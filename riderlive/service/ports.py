@@ -110,6 +110,11 @@ class StopCounts(Protocol):
         """E-stop requests by (source label, authorized) (``devices_api.DeviceMetrics``)."""
         ...
 
+    @property
+    def refusals(self) -> Counter[tuple[str, str]]:
+        """Refused device requests by (action, reason) (``riderlive_device_refusals_total``)."""
+        ...
+
 
 class PublishPort(ServicePort, Protocol):
     """What ``/ws/rider`` reads of the service."""
