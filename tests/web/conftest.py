@@ -123,9 +123,10 @@ def _needs_service() -> None:
         pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (.ci/run does it)")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def shared_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    """The default service, once per worker; fitted presets go to ``presets`` (``tick.preset_dirs``)."""
+    """The default service for tests/web, once per worker, stopped when the package ends (an
+    idle server costs ~0.55 of a core); fitted presets go to ``presets`` (``tick.preset_dirs``)."""
     _needs_service()
     workdir = tmp_path_factory.mktemp("serve")
     s = Server(0, workdir, extra_config=f'[tick]\npreset_dirs = ["{workdir / "presets"}"]\n')
@@ -146,8 +147,11 @@ def server(shared_server: Server) -> Iterator[Server]:
     assert not state["tick"].get("estop"), "the module left the e-stop latched"
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def browser() -> Iterator[Any]:
+    """Chromium for tests/web, closed when the package ends: Playwright's sync API keeps an
+    event loop running on the main thread while it is open, so a later test's ``asyncio.run``
+    (tests/bus, tests/service) would fail, as 18 did under ``-n 2 --dist loadfile``."""
     _needs_service()
     from playwright.sync_api import sync_playwright
 
