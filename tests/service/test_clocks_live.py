@@ -231,12 +231,14 @@ def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: 
 def held_and_late(frames: list[dict], stamps: list[float], sent: list[float]) -> tuple[float, np.ndarray]:
     """Of the frames from 1.5 s on (the clock's rate estimated): the share that held the newest
     frame (a frame's ``source_t`` is a stamp itself: not interpolated), and each one's
-    lateness (the newest stamp whose send began before the frame arrived minus its
-    ``source_t``, s: how far behind the producer's clock the rider reads, delivery included)."""
-    later = [f for f in frames if f["at"] >= frames[0]["at"] + 1.5]
+    lateness (the newest stamp whose send began before the frame was ticked minus its
+    ``source_t``, s: how far behind the producer's clock the rider reads, the delivery to the
+    tick included, the delivery to this follower not: a -n 2 run's follower, descheduled,
+    once made 0.19 s of it)."""
+    later = [f for f in frames if f["ticked"] >= frames[0]["ticked"] + 1.5]
     exact = set(stamps)
     held = sum(f["source_t"] in exact for f in later) / len(later)
-    lateness = [stamps[bisect.bisect_right(sent, f["at"]) - 1] - f["source_t"] for f in later]
+    lateness = [stamps[bisect.bisect_right(sent, f["ticked"]) - 1] - f["source_t"] for f in later]
     return held, np.array(lateness)
 
 

@@ -61,10 +61,11 @@ def ahead_and_late(
     frames: list[dict], stamps: list[float], sent: list[float], skip: float = 1.5
 ) -> tuple[float, np.ndarray]:
     """Of the frames from ``skip`` s on: the share read past the newest sample sent before the
-    frame arrived (extrapolated), and each one's lateness (that sample's stamp minus the
-    frame's ``source_t``, s; delivery included)."""
-    later = [f for f in frames if f["at"] >= frames[0]["at"] + skip]
-    lateness = np.array([stamps[bisect.bisect_right(sent, f["at"]) - 1] - f["source_t"] for f in later])
+    frame was ticked (extrapolated), and each one's lateness (that sample's stamp minus the
+    frame's ``source_t``, s; the delivery to the tick included, the delivery to this follower
+    not: ``test_clocks_live.held_and_late``)."""
+    later = [f for f in frames if f["ticked"] >= frames[0]["ticked"] + skip]
+    lateness = np.array([stamps[bisect.bisect_right(sent, f["ticked"]) - 1] - f["source_t"] for f in later])
     return float(np.mean(lateness < 0.0)), lateness
 
 
