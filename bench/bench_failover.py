@@ -78,19 +78,17 @@ def produce(url: str, stop_at: float) -> None:
 
 class Client(Follower):
     """Every /ws/rider frame (tests/service/producers.Follower: arrival ``at``, engine time
-    ``t``, rider ``values``)."""
+    ``t``, its tick on this process's clock ``ticked``, rider ``values``)."""
 
     def __init__(self, url: str) -> None:
         super().__init__(url, horse_channels=None, max_size=None, ping_interval=None)
-        self.offset = 0.0
-        """perf_counter minus the service's engine time (both CLOCK_MONOTONIC on this host)."""
 
     def first_after(self, at: float, timeout: float = 30.0) -> tuple[int, float]:
         """Index and arrival of the first frame ticked after ``at`` (perf_counter s): a frame
         the stopped or killed tick wrote before but that arrives after is not one."""
         start = max(0, len(self.frames) - 50)
-        self.inbox.wait_for(lambda f: f["t"] + self.offset > at, timeout, start)
-        i = self.first_ticked_after(at, self.offset, start)
+        self.inbox.wait_for(lambda f: f["ticked"] > at, timeout, start)
+        i = self.first_ticked_after(at, start)
         assert i is not None
         return i, self.frames[i]["at"]
 
@@ -99,13 +97,6 @@ class Bench:
     def __init__(self, port: int) -> None:
         self.http = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
         self.client = Client(f"ws://127.0.0.1:{port}")
-        offsets = []
-        for _ in range(9):
-            before = time.perf_counter()
-            engine = self.http.get("/api/state").json()["engine_time"]
-            after = time.perf_counter()
-            offsets.append((after - before, (before + after) / 2 - engine))
-        self.client.offset = min(offsets)[1]  # the quickest answer: within half its round trip
         self.lost = 0
         self.steps: list[float] = []
         self.marks: list[tuple[float, float, float, int]] = []
@@ -194,14 +185,12 @@ def quantiles(values: list[float]) -> str:
 
 
 def stage_table(marks: list[tuple[float, float, float, int]], frames: list[dict[str, Any]]) -> str:
-    """Signal -> found, -> spare told, -> its first tick, -> at the client (ms). The tick's
-    clock against ours: the least ``arrival - engine time`` over every frame (a frame is
-    never received before it was ticked; the quickest came within ~0.1 ms)."""
-    offset = min(f["at"] - f["t"] for f in frames)
+    """Signal -> found, -> spare told, -> its first tick, -> at the client (ms); a frame's tick
+    on our clock is its ``ticked`` (engine time plus the hello's ``engine_epoch``)."""
     stages = []
     for at, found, promoted, after in marks:
-        arrival, t = frames[after]["at"], frames[after]["t"]
-        stages.append((found - at, promoted - found, t + offset - promoted, arrival - t - offset))
+        arrival, ticked = frames[after]["at"], frames[after]["ticked"]
+        stages.append((found - at, promoted - found, ticked - promoted, arrival - ticked))
     names = ("found", "spare told", "first tick", "at the client")
     a = np.array(stages) * 1000
     return "; ".join(
