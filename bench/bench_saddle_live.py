@@ -22,7 +22,7 @@ to send it against its schedule (**lateness**), how long the send took (back-pre
 the server), and its thread's run and run-queue wait time (``/proc/thread-self/schedstat``:
 time runnable but not running is the scheduler's; time running, its own CPU). Each frame's
 tick time is known on the bench's clock (``perf_counter`` is ``CLOCK_MONOTONIC``, one clock
-for every process; the engine's origin from the hello and the frames' arrival), so a frame
+for every process; the engine's origin is the hello's ``engine_epoch``), so a frame
 read past the newest sample is charged to the **producer** when the sample that would have
 ended it was not yet sent at that tick, else to the **service** (sent, not yet read). The
 collector's share: frames the server dropped or skipped for it (``/api/state``'s clients) and
@@ -201,12 +201,11 @@ def one_run(port: int, seed: int, args: argparse.Namespace, rules: RiderModel) -
     producer.join()
     after = client_counts(port)
     stop.set()
-    hello, hello_at, raw = got_frames.recv()
+    hello, _, raw = got_frames.recv()
     collector.join()
     frames = [(at, json.loads(text)) for at, text in raw]
     frames = [(at, f) for at, f in frames if f.get("type") == "frame"]
-    # The engine's origin on this clock: no message arrives before it was stamped.
-    origin = min([hello_at - hello["engine_time"]] + [at - f["t"] for at, f in frames])
+    origin = hello["engine_epoch"]  # engine time 0 on this clock (CLOCK_MONOTONIC, the same host)
     baked_horse = rebuild(Model(point=SaddlePoint()), times, values).horse
     baked = np.array([rules.evaluate(frame.tolist()) for frame in baked_horse])
     live = [f for _, f in frames if f["driver"] == "input" and times[0] + LOCKED_AFTER <= f["source_t"] <= times[-1]]
