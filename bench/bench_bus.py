@@ -45,16 +45,23 @@ from riderlive.dynamixel.sdkbus import RigPort
 from riderlive.horse import DEFAULT_SCALE, ProceduralHorse
 from riderlive.rules import RiderModel
 from riderlive.sched import try_realtime_priority
+from riderlive.tickframe import Flag, TickFrame
 
 S = DeviceState
 
 
-def trot_frames(count: int, hz: float) -> list[list[float]]:
+def trot_frames(count: int, hz: float) -> list[TickFrame]:
+    """``count`` tick frames of a procedural trot at ``hz`` (the rider and the horse it rode)."""
     horse, model = ProceduralHorse("trot"), RiderModel(scale=DEFAULT_SCALE)
-    return [model.evaluate(horse.sample(i / hz)) for i in range(count)]
+    frames = []
+    for i in range(count):
+        t = i / hz
+        sample = horse.sample(t)
+        frames.append(TickFrame.build(i, t, t, t, Flag.PROCEDURAL, model.evaluate(sample), sample))
+    return frames
 
 
-def start(device: Device, frames: list[list[float]], timeout: float = 60.0) -> None:
+def start(device: Device, frames: list[TickFrame], timeout: float = 60.0) -> None:
     """Connect (or reset), arm, tick until RUNNING."""
     tick_s = device.period_s
     if device.state is S.DISCONNECTED:
@@ -73,7 +80,9 @@ def start(device: Device, frames: list[list[float]], timeout: float = 60.0) -> N
         raise SystemExit(f"the rig did not start: {device.state.value}, {device.fault}")
 
 
-def device_rate(device: Device, frames: list[list[float]], seconds: float, repeats: int) -> tuple[float, float, dict]:
+def device_rate(
+    device: Device, frames: list[TickFrame], seconds: float, repeats: int
+) -> tuple[float, float, dict[str, int]]:
     """Ticks per second, unpaced, while RUNNING (best of ``repeats`` windows: the machine
     is shared); and the median host time of a tick without a read."""
     write_only: list[float] = []
@@ -152,7 +161,7 @@ def rate_bench(baud: int, seconds: float, repeats: int) -> dict[str, Any]:
     }
 
 
-def soak_run(rig: RigConfig, seconds: float, frames: list[list[float]]) -> dict[str, Any]:
+def soak_run(rig: RigConfig, seconds: float, frames: list[TickFrame]) -> dict[str, Any]:
     """One paced run of the shipped map: what went wrong, what it cost. The loop runs at
     SCHED_FIFO 50 as the service's tick does, the emulator at 60 (it stands in for servos)."""
     emu = Emulator(rig, priority=60)
