@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench_page import served
+from bench.bench_page import served
 
 TICKS = os.sysconf("SC_CLK_TCK")
 COUNTER = """() => { window.__frames = 0;

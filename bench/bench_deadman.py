@@ -39,6 +39,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 
@@ -85,8 +86,9 @@ class Rig:
         assert self.live is not None
         return self.live
 
-    def supervision(self) -> dict:
-        return self.service().get("/api/devices").json()["supervision"]
+    def supervision(self) -> dict[str, Any]:
+        supervision: dict[str, Any] = self.service().get("/api/devices").json()["supervision"]
+        return supervision
 
     def state(self) -> str:
         devices = self.service().get("/api/devices").json()["devices"]

@@ -294,7 +294,7 @@ def main() -> int:
     sys.setswitchinterval(0.0005)
     with tempfile.TemporaryDirectory() as tmp, Broker() as broker:
         root = Path(tmp)
-        changes = {
+        changes: dict[str, Any] = {
             "soft_start_s": 0.1,
             "park_s": 0.2,
             "bus_watchdog_ms": 600,

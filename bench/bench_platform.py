@@ -21,6 +21,7 @@ import argparse
 import os
 import statistics
 import time
+from collections.abc import Callable
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -38,7 +39,7 @@ from riderlive.platform.saddle_input import saddle_pose
 RATE = 120.0
 
 
-def numpy_ik(g: Geometry) -> object:
+def numpy_ik(g: Geometry) -> Callable[[np.ndarray], np.ndarray]:
     """The baseline: one frame's leg lengths the obvious NumPy way."""
     base = np.asarray(g.base)
     joints = np.asarray(g.platform)
@@ -52,12 +53,13 @@ def numpy_ik(g: Geometry) -> object:
             @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
         )
         legs = pose[:3] + joints @ r.T - base
-        return np.linalg.norm(legs, axis=1)
+        lengths: np.ndarray = np.linalg.norm(legs, axis=1)
+        return lengths
 
     return ik
 
 
-def numpy_ik_batch(g: Geometry) -> object:
+def numpy_ik_batch(g: Geometry) -> Callable[[np.ndarray], np.ndarray]:
     """The bake's baseline: every frame's leg lengths at once with plain NumPy (einsum, norm)."""
     base = np.asarray(g.base)
     joints = np.asarray(g.platform)
@@ -70,7 +72,8 @@ def numpy_ik_batch(g: Geometry) -> object:
         r[:, 1] = np.stack([sz, cz * cx, -cz * sx], axis=1)
         r[:, 2] = np.stack([-sy * cz, sy * sz * cx + cy * sx, cy * cx - sy * sz * sx], axis=1)
         legs = poses[:, None, :3] + np.einsum("nij,lj->nli", r, joints) - base
-        return np.linalg.norm(legs, axis=2)
+        lengths: np.ndarray = np.linalg.norm(legs, axis=2)
+        return lengths
 
     return ik
 
@@ -167,11 +170,11 @@ def main() -> None:
         bake(model, saddle, 1.0 / RATE)
         warm.append(time.perf_counter() - start)
         cpu.append(time.process_time() - start_cpu)
-    baseline = numpy_ik_batch(model.geometry)
+    batch_baseline = numpy_ik_batch(model.geometry)
     base = []
     for _ in range(3):
         start = time.perf_counter()
-        baseline(result.pose)  # type: ignore[operator]
+        batch_baseline(result.pose)
         base.append(time.perf_counter() - start)
     print(
         f"bake {bake_name}, N={args.frames:,}, one core: {args.frames / min(warm) / 1e6:.2f} M frames/s warm "

@@ -57,6 +57,7 @@ def horse_frame_time(n: int = 20_000, rate: float = 1000.0) -> float:
 def step_times(rate: float, model: Model) -> tuple[list[float], list[float], State]:
     """Per-step times (s) through a recording; those of the steps that ran an analysis apart."""
     rec = record(gait_script("trot", SECONDS, seed=3), rate, imperfections=IMU_STRAP, seed=1)
+    assert rec.saddle.t is not None
     times, rows = rec.saddle.t.tolist(), rec.saddle.values.tolist()
     state = State()
     plain: list[float] = []
@@ -83,6 +84,7 @@ def tick_times(kind: InputKind, tick_rate: float = 120.0, rate: float = 1000.0) 
     """Per-tick times (s) of the live tick fed a 1000 Hz trot: its horse frames, or its saddle."""
     rec = record(gait_script("trot", 20.0, seed=3), rate, imperfections=IMU_STRAP, seed=1)
     table = rec.saddle if kind is InputKind.SADDLE else rec.horse
+    assert rec.saddle.t is not None
     times, rows = rec.saddle.t.tolist(), table.values.tolist()
     core = TickCore(RiderModel(scale=25.0), Timing(), ProceduralHorse("trot", seed=3), Mode.INPUT)
     out: list[float] = []

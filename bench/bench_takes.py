@@ -24,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 from websockets.sync.client import connect
@@ -40,7 +41,7 @@ def serve(workdir: Path) -> tuple[subprocess.Popen[str], str]:
     return proc, f"127.0.0.1:{port}"
 
 
-def one_run(workdir: Path, name: str) -> dict[str, object]:
+def one_run(workdir: Path, name: str) -> dict[str, Any]:
     proc, base = serve(workdir)
     try:
         assert httpx.post(f"http://{base}/api/record/start", json={"name": name}).status_code == 200

@@ -42,6 +42,7 @@ from typing import Any
 import httpx
 import numpy as np
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
 from bench.rig_fixtures import Emulator, bench_rig, other_core_busy
 from riderlive.dynamixel.emulator.faults import FaultKind, FaultSpec
@@ -73,8 +74,8 @@ class Frames:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                protocols = ["riderlive.v1", f"riderlive.token.{TOKEN}"]
-                with connect(self._url + "/ws/rider", subprotocols=protocols, ping_interval=None) as ws:  # type: ignore[list-item]
+                protocols = [Subprotocol("riderlive.v1"), Subprotocol(f"riderlive.token.{TOKEN}")]
+                with connect(self._url + "/ws/rider", subprotocols=protocols, ping_interval=None) as ws:
                     ws.recv(timeout=10)
                     ws.send(json.dumps({"type": "subscribe"}))
                     while not self._stop.is_set():

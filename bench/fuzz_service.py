@@ -90,7 +90,8 @@ HUGE = b"\x00" * (16 << 20)
 
 
 def _packed(obj: Any) -> bytes:
-    return msgpack.packb(obj, use_bin_type=True)
+    packed: bytes = msgpack.packb(obj, use_bin_type=True)
+    return packed
 
 
 def _text(obj: Any) -> str:
@@ -139,14 +140,13 @@ class Hostile:
         if kind == 7:  # a bad or a fine hello
             hello: dict[str, Any] = {"type": "hello"}
             field_name = rng.choice(["name", "priority", "length_scale", "channels"])
-            hello[field_name] = rng.choice(
-                {
-                    "name": ["", "x" * 80, 12, None, f"fuzz-{rng.randrange(10**6)}"],
-                    "priority": [10**9, -(10**9), "high", True, 1.5, rng.randint(-1000, 0)],
-                    "length_scale": [9.9e8, 0, -1, 1e-9, "m", True, rng.uniform(0.01, 100.0)],
-                    "channels": [[], ["lfHoof.tx", "lfHoof.tx"], ["nope"], "lfHoof.tx", list(HORSE_NAMES)],
-                }[field_name]
-            )
+            bad_hellos: dict[str, list[Any]] = {
+                "name": ["", "x" * 80, 12, None, f"fuzz-{rng.randrange(10**6)}"],
+                "priority": [10**9, -(10**9), "high", True, 1.5, rng.randint(-1000, 0)],
+                "length_scale": [9.9e8, 0, -1, 1e-9, "m", True, rng.uniform(0.01, 100.0)],
+                "channels": [[], ["lfHoof.tx", "lfHoof.tx"], ["nope"], "lfHoof.tx", list(HORSE_NAMES)],
+            }
+            hello[field_name] = rng.choice(bad_hellos[field_name])
             if field_name == "length_scale" and isinstance(hello[field_name], float) and rng.random() < 0.5:
                 hello[field_name] = rng.choice(NON_FINITE)
                 return _packed(hello)
@@ -174,16 +174,15 @@ class Hostile:
         kind = rng.randrange(8)
         if kind <= 3:
             field_name = rng.choice(["rate", "decimation", "channels", "horse_channels", "encoding", "bones"])
-            value = rng.choice(
-                {
-                    "rate": [1e-300, 1e-10, 0.0, -1.0, 1e300, "fast", rng.uniform(0.2, 200.0)],
-                    "decimation": [0, -1, 10**6, 2**70, 1.5, "x", rng.randint(1, 1000)],
-                    "channels": [["nope"], ["head.rz", "head.rz"], "head.rz", rng.sample(RIDER_NAMES, 3), []],
-                    "horse_channels": [["nope"], [1], rng.sample(HORSE_NAMES, 2)],
-                    "encoding": ["xml", ["json"], None, "json", "binary"],
-                    "bones": ["yes", 1, True, False],
-                }[field_name]
-            )
+            bad_fields: dict[str, list[Any]] = {
+                "rate": [1e-300, 1e-10, 0.0, -1.0, 1e300, "fast", rng.uniform(0.2, 200.0)],
+                "decimation": [0, -1, 10**6, 2**70, 1.5, "x", rng.randint(1, 1000)],
+                "channels": [["nope"], ["head.rz", "head.rz"], "head.rz", rng.sample(RIDER_NAMES, 3), []],
+                "horse_channels": [["nope"], [1], rng.sample(HORSE_NAMES, 2)],
+                "encoding": ["xml", ["json"], None, "json", "binary"],
+                "bones": ["yes", 1, True, False],
+            }
+            value = rng.choice(bad_fields[field_name])
             return _text({"type": "subscribe", field_name: value})
         if kind == 4:
             return _text({"type": "ping", "id": rng.choice([1, "a" * 100, [1], {"x": 1}, None, 2.5])})

@@ -19,8 +19,9 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from bench_page import served
 from PIL import Image
+
+from bench.bench_page import served
 
 GAITS = {"walk": 1.6, "trot": 4.0, "canter": 6.0, "gallop": 11.0}
 MOVES = {  # move: (gait it starts from, pitch in degrees that marks the moment: > if positive, < if negative)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench_page import served
+from bench.bench_page import served
 
 CATEGORIES = [
     "devtools.timeline",
