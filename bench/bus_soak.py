@@ -187,14 +187,16 @@ def soak_run(client: httpx.Client, emu: Emulator, name: str, seconds: float) -> 
     detected, message, notes = vanish(client, emu, name, restarts)
     after = device(client)
     old = before["counters"]  # a restarted tick's rig counts from 0 (an undercount then)
-    counts = {k: v - old.get(k, 0) if v >= old.get(k, 0) else v for k, v in after["counters"].items()}
-    ridden = armed.get("stall_ridethroughs", 0)
-    ridden = ridden - old.get("stall_ridethroughs", 0) if ridden >= old.get("stall_ridethroughs", 0) else ridden
+
+    def since_start(now: dict[str, int]) -> dict[str, int]:
+        return {k: v - old.get(k, 0) if v >= old.get(k, 0) else v for k, v in now.items()}
+
+    counts = since_start(after["counters"])
     keys = ("hangs", "restarts", "deaths", "takeovers", "stalls")
     sup = {k: after["supervision"][k] - before["supervision"][k] for k in keys}
     return {
         **counts,
-        "armed_ridethroughs": ridden,
+        "armed_ridethroughs": since_start(armed).get("stall_ridethroughs", 0),
         "fault_messages": faults,
         "vanish_s": detected,
         "vanish_fault": message,
