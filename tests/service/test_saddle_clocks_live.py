@@ -69,6 +69,16 @@ def ahead_and_late(
     return float(np.mean(lateness < 0.0)), lateness
 
 
+def held_by_host(frames: list[dict]) -> float:
+    """The longest the host held a frame between its tick and this follower beyond the usual
+    (the largest ``at - ticked`` less the median, s): a witness of a stall of the service's web
+    process, which receives the producer's samples in the same event loop that forwards the
+    tick's frames, so a sample it got late was held as long. (A stall of this follower shows
+    here too: the witness errs toward a larger allowance, never a smaller one.)"""
+    held = np.array([f["at"] - f["ticked"] for f in frames])
+    return float(held.max() - np.median(held))
+
+
 def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server: LiveServer) -> None:
     """As the horse's (``test_clocks_live``): 6 s of a saddle clock at 0.95 and 1.05 x ours,
     120 samples a second, against a steady clock in the same run: no segment, every frame
@@ -77,7 +87,13 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
     past the newest sample, once settled (from 3 s on), on at most 1 % more frames than the steady clock's, the lateness
     never growing: median and last second's median within 20 ms of the steady clock's,
     largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
-    lateness 248 ms against the steady 52 ms (the drift went into the read delay)."""
+    lateness 248 ms against the steady 52 ms (the drift went into the read delay).
+
+    The read delay follows the latest arrival of the last 10 s (``saddle_input.LATE_MEMORY_S``,
+    documented): a sample the host delivered late raises the lateness of every frame after
+    it in the run. So the medians' bounds add what the follower saw the host hold a frame
+    (:func:`held_by_host`) beyond what it saw in the steady run: a -n 2 run's other worker
+    once raised the last second's median to 51 ms against the steady 27 ms so."""
     steady_sent: list[float] = []
     wait, _ = every_sample_taken(server)
     steady, none, steady_stamps = run(
@@ -126,16 +142,19 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
         # the steady clock's 2 s: 0.5-0.7)
         assert 0.9 <= (rates[0] - 1.0) / (1.0 / rate - 1.0) <= 1.1, (rate, rates)
         ahead, late = ahead_and_late(frames, stamps, sent)
-        figures = (rate, ahead, steady_ahead, np.median(late), late.max(), np.median(steady_late), steady_late.max())
+        host = max(0.0, held_by_host(frames) - held_by_host(steady))
+        steady_figures = (np.median(steady_late), steady_late.max())
+        figures = (rate, ahead, steady_ahead, np.median(late), late.max(), *steady_figures, host)
         # Read past the newest sample: only while the new stream's mapping settles. Measured
         # per fifth of the window from 1.5 s (quiet host, 5 % slow): 11-30 % of the frames in
         # the first (1.5-2.4 s), then 0 in every later one; so from 3 s on, no more than the
         # steady clock's share + 1 %.
         settled, _ = ahead_and_late(frames, stamps, sent, skip=3.0)
         assert settled <= steady_ahead + 0.01, (settled, *figures)
-        assert np.median(late) <= np.median(steady_late) + 0.02 and late.max() <= steady_late.max() + 0.1, figures
+        assert np.median(late) <= np.median(steady_late) + 0.02 + host, figures
+        assert late.max() <= steady_late.max() + 0.1, figures
         second = len(late) * 120 // 540  # about one second of frames
-        assert np.median(late[-second:]) <= np.median(steady_late) + 0.02, figures
+        assert np.median(late[-second:]) <= np.median(steady_late) + 0.02 + host, figures
 
 
 def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(server: LiveServer) -> None:
