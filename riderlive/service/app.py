@@ -30,7 +30,7 @@ from riderlive.realtime import commands as cmd
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
-from riderlive.service.arbiter import SADDLE_INPUT
+from riderlive.service.arbiter import SADDLE_INPUT, Handover
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
 from riderlive.service.fit_api import REFERENCE_LIMIT, REFERENCE_PATH, add_fit_routes, with_references
@@ -226,7 +226,13 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
         saddles = sum(p.spec is SADDLE_INPUT for p in producers)
         counters = service.link.counters.snapshot()
         text = render(
-            service.metrics, counters, service.hub.snapshot(), len(producers), saddles, latency=service.latency()
+            service.metrics,
+            counters,
+            service.hub.snapshot(),
+            len(producers),
+            saddles,
+            latency=service.latency(),
+            handovers={reason.value: service.arbiter.handovers[reason] for reason in Handover},
         )
         text += render_device_metrics(service)
         text += render_platform_metrics(service)

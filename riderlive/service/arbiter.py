@@ -8,6 +8,9 @@ producer and a horse producer compete exactly like two horse producers.
   (declared in its hello, default 0). Among equals the incumbent keeps control; a
   newcomer takes over only when the incumbent disconnects or sends nothing for
   ``input.producer_timeout`` seconds. A higher priority takes over at its next frame.
+  Each change of driver is counted by its reason (:class:`Handover`) and the last one kept
+  (``/api/state`` ``arbitration``, ``riderlive_arbiter_handovers_total``): a takeover by
+  silence on a busy host says who fell silent and for how long.
 - Source ``replay``: only the replay drives; live producers are on standby.
 - Source ``procedural``: nobody drives; frames are validated and counted only.
 
@@ -19,11 +22,12 @@ plausible ranges (:meth:`Producer.convert`); its websocket endpoint is ``service
 
 from __future__ import annotations
 
+import enum
 import functools
 import itertools
 import math
-from collections import deque
-from dataclasses import dataclass, field
+from collections import Counter, deque
+from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from riderlive.channels import HORSE, HORSE_NAMES, SADDLE, Channel, Kind
@@ -138,6 +142,32 @@ class Producer:
         return list(self.last)
 
 
+class Handover(enum.StrEnum):
+    """Why a live producer began to drive."""
+
+    VACANT = "vacant"
+    """Nobody drove: the first producer, or the driver left."""
+    PRIORITY = "priority"
+    """Its priority is higher than the driver's."""
+    SILENCE = "silence"
+    """The driver, of the same or a higher priority, sent nothing for ``input.producer_timeout``."""
+
+
+@dataclass(frozen=True)
+class HandoverEvent:
+    """One change of driver (the producers' names as they gave them)."""
+
+    to: str
+    reason: Handover
+    previous: str | None = None
+    """The driver it took over from (None: nobody drove)."""
+    silent_for: float | None = None
+    """How long that driver had sent nothing (s; None unless ``reason`` is silence)."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "reason": self.reason.value}
+
+
 class Arbiter:
     """Which producer drives; see the module docstring."""
 
@@ -147,6 +177,9 @@ class Arbiter:
         self.active: int | None = None
         self.selection: str = "live"
         self.replay_id: int | None = None
+        self.handovers: Counter[Handover] = Counter()
+        """Changes of driver in source ``live``, by reason."""
+        self.last_handover: HandoverEvent | None = None
 
     def drives(self, producer: Producer, now: float) -> bool:
         """Called for each accepted frame; True when this producer's frame goes to the tick."""
@@ -157,10 +190,38 @@ class Arbiter:
         current = self.producers.get(self.active) if self.active is not None else None
         if current is producer:
             return True
-        if current is None or now - current.last_frame_at > self.timeout or producer.priority > current.priority:
-            self.active = producer.id
-            return True
-        return False
+        if current is None:
+            event = HandoverEvent(producer.name, Handover.VACANT)
+        elif producer.priority > current.priority:
+            event = HandoverEvent(producer.name, Handover.PRIORITY, current.name)
+        elif (silent := now - current.last_frame_at) > self.timeout:
+            event = HandoverEvent(producer.name, Handover.SILENCE, current.name, silent)
+        else:
+            return False
+        self.active = producer.id
+        self.handovers[event.reason] += 1
+        self.last_handover = event
+        return True
+
+    def status(self) -> dict[str, Any]:
+        """``/api/state``'s ``arbitration``: the selection, the driver, each producer, the handovers."""
+        return {
+            "selection": self.selection,
+            "active": self.active,
+            "producers": [
+                {
+                    "id": p.id,
+                    "name": p.name,
+                    "kind": p.spec.what,
+                    "priority": p.priority,
+                    "accepted": p.accepted,
+                    "rejected": p.rejected,
+                }
+                for p in self.producers.values()
+            ],
+            "handovers": {reason.value: self.handovers[reason] for reason in Handover},
+            "last_handover": None if self.last_handover is None else self.last_handover.as_dict(),
+        }
 
     def remove(self, producer_id: int) -> bool:
         """Forget a producer; True if it was driving."""

@@ -129,10 +129,12 @@ def render(
     saddle_producers: int = 0,
     *,
     latency: Mapping[str, LatencySnapshot] | None = None,
+    handovers: Mapping[str, int] | None = None,
 ) -> str:
     """Prometheus text exposition; ``clients`` are (id, path, sent, dropped, skipped); ``producers``
     counts every input connection, ``saddle_producers`` those of them on ``/ws/saddle``;
-    ``latency``: snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (``Service.latency``)."""
+    ``latency``: snapshots of ``tick_lateness``, ``ingest_to_send``, ``ingest_to_wire`` (``Service.latency``);
+    ``handovers``: changes of driver by reason (``arbiter.Handover``)."""
     latency = latency or {}
     out = Exposition()
     for name, histogram, help_text in (
@@ -157,6 +159,14 @@ def render(
         ("/ws/saddle", saddle_producers),
     )
     out.by_label("riderlive_clients_connected", Kind.GAUGE, "Connected websocket clients.", "path", connected)
+    if handovers is not None:
+        out.by_label(
+            "riderlive_arbiter_handovers_total",
+            Kind.COUNTER,
+            "Changes of the driving producer by reason (vacant, priority, silence: docs/protocol.md).",
+            "reason",
+            handovers.items(),
+        )
     for key, help_text in SADDLE_COUNTERS:
         out.one(f"riderlive_saddle_{key}_total", Kind.COUNTER, help_text, int(tick.get(f"saddle_{key}", 0)))
     out.by_label(

@@ -360,21 +360,7 @@ class Service:
             "tick": link.status(),
             "counters": link.counters.snapshot(),
             "source": self.source,
-            "arbitration": {
-                "selection": self.arbiter.selection,
-                "active": self.arbiter.active,
-                "producers": [
-                    {
-                        "id": p.id,
-                        "name": p.name,
-                        "kind": p.spec.what,
-                        "priority": p.priority,
-                        "accepted": p.accepted,
-                        "rejected": p.rejected,
-                    }
-                    for p in self.arbiter.producers.values()
-                ],
-            },
+            "arbitration": self.arbiter.status(),
             "clients": self.hub.describe_clients(),
             "recording": None if self.recorder is None else {"name": self.take_name, "rows": self.recorder.rows},
             "preset": self.params.name,

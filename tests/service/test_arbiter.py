@@ -12,7 +12,7 @@ from riderlive.channels import HORSE_NAMES, SADDLE_NAMES
 from riderlive.configfile import validate
 from riderlive.realtime import commands as cmd
 from riderlive.realtime.layout import InputKind
-from riderlive.service.arbiter import HORSE_INPUT, SADDLE_INPUT, Producer, next_producer_id
+from riderlive.service.arbiter import HORSE_INPUT, SADDLE_INPUT, Handover, HandoverEvent, Producer, next_producer_id
 from riderlive.service.codecs import BadFrame
 from riderlive.service.config import ServiceConfig
 from riderlive.service.ingest import IngestEndpoint
@@ -65,6 +65,30 @@ def test_a_higher_priority_takes_over_at_its_next_frame_and_a_lower_never() -> N
     assert horse.handle(lower, frame(10.0), clock.now) is True
     kinds = [p.kind for p in service.link.pushed]
     assert kinds == [InputKind.HORSE, InputKind.SADDLE, InputKind.HORSE]
+
+
+def test_each_change_of_driver_is_counted_by_its_reason_and_the_last_is_kept() -> None:
+    """docs/protocol.md "Several producers": who took over from whom, and why; a takeover by
+    silence says how long the driver had been silent (virtual clock: exact)."""
+    service, horse, _ = setup()
+    clock, arbiter = service.clock, service.arbiter
+    a, b, high = join(service, horse), join(service, horse), join(service, horse, priority=3)
+    assert horse.handle(a, frame(0.0), clock.now) is True
+    assert arbiter.last_handover == HandoverEvent(a.name, Handover.VACANT)
+    horse.handle(b, frame(0.0), clock.advance(0.25))  # refused: a is live
+    assert sum(arbiter.handovers.values()) == 1
+    assert horse.handle(b, frame(0.1), clock.advance(0.375)) is True  # a silent 0.625 s > 0.5
+    assert arbiter.last_handover == HandoverEvent(b.name, Handover.SILENCE, a.name, 0.625)
+    assert horse.handle(high, frame(0.0), clock.advance(0.125)) is True
+    assert arbiter.last_handover == HandoverEvent(high.name, Handover.PRIORITY, b.name)
+    assert arbiter.remove(high.id) is True
+    assert horse.handle(a, frame(1.0), clock.advance(0.125)) is True  # the driver left
+    assert arbiter.last_handover == HandoverEvent(a.name, Handover.VACANT)
+    assert arbiter.handovers == {Handover.VACANT: 2, Handover.SILENCE: 1, Handover.PRIORITY: 1}
+    status = arbiter.status()
+    assert status["handovers"] == {"vacant": 2, "priority": 1, "silence": 1}
+    assert status["last_handover"] == {"to": a.name, "reason": "vacant", "previous": None, "silent_for": None}
+    assert [p["name"] for p in status["producers"]] == [a.name, b.name] and status["active"] == a.id
 
 
 def test_replay_and_procedural_selections() -> None:
