@@ -1,8 +1,10 @@
 """``riderlive serve``: run the live service until SIGINT or SIGTERM.
 
 SIGINT and SIGTERM are an e-stop of every device (torque off at once, latched), then a
-clean shutdown. ``--arm`` arms the rig once it is connected, at start only: for
-unattended installations, at the risk that it moves with nobody watching.
+clean shutdown. The exit status says which signal stopped it, whatever the disposition
+the process inherited: 130 after SIGINT; after SIGTERM the process ends by the signal
+(143 where SIGTERM was ignored). ``--arm`` arms the rig once it is connected, at start
+only: for unattended installations, at the risk that it moves with nobody watching.
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ class RiderServer(uvicorn.Server):
         self.service = service
         self.interrupts_while_stopping = 0
         """Ctrl+C pressed after the stop began (:data:`ABANDON_AFTER` of them force the exit)."""
+        self.stopped_by: int | None = None
+        """The signal that began the stop (None: none did)."""
 
     async def startup(self, sockets: list[socket.socket] | None = None) -> None:
         """``asyncio.to_thread`` work (bakes, upload checks, recovering a take) at normal priority,
@@ -82,6 +86,8 @@ class RiderServer(uvicorn.Server):
         supervisor = getattr(self.service, "supervisor", None)
         if supervisor is not None:
             supervisor.estop(StopSource.SIGNAL)
+        if self.stopped_by is None:
+            self.stopped_by = sig
         if self.should_exit and sig == signal.SIGINT:
             self.interrupts_while_stopping += 1
             if self.interrupts_while_stopping < ABANDON_AFTER:
@@ -222,8 +228,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         server.run(sockets=[sock])
     except KeyboardInterrupt:  # uvicorn re-raises Ctrl+C after its clean shutdown
-        return 130
+        return 128 + signal.SIGINT
     finally:
         if service.vmc is not None:
             print(f"riderlive serve: VMC out: {service.vmc.status()}", file=sys.stderr, flush=True)
-    return 0
+    # uvicorn re-raises the signal with the disposition the process inherited: one started with
+    # SIGINT ignored (a background job of a script, a test worker) got here after a Ctrl+C
+    return 0 if server.stopped_by is None else 128 + server.stopped_by
