@@ -54,4 +54,4 @@ if [ ! -x .venv/blender/bin/python ] && python3 -c 'import sys; sys.exit(sys.ver
     python3 -m venv .venv/blender && .venv/blender/bin/pip install -q --disable-pip-version-check 'bpy>=4.2,<5.1' ||
         { rm -rf .venv/blender; echo "install: bpy is unavailable here; the Blender test skips" >&2; }
 fi
-echo "install: ready. Test: .venv/bin/pytest   Run: .venv/bin/riderlive serve"
+echo "install: ready. Test: .venv/bin/pytest -n 2 --dist loadfile   Run: .venv/bin/riderlive serve"
