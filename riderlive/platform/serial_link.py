@@ -311,6 +311,9 @@ class SerialPlatformLink:
             return
         if isinstance(message, HelloReply):
             self._window.restart(frame.seq)  # a session starts at the device's reply
+        elif self.device is None:  # before it: the session before, still on the wire
+            self.counters["rx_stale"] += 1
+            return
         else:
             gap = self._window.check(frame.seq)
             if gap is None:

@@ -93,6 +93,27 @@ def test_bad_frames_from_the_device_are_dropped_counted_never_used() -> None:
     device.vanish()
 
 
+def test_telemetry_of_the_session_before_the_reply_is_not_trusted() -> None:
+    """A reconnect: the device's telemetry sent before it read our HELLO (the session before,
+    moving) arrives ahead of its HELLO_REPLY; it is dropped as stale, and the link's telemetry
+    is the new session's. (A loaded run read such a frame into the new session.)"""
+
+    def on_frame(device: FakeDevice, frame: link.Frame) -> None:
+        if isinstance(frame.message, link.Hello):
+            reply = link.HelloReply((9, 9), link_vocab.Profile.SERVO8, 8, 4000, 200, "fake")
+            device.write(link.encode(telemetry(1234), 40) + link.encode(reply, 10))
+
+    device = FakeDevice(on_frame)
+    port = SerialPlatformLink(device.port)
+    port.open(timeout_s=2.0)
+    assert port.telemetry is None and port.counters["rx_stale"] == 1 and port.counters["rx_ok"] == 1
+    device.write(link.encode(telemetry(0, link_vocab.LinkState.PARKED), 11))
+    parked = port.wait_telemetry(lambda t: True, 2.0)
+    assert LinkState(parked.state) is LinkState.PARKED and parked.commanded == (0,) * 8
+    port.close()
+    device.vanish()
+
+
 def test_a_silent_device_then_a_vanished_port() -> None:
     device = FakeDevice(reply_hello())
     clock = [100.0]
