@@ -150,11 +150,13 @@ def present_deg(status: DeviceStatus) -> list[float | None]:
 
 @contextlib.contextmanager
 def servo_emulator(rig_file: Path) -> Iterator[str]:
-    """``riderlive servo-emu --rig FILE`` in its own process (as a user would start it); yields
-    its pty, stops it on the way out."""
+    """``riderlive servo-emu --rig FILE --realtime 60`` in its own process (as a user would
+    start it); yields its pty, stops it on the way out. At SCHED_FIFO where the host allows
+    it: it stands for servos, which a busy host cannot starve (a -n 2 run beside two busy
+    loops starved three normal-priority emulators of one stage into no-reply faults)."""
     root = Path(__file__).resolve().parents[2]
     emu = popen(
-        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file)],
+        [sys.executable, "-m", "riderlive", "servo-emu", "--rig", str(rig_file), "--realtime", "60"],
         stdout=subprocess.PIPE,
         text=True,
         env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"},

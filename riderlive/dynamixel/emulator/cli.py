@@ -24,6 +24,7 @@ from riderlive.dynamixel.emulator.bus import DEFAULT_BAUD, EmulatedBus
 from riderlive.dynamixel.emulator.faults import FaultSpec, parse_fault
 from riderlive.dynamixel.emulator.servo import ServoSetup
 from riderlive.dynamixel.tables import PULSES_PER_TURN, model_spec
+from riderlive.sched import try_realtime_priority
 
 
 def parse_servo(text: str) -> ServoSetup:
@@ -78,6 +79,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration", type=float, default=0.0, help="stop after this many seconds (0: run until Ctrl-C)"
     )
+    parser.add_argument(
+        "--realtime",
+        type=int,
+        default=0,
+        metavar="PRIORITY",
+        help="run at SCHED_FIFO PRIORITY where allowed, as servos a busy host cannot starve (0: normal)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -110,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    if args.realtime:  # before the bus's thread starts: it inherits the policy
+        try_realtime_priority(args.realtime, who="the emulated servos")
     with bus:
         if args.link:
             link = Path(args.link)
