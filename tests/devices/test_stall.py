@@ -137,24 +137,30 @@ def test_a_running_cpu_accounts_the_wall_clock_and_a_taken_one_its_steal_after()
     CPU accounts the wall time, less what the hypervisor took, which is added as steal once
     the vCPU runs again (its stalls last ~100 ms)."""
     clock = HostClock()
-    t0, first = time.perf_counter(), clock.cpu_seconds()
-    deadline = t0 + 0.3
-    while time.perf_counter() < deadline:  # busy here, idle or busy there: both account
+    # Each reading snapshots the counters at some moment while it runs (a reader descheduled
+    # before it does, as in a -n 2 run, moves that moment): the wall time between the two
+    # snapshots is at most ``longest`` and at least ``shortest``.
+    before0 = time.perf_counter()
+    first = clock.cpu_seconds()
+    after0 = time.perf_counter()
+    while time.perf_counter() < after0 + 0.3:  # busy here, idle or busy there: both account
         pass
-    t1, second = time.perf_counter(), clock.cpu_seconds()
-    span = t1 - t0
+    before1 = time.perf_counter()
+    second = clock.cpu_seconds()
+    after1 = time.perf_counter()
+    longest, shortest = after1 - before0, before1 - after0
     assert len(first) == len(second) == os.cpu_count()
     for (acc0, _), (acc1, _) in zip(first, second, strict=True):
-        assert acc1 - acc0 <= span + 0.03  # never faster than the wall (10 ms units, rounded down)
+        assert acc1 - acc0 <= longest + 0.03  # never faster than the wall (10 ms units, rounded down)
 
-    def accounted_or_stolen() -> bool:  # a vCPU taken at t1 adds its steal once it runs again
+    def accounted_or_stolen() -> bool:  # a vCPU taken at the second reading adds its steal once it runs again
         later = clock.cpu_seconds()
         return all(
-            (acc1 - acc0) + (steal2 - steal0) >= span - 0.03
+            (acc1 - acc0) + (steal2 - steal0) >= shortest - 0.03
             for (acc0, steal0), (acc1, _), (_, steal2) in zip(first, second, later, strict=True)
         )
 
-    wait_until(accounted_or_stolen, 1.0, lambda: (span, first, second, clock.cpu_seconds()))
+    wait_until(accounted_or_stolen, 1.0, lambda: (shortest, longest, first, second, clock.cpu_seconds()))
 
 
 def test_the_kernel_counters_are_read_and_never_go_back() -> None:
