@@ -18,6 +18,7 @@ from typing import TypeVar
 
 from riderlive.devices.lifecycle import HardwareFault, Mismatch, NoReply
 from riderlive.devices.plug import Steps
+from riderlive.dynamixel.models import ModelSpec
 from riderlive.dynamixel.rig import RigConfig, ServoConfig
 from riderlive.dynamixel.sdkbus import SdkBus, usb_latency_timer_ms
 from riderlive.dynamixel.servo_map import (
@@ -28,7 +29,7 @@ from riderlive.dynamixel.servo_map import (
     return_delay_units,
     watchdog_units,
 )
-from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, ModelSpec, OperatingMode, decode_hardware_error
+from riderlive.dynamixel.tables import ALERT_BIT, Item, ItemSpec, OperatingMode, decode_hardware_error
 
 log = logging.getLogger("riderlive.dynamixel")
 T = TypeVar("T")

@@ -26,14 +26,8 @@ from pydantic import Field
 
 from riderlive.channels import RIDER_INDEX, RIDER_NAMES
 from riderlive.configfile import CONFIG_DIR, ConfigError, StrictModel, read_toml, validate
-from riderlive.dynamixel.tables import (
-    POSITION_RANGE,
-    PULSES_PER_TURN,
-    HardwareError,
-    Model,
-    ModelSpec,
-    model_spec,
-)
+from riderlive.dynamixel.models import Model, ModelSpec, model_spec
+from riderlive.dynamixel.tables import POSITION_RANGE, PULSES_PER_TURN, HardwareError
 from riderlive.names import NAME_PATTERN
 
 RIG_DIR = CONFIG_DIR / "rigs"

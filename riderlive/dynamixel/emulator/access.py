@@ -18,16 +18,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from riderlive.dynamixel.tables import (
-    EXTENDED_POSITION_RANGE,
-    Access,
-    Area,
-    Item,
-    ItemSpec,
-    ModelSpec,
-    OperatingMode,
-    StatusError,
-)
+from riderlive.dynamixel.models import ModelSpec
+from riderlive.dynamixel.tables import EXTENDED_POSITION_RANGE, Access, Area, Item, ItemSpec, OperatingMode, StatusError
 
 GOAL_ITEMS = frozenset({Item.GOAL_PWM, Item.GOAL_CURRENT, Item.GOAL_VELOCITY, Item.GOAL_POSITION})
 """Items that become read-only while the Bus Watchdog has tripped."""

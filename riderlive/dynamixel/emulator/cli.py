@@ -23,7 +23,8 @@ from typing import Any
 from riderlive.dynamixel.emulator.bus import DEFAULT_BAUD, EmulatedBus
 from riderlive.dynamixel.emulator.faults import FaultSpec, parse_fault
 from riderlive.dynamixel.emulator.servo import ServoSetup
-from riderlive.dynamixel.tables import PULSES_PER_TURN, model_spec
+from riderlive.dynamixel.models import model_spec
+from riderlive.dynamixel.tables import PULSES_PER_TURN
 from riderlive.sched import try_realtime_priority
 
 

@@ -14,15 +14,8 @@ import struct
 from dataclasses import dataclass
 
 from riderlive.dynamixel.emulator import motion
-from riderlive.dynamixel.tables import (
-    MODELS,
-    POSITION_MODES,
-    VELOCITY_UNIT_RPM,
-    Item,
-    ItemSpec,
-    ModelSpec,
-    OperatingMode,
-)
+from riderlive.dynamixel.models import MODELS, ModelSpec
+from riderlive.dynamixel.tables import POSITION_MODES, VELOCITY_UNIT_RPM, Item, ItemSpec, OperatingMode
 
 
 def item_layout(spec: ItemSpec) -> tuple[int, str, str, int]:

@@ -22,19 +22,17 @@ from dataclasses import dataclass, replace
 from riderlive.dynamixel.emulator import motion
 from riderlive.dynamixel.emulator.access import write_error
 from riderlive.dynamixel.emulator.registers import BLOCKS, LAYOUTS, profile_of
+from riderlive.dynamixel.models import MODELS, ModelSpec, model_spec
 from riderlive.dynamixel.tables import (
     ALERT_BIT,
     BUS_WATCHDOG_UNIT_S,
-    MODELS,
     PULSES_PER_TURN,
     RETURN_DELAY_UNIT_S,
     Area,
     FactoryResetOption,
     HardwareError,
     Item,
-    ModelSpec,
     StatusError,
-    model_spec,
 )
 
 CONTROL_PERIOD_S = motion.SUBSTEP_S

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from riderlive.dynamixel.emulator.access import write_error
-from riderlive.dynamixel.tables import HardwareError, Item, OperatingMode, StatusError, model_spec
+from riderlive.dynamixel.models import model_spec
+from riderlive.dynamixel.tables import HardwareError, Item, OperatingMode, StatusError
 
 SPEC = model_spec("XL430-W250")
 

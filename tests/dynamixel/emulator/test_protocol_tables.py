@@ -6,17 +6,8 @@ import itertools
 
 import pytest
 
-from riderlive.dynamixel.tables import (
-    MODEL_NUMBERS,
-    MODELS,
-    Access,
-    Area,
-    HardwareError,
-    Item,
-    Model,
-    decode_hardware_error,
-    model_spec,
-)
+from riderlive.dynamixel.models import MODEL_NUMBERS, MODELS, Model, model_spec
+from riderlive.dynamixel.tables import Access, Area, HardwareError, Item, decode_hardware_error
 
 # Addresses the rest of the project relies on (X-series, Protocol 2.0).
 ADDRESSES = {
