@@ -160,18 +160,21 @@ def run(
     make: Callable[[float, float], dict[str, Any]] = horse_frame,
     settle: float = 0.5,
     before_close: Callable[[list[float]], None] | None = None,
+    whole: list[dict] | None = None,
 ) -> tuple[list[dict], list[dict], list[float]]:
     """``settle`` s on a steady clock, then ``seconds`` on ``clock``, without a break in the
     stream to ``path``; the follower's frames of the second part, the segment messages and
     the stamps sent (``sent``: when each was sent). ``before_close(stamps)`` runs after the
-    last send, while the producer is still connected."""
+    last send, while the producer is still connected. ``whole`` gets every frame of the
+    stream, the settle's too."""
     follower = Follower(server.ws)
     segments: list[dict] = []
     stamps: list[float] = []
     try:
         with connect(server.ws + path) as ws:
             ws.recv(timeout=5)
-            begin = time.perf_counter() + settle
+            connected = time.perf_counter()
+            begin = connected + settle
             drive(
                 ws,
                 settle + seconds,
@@ -186,6 +189,8 @@ def run(
             if before_close is not None:
                 before_close(stamps)
         frames = [f for f in follower.frames if begin + 0.05 <= f["at"] <= end]
+        if whole is not None:
+            whole.extend(f for f in follower.frames if connected <= f["at"] <= end)
         assert frames and any(f["driver"] == "input" for f in follower.frames if f["at"] < begin), "it drove at once"
         return frames, segments, stamps
     finally:
