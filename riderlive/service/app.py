@@ -30,7 +30,7 @@ from riderlive.realtime import commands as cmd
 from riderlive.rules.animator import AnimatorLayer
 from riderlive.rules.params import find_preset, load_preset, shipped_presets
 from riderlive.service import auth
-from riderlive.service.arbiter import SADDLE_INPUT, Handover
+from riderlive.service.arbiter import SADDLE_INPUT
 from riderlive.service.config import ServiceConfig
 from riderlive.service.devices_api import add_device_routes, render_device_metrics
 from riderlive.service.fit_api import REFERENCE_LIMIT, REFERENCE_PATH, add_fit_routes, with_references
@@ -232,7 +232,7 @@ def create_app(config: ServiceConfig | None = None) -> FastAPI:
             len(producers),
             saddles,
             latency=service.latency(),
-            handovers={reason.value: service.arbiter.handovers[reason] for reason in Handover},
+            handovers=service.arbiter.handover_counts(),
         )
         text += render_device_metrics(service)
         text += render_platform_metrics(service)

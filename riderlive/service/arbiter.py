@@ -203,6 +203,10 @@ class Arbiter:
         self.last_handover = event
         return True
 
+    def handover_counts(self) -> dict[str, int]:
+        """Changes of driver by reason, every reason named (``/api/state``, ``/metrics``)."""
+        return {reason.value: self.handovers[reason] for reason in Handover}
+
     def status(self) -> dict[str, Any]:
         """``/api/state``'s ``arbitration``: the selection, the driver, each producer, the handovers."""
         return {
@@ -219,7 +223,7 @@ class Arbiter:
                 }
                 for p in self.producers.values()
             ],
-            "handovers": {reason.value: self.handovers[reason] for reason in Handover},
+            "handovers": self.handover_counts(),
             "last_handover": None if self.last_handover is None else self.last_handover.as_dict(),
         }
 
