@@ -182,9 +182,9 @@ def test_bad_saddle_messages_get_the_ws_saddle_replies_counted_and_change_nothin
     assert welcome["kind"] == "saddle" and [c["name"] for c in welcome["channels"]] == list(SADDLE_NAMES)
     for reason, count in before.items():
         assert metric(rig, "riderlive_bad_frames_total", f'reason="{reason}"') == count + 1, reason
-    producers = {p["name"]: p for p in state(rig)["arbitration"]["producers"]}
-    assert (producers["nats:saddle:bad"]["kind"], producers["nats:saddle:bad"]["accepted"]) == ("saddle", 0)
-    assert producers["nats:saddle:bad"]["rejected"] == len(reasons)
+    bad = producers(rig)["nats:saddle:bad"]
+    assert (bad["kind"], bad["accepted"]) == ("saddle", 0)
+    assert bad["rejected"] == len(reasons)
     assert metric(rig, "riderlive_frames_in_total", 'producer="nats:saddle:bad"') == 0
     # Nothing of it reached the tick: the procedural horse drove every frame, no estimate (over
     # 5 frames at least: a fast host sent and checked all of the above within 5 ticks)
@@ -301,7 +301,7 @@ def test_a_nats_saddle_and_ws_horse_producers_share_one_arbiter(
         wait_for(lambda: controls() == [*told, False], say=lambda: answers(replies))
         frame = follower.wait_for(lambda f: f["driver"] == "input" and f["horse"][rz] == 2.0)
         assert frame["estimate"] is None
-        kinds = {p["name"]: p["kind"] for p in state(rig)["arbitration"]["producers"]}
+        kinds = {name: p["kind"] for name, p in producers(rig).items()}
         assert kinds == {"nats:saddle:arb": "saddle", "ws-equal": "horse", "ws-high": "horse"}
         # Both horse producers leave: the NATS saddle producer, still sending, drives again.
         equal.close()
