@@ -16,8 +16,11 @@ STEAL_BASE_S = 0.02
 then count up to this much steal from before the beat: lenient by that, at ~50 us a read)."""
 FROZEN_SLACK_S = 0.03
 """What a CPU's accounted time may fall short of the wall clock without its vCPU having been
-taken: ``/proc/stat`` counts in 10 ms units, each field rounded down on its own (the few a
-busy CPU moves: user, system, softirq)."""
+taken: ``/proc/stat`` counts in 10 ms units, each field rounded down on its own. Chosen below
+the counters' worst case (``devices.stall.accounting_error_s``: 80 ms, seven fields and a
+kernel tick; seen 10 ms here, 30 ms in CI) so that a vCPU taken for 100 ms still excuses
+70 ms of a late beat: the price, a CPU never taken may excuse up to 50 ms, and only of a
+beat already late, never a tick that spins on a CPU that runs (its CPU keeps accounting)."""
 
 
 class BeatWatch:

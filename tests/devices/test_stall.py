@@ -15,6 +15,7 @@ from riderlive.devices.stall import (
     HostClock,
     HostSample,
     SilenceState,
+    accounting_error_s,
     lost_between,
     parse_cpu_seconds,
     parse_steal,
@@ -149,14 +150,17 @@ def test_a_running_cpu_accounts_the_wall_clock_and_a_taken_one_its_steal_after()
     second = clock.cpu_seconds()
     after1 = time.perf_counter()
     longest, shortest = after1 - before0, before1 - after0
+    error = accounting_error_s(clock.tick_s)
     assert len(first) == len(second) == os.cpu_count()
     for (acc0, _), (acc1, _) in zip(first, second, strict=True):
-        assert acc1 - acc0 <= longest + 0.03  # never faster than the wall (10 ms units, rounded down)
+        assert acc1 - acc0 <= longest + error  # never faster than the wall
+    # (``error``: each field counts in 10 ms units, rounded down on its own, and a busy CPU
+    # at its scheduler ticks. 30 ms once fell short in CI, the bound then.)
 
     def accounted_or_stolen() -> bool:  # a vCPU taken at the second reading adds its steal once it runs again
         later = clock.cpu_seconds()
         return all(
-            (acc1 - acc0) + (steal2 - steal0) >= shortest - 0.03
+            (acc1 - acc0) + (steal2 - steal0) >= shortest - error
             for (acc0, steal0), (acc1, _), (_, steal2) in zip(first, second, later, strict=True)
         )
 
