@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import bisect
 import math
+import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from riderlive.realtime.resample import MAX_SKEW
 from riderlive.realtime.tick_control import RATE_SHOWN
 from riderlive.saddle import Model
 from tests.service.live_server import LiveServer
@@ -69,6 +72,59 @@ def ahead_and_late(
     return float(np.mean(lateness < 0.0)), lateness
 
 
+class RateWatch:
+    """The saddle clock rate in use as ``/metrics`` shows it (the tick's, from shared memory),
+    read every ``every`` s on a thread while the ``with`` block runs: ``seen`` holds
+    (perf_counter s when the answer came, rate)."""
+
+    def __init__(self, server: LiveServer, every: float = 0.1) -> None:
+        self.server, self.every = server, every
+        self.seen: list[tuple[float, float]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self.every):
+            rate = self.server.metric("riderlive_input_clock_rate", 'kind="saddle"')
+            self.seen.append((time.perf_counter(), rate))
+
+    def __enter__(self) -> RateWatch:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def followed(self, change: float, since: float) -> float | None:
+        """Seconds from ``since`` to the first answer showing a rate within 10 % of ``change``
+        (the rate's change from 1) with every later answer too (None: not by the last one)."""
+        out: float | None = None
+        for at, rate in self.seen:
+            close = at >= since and abs((rate - 1.0) / change - 1.0) <= 0.1
+            out = (at - since if out is None else out) if close else None
+        return out
+
+
+def settled_from(
+    frames: list[dict[str, Any]], lateness: np.ndarray, followed: float, change: float, every: float
+) -> float:
+    """Seconds from the first frame by which the read can no longer be past the newest sample:
+    ``followed`` (the rate shown within 10 % of ``change``, on the watch's answers ``every``
+    s apart) plus the catch-up of the read past the newest sample then (the largest over the
+    two answers before), at the mapping's slew (``resample.MAX_SKEW`` of the producer's
+    progress, less the 10 % of the change still off). ``lateness``: each frame's, as
+    :func:`ahead_and_late` gives it with ``skip=0``."""
+    t0 = frames[0]["ticked"]
+    times = np.array([f["ticked"] - t0 for f in frames])
+    near = (times >= followed - 2 * every) & (times <= followed)
+    past = max(0.0, float(-lateness[near].min())) if near.any() else 0.0
+    # ``past`` is producer seconds (1 + change of ours each); the mapping moves by MAX_SKEW of
+    # each producer second (1 / (1 + change) of them in one of ours), less the rate still off
+    slew = (MAX_SKEW - 0.1 * abs(change)) / (1.0 + change)  # our s per our s
+    return followed + past * (1.0 + change) / slew
+
+
 def held_by_host(frames: list[dict]) -> float:
     """The longest the host held a frame between its tick and this follower beyond the usual
     (the largest ``at - ticked`` less the median, s): a witness of a stall of the service's web
@@ -84,7 +140,8 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
     120 samples a second, against a steady clock in the same run: no segment, every frame
     driven by the saddle, every sample stepped (none refused), the rate the same in
     /api/state (within 0.1 %) and /metrics, within 10 % of the change from 1 to 1 / rate; the read
-    past the newest sample, once settled (from 3 s on), on at most 1 % more frames than the steady clock's, the lateness
+    past the newest sample, once settled (:func:`settled_from`: the rate followed and the
+    read caught up at the mapping's slew), on at most 1 % more frames than the steady clock's, the lateness
     never growing: median and last second's median within 20 ms of the steady clock's,
     largest within 0.1 s of its largest. Old code (rate taken as 1), 5 % slow: largest
     lateness 248 ms against the steady 52 ms (the drift went into the read delay).
@@ -128,18 +185,19 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
                 "/api/state never showed the rate /metrics shows (within tick.RATE_SHOWN)",
             )
 
-        frames, segments, stamps = run(
-            server,
-            6.0,
-            lambda e, r=rate: r * e,  # type: ignore[misc]
-            True,
-            sent,
-            path="/ws/saddle",
-            make=saddle_frame,
-            settle=SETTLE,
-            before_close=shown,
-            whole=whole,
-        )
+        with RateWatch(server) as watch:
+            frames, segments, stamps = run(
+                server,
+                6.0,
+                lambda e, r=rate: r * e,  # type: ignore[misc]
+                True,
+                sent,
+                path="/ws/saddle",
+                make=saddle_frame,
+                settle=SETTLE,
+                before_close=shown,
+                whole=whole,
+            )
         assert segments == [], (rate, segments)
         assert all(driven(f) for f in frames), (rate, drivers(frames))
         assert taken == [0.0, 0.0], ("every sample stepped once, none refused", rate, taken)
@@ -151,12 +209,20 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
         host = max(0.0, held_by_host(whole) - held_by_host(steady_whole))
         steady_figures = (np.median(steady_late), steady_late.max())
         figures = (rate, ahead, steady_ahead, np.median(late), late.max(), *steady_figures, host)
-        # Read past the newest sample: only while the new stream's mapping settles. Measured
-        # per fifth of the window from 1.5 s (quiet host, 5 % slow): 11-30 % of the frames in
-        # the first (1.5-2.4 s), then 0 in every later one; so from 3 s on, no more than the
-        # steady clock's share + 1 %.
-        settled, _ = ahead_and_late(frames, stamps, sent, skip=3.0)
-        assert settled <= steady_ahead + 0.01, (settled, *figures)
+        # When the rate in use came within 10 % of the change, watched live (measured, quiet
+        # and beside two busy loops: 5 % slow 2.4-3.5 s, 5 % fast 1.0 s; docs/protocol.md
+        # "Clocks that drift" for why a slowing clock is followed later).
+        change = 1.0 / rate - 1.0
+        followed = watch.followed(change, frames[0]["ticked"])
+        assert followed is not None, (rate, watch.seen)
+        # Read past the newest sample: only while the mapping settles, so none from when the
+        # rate was followed and the read caught up (5 % slow, measured: the last such frame
+        # 2.3-2.9 s on, before the rate was shown followed). A fixed "from 3 s" failed once
+        # in CI (-n 2): 2.9 % of the frames after it, the change judged late.
+        _, every_late = ahead_and_late(frames, stamps, sent, skip=0.0)
+        since = settled_from(frames, every_late, followed, change, watch.every)
+        settled, _ = ahead_and_late(frames, stamps, sent, skip=since)
+        assert settled <= steady_ahead + 0.01, (settled, since, followed, *figures)
         assert np.median(late) <= np.median(steady_late) + 0.02 + host, figures
         assert late.max() <= steady_late.max() + 0.1, figures
         second = len(late) * 120 // 540  # about one second of frames
