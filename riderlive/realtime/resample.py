@@ -22,9 +22,9 @@ estimated: the least-delayed frame of each window of :data:`RATE_EVERY_S` of sou
 is kept (the last :data:`RATE_WINDOWS`: 10 s), and at the end of each window, once they
 span :data:`RATE_SPAN_S`, ``rate = 1 + d(receive - t) / dt`` between the least-delayed
 of the oldest and of the newest third, bounded to 1 +- :data:`MAX_SKEW`; a change of the
-producer's rate (the slope from the middle third's least-delayed frame to the newest
-third's :data:`RATE_CHANGE` from the whole one's) restarts the baseline from the newest
-third, so the rate follows in seconds. At each new
+producer's rate (of the windows of the last :data:`CHANGE_SPAN_S`, the slope from the middle
+third's least-delayed frame to the newest third's :data:`RATE_CHANGE` from the whole
+baseline's) restarts the baseline from the newest third, so the rate follows in seconds. At each new
 estimate the mapping is kept continuous at the newest frame; then, at each frame, it moves
 toward the line (at that rate) through the least-delayed frame of the last second (lowered
 by a less-delayed frame) by at most :data:`MAX_SKEW` of the frame's source time step: the
@@ -52,12 +52,20 @@ RATE_EVERY_S = 0.25
 RATE_WINDOWS = 40
 """Windows kept for the rate (10 s of source time at most): the baseline of the estimate."""
 RATE_CHANGE = 0.01
-"""A slope between the least-delayed frames of the middle and the newest third of the windows
-this far from the whole baseline's is a change of the producer's rate (a game that slows when
-the host gets busy): the baseline restarts from the newest third, so the estimate follows in
-seconds, not the baseline's 10 s. Judged only once each third spans a second and the two
-least-delayed frames compared lie a second apart: the least-delayed frame of a second is an
-on-time one, so delivery stalls and a stream's bursty first seconds do not reach it."""
+"""A slope between the least-delayed frames of the middle and the newest third of the last
+:data:`CHANGE_SPAN_S` of windows this far from the whole baseline's is a change of the
+producer's rate (a game that slows when the host gets busy): the baseline restarts from the
+newest third, so the estimate follows in seconds, not the baseline's 10 s. Judged only once
+each third spans a second and the two least-delayed frames compared lie a second apart: the
+least-delayed frame of a second is an on-time one, so delivery stalls and a stream's bursty
+first seconds do not reach it."""
+CHANGE_SPAN_S = 4.5
+"""Source seconds of the newest windows a change of rate is judged on (thirds of 1.5 s). A
+slowed clock's least-delayed frames are the earliest of each third, so the change shows only
+once the middle third has passed it: judged on the whole 10 s baseline (thirds of 3.3 s),
+a 5 % slowing 12 s into a stream was followed in 4.0-6.4 s; on 4.5 s, 2.2-2.7 s
+(``bench/bench_rate_follow.py``), as robust to delivery stalls (thirds of 1 s were not:
+a steady clock's rate 1.5 % off under sustained slow deliveries)."""
 
 
 @dataclass
@@ -147,13 +155,16 @@ class ClockMap:
         if tb - ta < RATE_SPAN_S / 2:
             return
         skew = (ob - oa) / (tb - ta)
-        if third * RATE_EVERY_S >= RATE_SPAN_S and len(windows) > 2 * third:  # thirds of a second or more
-            tm, om = min(windows[third:-third], key=lambda w: w[1])
-            if tb - tm >= RATE_SPAN_S and abs((ob - om) / (tb - tm) - skew) > RATE_CHANGE:
+        recent = windows[-round(CHANGE_SPAN_S / RATE_EVERY_S) :]
+        third = len(recent) // 3
+        if third * RATE_EVERY_S >= RATE_SPAN_S and len(recent) > 2 * third:  # thirds of a second or more
+            tm, om = min(recent[third:-third], key=lambda w: w[1])
+            tn, on = min(recent[-third:], key=lambda w: w[1])
+            if tn - tm >= RATE_SPAN_S and abs((on - om) / (tn - tm) - skew) > RATE_CHANGE:
                 # the clock's rate changed within the baseline: it restarts from the newest third
                 for _ in range(len(windows) - third):
                     self.windows.popleft()
-                skew = (ob - om) / (tb - tm)
+                skew = (on - om) / (tn - tm)
         skew = min(MAX_SKEW, max(-MAX_SKEW, skew))
         rate = 1.0 + skew
         before = self.offset if self.anchor is None else self.anchor

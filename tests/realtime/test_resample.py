@@ -202,6 +202,19 @@ def test_a_clock_that_changes_rate_is_followed_within_4_s_not_the_baselines_10(r
     assert worst < 0.003, worst
 
 
+@pytest.mark.parametrize("stalls", [0, 6])
+@pytest.mark.parametrize("rate", [0.95, 1.05])
+def test_a_change_after_a_long_steady_stream_is_followed_as_soon(rate: float, stalls: int) -> None:
+    """12 s at our rate (a full 10 s baseline), then 5 % slow or fast, with and without
+    delivery stalls: from 3 s after the change the rate in use is within 0.1 % of 1 / rate
+    (measured 0.02-0.06 %). Old code, the change judged on the thirds of the whole baseline
+    (3.3 s each: a slowed clock's least-delayed frames are the earliest of each, so the change
+    showed only once the middle third had passed it): the slowing not yet followed, 5 % off."""
+    after = rates_after(changing(rate, 12.0, 20.0, 120.0, stalls=stalls), 15.0)
+    worst = max(abs(r * rate - 1.0) for _, r in after)
+    assert worst < 0.001, worst
+
+
 def test_a_steady_clock_whose_delivery_stalls_keeps_its_rate() -> None:
     """A steady clock, 12 delivery stalls of 30-120 ms in 20 s: the least-delayed frames the
     rate rests on are the on-time ones around the stalls, so no stall is taken for a change
