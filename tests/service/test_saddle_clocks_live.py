@@ -61,14 +61,16 @@ def every_sample_taken(server: LiveServer) -> tuple[Callable[[list[float]], None
 
 
 def ahead_and_late(
-    frames: list[dict], stamps: list[float], sent: list[float], skip: float = 1.5
+    frames: list[dict], stamps: list[float], sent: list[float], skip: float = 1.5, at: str = "ticked"
 ) -> tuple[float, np.ndarray]:
     """Of the frames from ``skip`` s on: the share read past the newest sample sent before the
     frame was ticked (extrapolated), and each one's lateness (that sample's stamp minus the
     frame's ``source_t``, s; the delivery to the tick included, the delivery to this follower
-    not: ``test_clocks_live.held_and_late``)."""
+    not: ``test_clocks_live.held_and_late``). ``at="at"``: the newest sample sent before the
+    frame reached this follower instead, the least lateness (a tick that ran late read the
+    samples that came until it ran: past its deadline's newest, not past the newest)."""
     later = [f for f in frames if f["ticked"] >= frames[0]["ticked"] + skip]
-    lateness = np.array([stamps[bisect.bisect_right(sent, f["ticked"]) - 1] - f["source_t"] for f in later])
+    lateness = np.array([stamps[bisect.bisect_right(sent, f[at]) - 1] - f["source_t"] for f in later])
     return float(np.mean(lateness < 0.0)), lateness
 
 
@@ -170,6 +172,7 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
     )
     assert none == [] and all(driven(f) for f in steady), drivers(steady)
     steady_ahead, steady_late = ahead_and_late(steady, steady_stamps, steady_sent)
+    steady_past, _ = ahead_and_late(steady, steady_stamps, steady_sent, at="at")
     for rate in (0.95, 1.05):
         sent: list[float] = []
         whole: list[dict] = []
@@ -217,12 +220,15 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
         assert followed is not None, (rate, watch.seen)
         # Read past the newest sample: only while the mapping settles, so none from when the
         # rate was followed and the read caught up (5 % slow, measured: the last such frame
-        # 2.3-2.9 s on, before the rate was shown followed). A fixed "from 3 s" failed once
-        # in CI (-n 2): 2.9 % of the frames after it, the change judged late.
+        # 2.3-2.9 s on, before the rate was shown followed), judged on the samples sent
+        # before the frame reached this follower. A fixed "from 3 s" failed once in CI
+        # (-n 2): 2.9 % of the frames after it, the change judged late; and judged at the
+        # frames' deadlines, a -n 2 run once had 7 of 657 frames after the settle past the
+        # newest sample sent by then (the steady run 0), as the horse's did.
         _, every_late = ahead_and_late(frames, stamps, sent, skip=0.0)
         since = settled_from(frames, every_late, followed, change, watch.every)
-        settled, _ = ahead_and_late(frames, stamps, sent, skip=since)
-        assert settled <= steady_ahead + 0.01, (settled, since, followed, *figures)
+        settled, _ = ahead_and_late(frames, stamps, sent, skip=since, at="at")
+        assert settled <= steady_past + 0.01, (settled, since, followed, steady_past, *figures)
         assert np.median(late) <= np.median(steady_late) + 0.02 + host, figures
         assert late.max() <= steady_late.max() + 0.1, figures
         second = len(late) * 120 // 540  # about one second of frames
