@@ -163,9 +163,13 @@ def test_the_stage_estop_reaches_every_rig_and_turns_every_torque_off(stage3: St
         assert rig.post("/api/reset").status_code == 200
     stage3.wait_all("disarmed")
     for rig in stage3.rigs:
+        # read back off (a read-back a busy host kept the servos from answering is repeated,
+        # every tick for a second, then every 0.5 s: devices/off_readback.py)
+        wait_for(rig.torque_off, 3.0, rig.status)
         rig.wait_ticks(30)
     statuses = [rig.status() for rig in stage3.rigs]
-    assert all(s["state"] == "disarmed" and s.get("outputs_off_confirmed") is True for s in statuses), statuses
+    shown = [(rig.name, s["state"], s.get("outputs_off_confirmed")) for rig, s in zip(stage3.rigs, statuses)]
+    assert all(s["state"] == "disarmed" and s.get("outputs_off_confirmed") is True for s in statuses), shown
 
 
 def test_a_dead_broker_parks_every_rig_keeps_the_take_and_nothing_rearms(stage3: Stage3) -> None:
