@@ -102,6 +102,8 @@ async def _kill_and_take_over() -> None:
         await w.until(lambda: w.link.status().get("preset") == "kept", 10.0, "the preset applied")
         await w.spare_warm()
         await w.until(lambda: int(w.records[-1][1][RecordLayout.driver.start]) == Driver.INPUT, 10.0, "input drives")
+        # the 100 records the slew before the kill is taken from (a loaded -n 2 run had fewer)
+        await w.until(lambda: len(w.records) > 100, 30.0, "100 records before the kill")
         spare_pid = w.link.spare.process.pid if w.link.spare else None
         reported = w.link.status()
         before = len(w.records)
