@@ -20,6 +20,7 @@ from riderlive.service import auth
 from riderlive.service.app import create_app
 from riderlive.service.config import ServiceConfig
 from tests.service.live_server import LiveServer
+from tests.waiting import wait_until
 
 TOKEN = "s3cret-Token_42"
 CONFIG = f"""
@@ -84,6 +85,12 @@ def test_the_token_never_reaches_the_log(guarded: LiveServer) -> None:
     with connect(guarded.ws + "/ws/horse", subprotocols=["riderlive.v1", f"riderlive.token.{TOKEN}"]) as ws:
         ws.recv(timeout=5)
     guarded.request("GET", "/api/state", headers={"Authorization": f"Bearer {TOKEN}"})
+    # the log is read on a thread as the server writes it: a connection after the two with the
+    # token, its line awaited, is the mark that everything they logged has been read (a fresh
+    # clone once read the log before the first connection's line)
+    with connect(guarded.ws + "/ws/rider") as ws:
+        ws.recv(timeout=5)
+    wait_until(lambda: "/ws/rider" in "".join(guarded.log), 5.0, lambda: "".join(guarded.log)[-600:])
     log = "".join(guarded.log)
     assert "/ws/horse" in log and TOKEN not in log
 
