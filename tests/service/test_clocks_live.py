@@ -42,12 +42,13 @@ def drive(
     stamps: list[float],
     sent: list[float] | None = None,
     make: Callable[[float, float], dict[str, Any]] = horse_frame,
+    done: list[float] | None = None,
 ) -> None:
     """Send a smooth horse (or ``make(stamp, time shown)``'s frames) at HZ, stamped with
     ``clock(elapsed)``: a function of that clock (``game``: a game's pose follows its clock,
     and stands still with it) or of real time (a producer whose timestamps alone step);
     collect the segment messages that come back and the stamps sent (``stamps``, in order;
-    ``sent``: when each send began, perf_counter s)."""
+    ``sent``: when each send began, ``done``: when it returned, perf_counter s)."""
     start = time.perf_counter()
     n = 0
     while (elapsed := time.perf_counter() - start) < seconds:
@@ -55,6 +56,8 @@ def drive(
         if sent is not None:
             sent.append(time.perf_counter())  # before the send: no frame can arrive before it
         ws.send(json.dumps(make(t, t if game else elapsed)))
+        if done is not None:
+            done.append(time.perf_counter())
         stamps.append(t)
         n += 1
         time.sleep(max(0.0, start + n / HZ - time.perf_counter()))
@@ -161,12 +164,13 @@ def run(
     settle: float = 0.5,
     before_close: Callable[[list[float]], None] | None = None,
     whole: list[dict] | None = None,
+    done: list[float] | None = None,
 ) -> tuple[list[dict], list[dict], list[float]]:
     """``settle`` s on a steady clock, then ``seconds`` on ``clock``, without a break in the
     stream to ``path``; the follower's frames of the second part, the segment messages and
-    the stamps sent (``sent``: when each was sent). ``before_close(stamps)`` runs after the
-    last send, while the producer is still connected. ``whole`` gets every frame of the
-    stream, the settle's too."""
+    the stamps sent (``sent``: when each was sent; ``done``: when each send returned, the
+    settle's too). ``before_close(stamps)`` runs after the last send, while the producer is
+    still connected. ``whole`` gets every frame of the stream, the settle's too."""
     follower = Follower(server.ws)
     segments: list[dict] = []
     stamps: list[float] = []
@@ -184,6 +188,7 @@ def run(
                 stamps,
                 sent,
                 make,
+                done,
             )
             end = time.perf_counter()
             if before_close is not None:
