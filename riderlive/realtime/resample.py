@@ -156,13 +156,13 @@ class ClockMap:
             return
         skew = (ob - oa) / (tb - ta)
         recent = windows[-round(CHANGE_SPAN_S / RATE_EVERY_S) :]
-        third = len(recent) // 3
-        if third * RATE_EVERY_S >= RATE_SPAN_S and len(recent) > 2 * third:  # thirds of a second or more
-            tm, om = min(recent[third:-third], key=lambda w: w[1])
-            tn, on = min(recent[-third:], key=lambda w: w[1])
+        part = len(recent) // 3
+        if part * RATE_EVERY_S >= RATE_SPAN_S and len(recent) > 2 * part:  # thirds of a second or more
+            tm, om = min(recent[part:-part], key=lambda w: w[1])
+            tn, on = min(recent[-part:], key=lambda w: w[1])
             if tn - tm >= RATE_SPAN_S and abs((on - om) / (tn - tm) - skew) > RATE_CHANGE:
                 # the clock's rate changed within the baseline: it restarts from the newest third
-                for _ in range(len(windows) - third):
+                for _ in range(len(windows) - part):
                     self.windows.popleft()
                 skew = (on - om) / (tn - tm)
         skew = min(MAX_SKEW, max(-MAX_SKEW, skew))
