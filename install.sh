@@ -54,4 +54,7 @@ if [ ! -x .venv/blender/bin/python ] && python3 -c 'import sys; sys.exit(sys.ver
     python3 -m venv .venv/blender && .venv/blender/bin/pip install -q --disable-pip-version-check 'bpy>=4.2,<5.1' ||
         { rm -rf .venv/blender; echo "install: bpy is unavailable here; the Blender test skips" >&2; }
 fi
+# The numba kernels compiled once, serially, into their disk cache: the first test run and the
+# first `riderlive serve` load them instead of compiling them (several processes at once).
+.ci/warm
 echo "install: ready. Test: .venv/bin/pytest -n 2 --dist loadfile   Run: .venv/bin/riderlive serve"
