@@ -108,12 +108,23 @@ def test_estop_torques_off_at_once_latches_and_reset_never_arms(timed_buses: Cal
     pressed = time.perf_counter()
     device.estop(StopSource.API)
     emu.settle()
-    assert emu.torque_off_at is not None
-    latency = emu.torque_off_at - pressed
+    # the torque-off that arrived after the press (``emu.torque_off_at`` is the first ever: the
+    # setup's, before the press, so a bound on it held whatever happened)
+    offs = [at for at, raw in list(emu.arrivals) if at > pressed and is_torque_off_write(raw)]
+    assert offs, "no torque-off arrived after the press"
+    latency = offs[0] - pressed
     assert latency < rig_of(device).bus.tick_s, f"e-stop to torque-off write took {latency * 1000:.1f} ms"
     assert device.state is S.ESTOP
     assert all(torque(emu, i) == 0 for i in (1, 2, 3))
-    assert goal_writes_after(emu, pressed) == 0
+    # No goal write began after the press (the e-stop record says when the last one began),
+    # and none arrived after the torque-off. One begun before may still arrive after the
+    # press, ahead of the torque-off: in flight on the pty (a render host once delayed the
+    # tty's delivery so; bench_estop counts these apart too).
+    record = device.last_stop
+    assert record is not None and record.last_goal_at is not None and record.last_goal_at < pressed
+    assert goal_writes_after(emu, offs[0]) == 0
+    in_flight = goal_writes_after(emu, pressed)
+    assert in_flight <= 1
 
     # latched: no goal goes out; torque read back; arm refused; reset -> disarmed, still
     statuses = drive(device, 1.0, until=lambda s: s.outputs_off_confirmed).statuses
@@ -122,7 +133,7 @@ def test_estop_torques_off_at_once_latches_and_reset_never_arms(timed_buses: Cal
     assert all(s.state is S.ESTOP and not s.wrote for s in statuses)
     assert statuses[-1].outputs_off_confirmed and statuses[-1].estop is not None
     assert statuses[-1].estop.confirmed_at is not None and statuses[-1].estop.source == "api"
-    assert goal_writes_after(emu, pressed) == 0
+    assert goal_writes_after(emu, pressed) == in_flight
     with pytest.raises(Refused) as refused:
         device.arm(device.name, "test")
     assert refused.value.reason is Refusal.ESTOPPED
