@@ -238,6 +238,12 @@ def test_a_paused_clock_and_a_stepping_clock_keep_driving_without_jumps(server: 
     assert largest_step(stepping, sent) <= 1.5 * bound, (largest_step(stepping, sent), bound)
 
 
+def lateness(frames: list[dict], stamps: list[float], sent: list[float], at: str = "ticked") -> np.ndarray:
+    """Each frame's lateness: the newest stamp whose send began before the frame's ``at`` time
+    (``ticked``: its tick's deadline; ``at``: its arrival here) minus its ``source_t`` (s)."""
+    return np.array([stamps[bisect.bisect_right(sent, f[at]) - 1] - f["source_t"] for f in frames])
+
+
 def held_and_late(
     frames: list[dict], stamps: list[float], sent: list[float], at: str = "ticked"
 ) -> tuple[float, np.ndarray]:
@@ -256,8 +262,7 @@ def held_and_late(
     later = [f for f in frames if f["ticked"] >= frames[0]["ticked"] + 1.5]
     exact = set(stamps)
     held = sum(f["source_t"] in exact for f in later) / len(later)
-    lateness = [stamps[bisect.bisect_right(sent, f[at]) - 1] - f["source_t"] for f in later]
-    return held, np.array(lateness)
+    return held, lateness(later, stamps, sent, at)
 
 
 def test_a_clock_5_percent_slow_or_fast_is_tracked_without_resets(server: LiveServer) -> None:

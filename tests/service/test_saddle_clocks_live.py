@@ -6,7 +6,6 @@ lateness bounded; a frozen timestamp and small steps back keep the producer in c
 
 from __future__ import annotations
 
-import bisect
 import math
 import threading
 import time
@@ -19,7 +18,15 @@ from riderlive.realtime.resample import MAX_SKEW
 from riderlive.realtime.tick_control import RATE_SHOWN
 from riderlive.saddle import Model
 from tests.service.live_server import LiveServer
-from tests.service.test_clocks_live import DELAY, driven_while_sent, drivers, largest_step, run, steps_back
+from tests.service.test_clocks_live import (
+    DELAY,
+    driven_while_sent,
+    drivers,
+    largest_step,
+    lateness,
+    run,
+    steps_back,
+)
 from tests.service.test_saddle_live import _trot_saddle
 from tests.waiting import wait_until
 
@@ -69,9 +76,8 @@ def ahead_and_late(
     not: ``test_clocks_live.held_and_late``). ``at="at"``: the newest sample sent before the
     frame reached this follower instead, the least lateness (a tick that ran late read the
     samples that came until it ran: past its deadline's newest, not past the newest)."""
-    later = [f for f in frames if f["ticked"] >= frames[0]["ticked"] + skip]
-    lateness = np.array([stamps[bisect.bisect_right(sent, f[at]) - 1] - f["source_t"] for f in later])
-    return float(np.mean(lateness < 0.0)), lateness
+    later = lateness([f for f in frames if f["ticked"] >= frames[0]["ticked"] + skip], stamps, sent, at)
+    return float(np.mean(later < 0.0)), later
 
 
 class RateWatch:
@@ -87,24 +93,30 @@ class RateWatch:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, daemon=True)
 
+    def _read(self) -> float:
+        rate = self.server.metric("riderlive_input_clock_rate", 'kind="saddle"')
+        self.seen.append((time.perf_counter(), rate))
+        return rate
+
     def _watch(self) -> None:
         while not self._stop.wait(self.every):
-            rate = self.server.metric("riderlive_input_clock_rate", 'kind="saddle"')
-            self.seen.append((time.perf_counter(), rate))
+            self._read()
 
     def __enter__(self) -> RateWatch:
         self._thread.start()
         return self
 
-    def finish(self) -> None:
-        """No more readings but one now, which the thread's last may not have been."""
+    def _halt(self) -> None:
         self._stop.set()
         self._thread.join()
-        self.seen.append((time.perf_counter(), self.server.metric("riderlive_input_clock_rate", 'kind="saddle"')))
+
+    def finish(self) -> float:
+        """No more readings but one now (the thread's last may not have been): its rate."""
+        self._halt()
+        return self._read()
 
     def __exit__(self, *_: object) -> None:
-        self._stop.set()
-        self._thread.join()
+        self._halt()
 
     def shown(self, since: float) -> list[tuple[float, float]]:
         """The answers from ``since`` on: (s after it, rate), rounded for a message."""
@@ -219,8 +231,7 @@ def test_a_saddle_clock_5_percent_slow_or_fast_is_tracked_without_resets(server:
             watch: RateWatch = watch,
         ) -> None:
             wait(stamps)  # every sample stepped: the rate is final
-            watch.finish()
-            rates.append(server.metric("riderlive_input_clock_rate", 'kind="saddle"'))
+            rates.append(watch.finish())
             wait_until(
                 lambda: abs(server.get("/api/state").json()["tick"]["saddle_clock_rate"] - rates[0]) <= RATE_SHOWN,
                 5.0,
@@ -312,11 +323,8 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     assert -0.5 <= segments[0]["jump"] < 0.0, segments  # a segment within 0.5 s of the freeze
     ok, runs = driven_while_sent(paused, sent, STALE_S)
     assert ok, ("the saddle kept control throughout", runs)
-    assert largest_step(paused, sent, DELAY) <= 1.5 * bound, (
-        largest_step(paused, sent, DELAY),
-        bound,
-        longest_silence(sent),
-    )
+    step = largest_step(paused, sent, DELAY)
+    assert step <= 1.5 * bound, (step, bound, longest_silence(sent))
     assert server.metric("riderlive_clock_jumps_total", 'direction="paused"') == paused_before + 1
 
     sent = []
@@ -329,8 +337,5 @@ def test_a_frozen_saddle_timestamp_and_small_steps_back_keep_the_saddle_driving(
     assert [(s["previous_t"], s["t"]) for s in segments] == back, (segments, back)
     ok, runs = driven_while_sent(stepping, sent, STALE_S)
     assert ok, runs
-    assert largest_step(stepping, sent, DELAY) <= 1.5 * bound, (
-        largest_step(stepping, sent, DELAY),
-        bound,
-        longest_silence(sent),
-    )
+    step = largest_step(stepping, sent, DELAY)
+    assert step <= 1.5 * bound, (step, bound, longest_silence(sent))
